@@ -1,0 +1,293 @@
+"""Tests of the expert-demonstration container, its .npz format and the published-data importer."""
+from __future__ import annotations
+
+import hashlib
+import os
+import pickle
+
+import numpy as np
+import pytest
+import torch
+
+from torchrl_csirl.data import ExpertDemonstrations, RestrictedUnpickler, import_published
+
+
+def _episode(length: int, obs_dim: int = 4, act_dim: int = 2, *, seed: int = 0, terminal: bool = True, reward: bool = False):
+    g = torch.Generator().manual_seed(seed)
+    obs = torch.randn(length + 1, obs_dim, generator=g)
+    ep = {
+        "observation": obs[:-1],
+        "action": torch.rand(length, act_dim, generator=g) * 2 - 1,
+        "next_observation": obs[1:],
+        "terminated": torch.zeros(length, dtype=torch.bool),
+        "truncated": torch.zeros(length, dtype=torch.bool),
+    }
+    if terminal:
+        ep["terminated"][-1] = True
+    else:
+        ep["truncated"][-1] = True
+    if reward:
+        ep["reward"] = torch.randn(length, generator=g)
+    return ep
+
+
+@pytest.fixture
+def demos() -> ExpertDemonstrations:
+    episodes = [_episode(5, seed=0), _episode(3, seed=1, terminal=False), _episode(4, seed=2)]
+    return ExpertDemonstrations.from_episodes(episodes, metadata={"scenario": "merge", "seed": 7})
+
+
+class TestContainer:
+    def test_layout(self, demos):
+        assert demos.num_trajectories == 3
+        assert len(demos) == 12
+        assert demos.lengths.tolist() == [5, 3, 4]
+        td = demos.transitions()
+        for key in ["observation", "action", ("next", "observation"), ("next", "terminated"),
+                    ("next", "truncated"), ("next", "done"), ("collector", "traj_ids")]:
+            assert key in td.keys(True), key
+        assert td["collector", "traj_ids"].tolist() == [0] * 5 + [1] * 3 + [2] * 4
+        assert torch.equal(td["next", "done"], td["next", "terminated"] | td["next", "truncated"])
+        assert td["next", "terminated"].shape == (12, 1)
+
+    def test_trajectory_matches_episode(self, demos):
+        ep = _episode(3, seed=1, terminal=False)
+        traj = demos.trajectory(1)
+        assert traj.batch_size == (3,)
+        torch.testing.assert_close(traj["observation"], ep["observation"])
+        torch.testing.assert_close(traj["next", "observation"], ep["next_observation"])
+        assert traj["next", "truncated"].squeeze(-1).tolist() == [False, False, True]
+        assert not traj["next", "terminated"].any()
+        assert torch.equal(demos.trajectory(-1)["observation"], demos.trajectory(2)["observation"])
+        obs = demos.trajectory_observations(1, include_final=True)
+        assert obs.shape == (4, 4)
+        torch.testing.assert_close(obs[-1], ep["next_observation"][-1])
+
+    def test_trajectory_is_a_copy(self, demos):
+        traj = demos.trajectory(0)
+        traj["observation"].zero_()
+        assert demos.trajectory(0)["observation"].abs().sum() > 0
+
+    def test_subset_and_metadata(self, demos):
+        sub = demos.subset(2)
+        assert sub.num_trajectories == 2 and len(sub) == 8
+        assert sub.metadata["scenario"] == "merge" and sub.metadata["num_trajectories"] == 2
+        torch.testing.assert_close(sub.trajectory(1)["action"], demos.trajectory(1)["action"])
+        meta = demos.metadata
+        meta["scenario"] = "changed"
+        assert demos.metadata["scenario"] == "merge"
+        with pytest.raises(ValueError, match="n must be in"):
+            demos.subset(4)
+        with pytest.raises(IndexError):
+            demos.trajectory(3)
+
+    def test_from_rollout_tensordicts(self):
+        from torchrl.testing.mocking_classes import ContinuousActionVecMockEnv
+
+        env = ContinuousActionVecMockEnv()
+        env.set_seed(0)
+        rollouts = [env.rollout(4, break_when_any_done=False) for _ in range(2)]
+        demos = ExpertDemonstrations.from_episodes(rollouts)
+        assert demos.num_trajectories == 2 and len(demos) == 8
+        torch.testing.assert_close(demos.trajectory(1)["action"], rollouts[1]["action"])
+        torch.testing.assert_close(demos.trajectory(0)["next", "observation"], rollouts[0]["next", "observation"])
+
+    def test_replay_buffer(self, demos):
+        rb = demos.as_replay_buffer(batch_size=6)
+        assert len(rb) == len(demos)
+        sample = rb.sample()
+        assert sample.batch_size == (6,)
+        all_obs = demos.transitions()["observation"]
+        # every sampled observation is one of the stored transitions
+        dist = torch.cdist(sample["observation"], all_obs).min(-1).values
+        assert torch.all(dist < 1e-6)
+        assert ("collector", "traj_ids") in sample.keys(True)
+
+    @pytest.mark.parametrize(
+        "change,match",
+        [
+            (lambda ep: ep.pop("observation"), "no observation"),
+            (lambda ep: ep.__setitem__("action", torch.zeros(2, 2)), "action must have shape"),
+            (lambda ep: ep.__setitem__("next_observation", torch.zeros(5, 3)), "next observation shape"),
+            (lambda ep: ep.__setitem__("done", torch.zeros(5, dtype=torch.bool)), "done must equal"),
+        ],
+    )
+    def test_bad_episodes(self, change, match):
+        ep = _episode(5)
+        change(ep)
+        with pytest.raises(ValueError, match=match):
+            ExpertDemonstrations.from_episodes([ep])
+
+    def test_bad_metadata(self):
+        with pytest.raises(TypeError, match="JSON"):
+            ExpertDemonstrations.from_episodes([_episode(2)], metadata={"x": object()})
+
+
+class TestNpzFormat:
+    def test_roundtrip(self, demos, tmp_path):
+        path = demos.save(tmp_path / "demos")
+        assert path.endswith(".npz")
+        loaded = ExpertDemonstrations.load(path)
+        assert loaded == demos
+        assert loaded.metadata == {"scenario": "merge", "seed": 7}
+        # readable without pickle, with the documented members
+        with np.load(path, allow_pickle=False) as npz:
+            assert int(npz["format_version"]) == 1
+            assert npz["observation"].dtype == np.float32 and npz["terminated"].dtype == np.bool_
+            assert npz["lengths"].tolist() == [5, 3, 4]
+
+    def test_roundtrip_with_reward(self, tmp_path):
+        demos = ExpertDemonstrations.from_episodes([_episode(3, reward=True), _episode(2, seed=3, reward=True)])
+        loaded = ExpertDemonstrations.load(demos.save(tmp_path / "r.npz"))
+        torch.testing.assert_close(loaded.transitions()["next", "reward"], demos.transitions()["next", "reward"])
+
+    def test_deterministic_bytes(self, demos, tmp_path):
+        a = demos.save(tmp_path / "a.npz")
+        os.utime(tmp_path, (0, 0))
+        # rebuilt from scratch: same content -> same bytes, whatever the wall clock says
+        rebuilt = ExpertDemonstrations.from_episodes(
+            [_episode(5, seed=0), _episode(3, seed=1, terminal=False), _episode(4, seed=2)],
+            metadata={"seed": 7, "scenario": "merge"},
+        )
+        b = rebuilt.save(tmp_path / "b.npz")
+        digest = [hashlib.sha256(open(p, "rb").read()).hexdigest() for p in (a, b)]
+        assert digest[0] == digest[1]
+        c = demos.with_metadata(scenario="highway-fast").save(tmp_path / "c.npz")
+        assert hashlib.sha256(open(c, "rb").read()).hexdigest() != digest[0]
+
+    def test_load_rejects_wrong_files(self, demos, tmp_path):
+        np.savez(tmp_path / "other.npz", x=np.zeros(3))
+        with pytest.raises(ValueError, match="missing members"):
+            ExpertDemonstrations.load(tmp_path / "other.npz")
+        arrays = dict(np.load(demos.save(tmp_path / "d.npz")))
+        arrays["format_version"] = np.asarray(99)
+        np.savez(tmp_path / "v99.npz", **arrays)
+        with pytest.raises(ValueError, match="format version"):
+            ExpertDemonstrations.load(tmp_path / "v99.npz")
+
+
+def _published_dict(n: int = 3, width: int = 6, obs_dim: int = 5, act_dim: int = 2, seed: int = 0):
+    rng = np.random.default_rng(seed)
+    states = rng.normal(size=(n, width, obs_dim)).astype(np.float32)
+    lengths = np.array([width, 4, 2][:n])
+    dones = np.zeros((n, width), dtype=np.float32)
+    for i, length in enumerate(lengths):
+        dones[i, length - 1] = 1.0
+    return {
+        "states": states,
+        "next_states": np.roll(states, -1, axis=1),
+        "actions": rng.uniform(-1, 1, size=(n, width, act_dim)).astype(np.float32),
+        "rewards": rng.normal(size=(n, width)).astype(np.float32),
+        "dones": dones,
+        "lengths": lengths,
+    }
+
+
+def _save_published(tmp_path, data, name="expert.npy"):
+    path = tmp_path / name
+    np.save(path, data, allow_pickle=True)
+    return path
+
+
+class TestImportPublished:
+    def test_import(self, tmp_path):
+        data = _published_dict()
+        demos = import_published(_save_published(tmp_path, data))
+        assert demos.num_trajectories == 3
+        assert demos.lengths.tolist() == [6, 4, 2]
+        traj = demos.trajectory(1)
+        np.testing.assert_allclose(traj["observation"].numpy(), data["states"][1, :4])
+        np.testing.assert_allclose(traj["next", "observation"].numpy(), data["next_states"][1, :4])
+        np.testing.assert_allclose(traj["action"].numpy(), data["actions"][1, :4])
+        np.testing.assert_allclose(traj["next", "reward"].squeeze(-1).numpy(), data["rewards"][1, :4])
+        assert demos.metadata["source"] == "published"
+
+    def test_done_mapping(self, tmp_path):
+        path = _save_published(tmp_path, _published_dict())
+        demos = import_published(path)
+        # full-length episode ending with done: truncation; shorter ones: termination
+        full = demos.trajectory(0)["next"]
+        assert full["truncated"].squeeze(-1).tolist()[-1] and not full["terminated"].any()
+        short = demos.trajectory(1)["next"]
+        assert short["terminated"].squeeze(-1).tolist() == [False, False, False, True]
+        assert not short["truncated"].any()
+        legacy = import_published(path, done_mapping="terminated")
+        assert legacy.trajectory(0)["next", "terminated"].squeeze(-1).tolist()[-1]
+        assert not legacy.transitions()["next", "truncated"].any()
+        # an explicit, longer time limit makes the full-width episode a termination
+        limited = import_published(path, max_episode_steps=10)
+        assert limited.trajectory(0)["next", "terminated"][-1].item()
+
+    def test_final_step_without_done_is_truncated(self, tmp_path):
+        data = _published_dict()
+        data["dones"][1, 3] = 0.0
+        demos = import_published(_save_published(tmp_path, data))
+        assert demos.trajectory(1)["next", "truncated"][-1].item()
+        assert not demos.trajectory(1)["next", "terminated"].any()
+
+    def test_roundtrip_to_npz(self, tmp_path):
+        demos = import_published(_save_published(tmp_path, _published_dict()))
+        assert ExpertDemonstrations.load(demos.save(tmp_path / "converted.npz")) == demos
+
+    @pytest.mark.parametrize(
+        "corrupt,match",
+        [
+            (lambda d: d.pop("actions"), r"missing key\(s\) \['actions'\]"),
+            (lambda d: d.__setitem__("states", d["states"][:, :, 0]), "'states' must have shape"),
+            (lambda d: d.__setitem__("next_states", d["next_states"][:, :5]), "'next_states' shape"),
+            (lambda d: d["states"].__setitem__((1, 2, 0), np.nan), "NaN"),
+            (lambda d: d["actions"].__setitem__((0, 1, 1), 1.5), r"actions must lie in \[-1, 1\]"),
+            (lambda d: d.__setitem__("lengths", np.array([6, 0, 2])), "'lengths' must lie in"),
+            (lambda d: d.__setitem__("lengths", np.array([6, 7, 2])), "'lengths' must lie in"),
+            (lambda d: d.__setitem__("lengths", np.array([6, 4])), "'lengths' must have shape"),
+            (lambda d: d["dones"].__setitem__((0, 2), 1.0), "done at step 2 before its last step"),
+            (lambda d: d.__setitem__("dones", d["dones"][:2]), "'dones' must have shape"),
+        ],
+    )
+    def test_rejects_malformed(self, tmp_path, corrupt, match):
+        data = _published_dict()
+        corrupt(data)
+        with pytest.raises(ValueError, match=match):
+            import_published(_save_published(tmp_path, data))
+
+    def test_nan_in_padding_is_ignored(self, tmp_path):
+        data = _published_dict()
+        data["states"][2, 4, :] = np.nan  # beyond length 2: padding
+        assert import_published(_save_published(tmp_path, data)).num_trajectories == 3
+
+    def test_refuses_malicious_pickle(self, tmp_path):
+        marker = tmp_path / "pwned"
+
+        class Exploit:
+            def __reduce__(self):
+                return (os.system, (f"touch {marker}",))
+
+        data = _published_dict()
+        data["states"] = Exploit()
+        path = tmp_path / "evil.npy"
+        # the numpy header for a pickled object array, followed by the malicious pickle
+        np.save(path, np.array(None, dtype=object), allow_pickle=True)
+        raw = open(path, "rb").read()
+        header_end = raw.index(b"\n") + 1
+        with open(path, "wb") as f:
+            f.write(raw[:header_end] + pickle.dumps(data, protocol=3))
+        with pytest.raises(pickle.UnpicklingError, match="refusing to load global"):
+            import_published(path)
+        # also as a bare pickle file
+        bare = tmp_path / "evil.pkl"
+        bare.write_bytes(pickle.dumps({"x": Exploit()}))
+        with pytest.raises(pickle.UnpicklingError, match="system"):
+            import_published(bare)
+        assert not marker.exists()
+
+    def test_restricted_unpickler_allows_numpy(self):
+        import io
+
+        payload = pickle.dumps({"a": np.arange(4, dtype=np.int32), "b": [np.float64(1.5)], "c": (1, "x")})
+        obj = RestrictedUnpickler(io.BytesIO(payload)).load()
+        assert obj["a"].tolist() == [0, 1, 2, 3] and obj["b"][0] == 1.5 and obj["c"] == (1, "x")
+
+    def test_not_a_dict(self, tmp_path):
+        np.save(tmp_path / "plain.npy", np.zeros((2, 3)))
+        with pytest.raises(ValueError, match="expected a pickled dict"):
+            import_published(tmp_path / "plain.npy")

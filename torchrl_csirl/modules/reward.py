@@ -1,0 +1,96 @@
+"""The CSIRL intrinsic reward network r_w: an MLP with a tanh output in (-1, 1)."""
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import torch
+from tensordict.nn import TensorDictModule
+from tensordict.utils import NestedKey
+from torch import nn
+from torchrl.modules import MLP
+
+__all__ = ["RewardMLP", "make_reward_network"]
+
+
+class RewardMLP(nn.Module):
+    """Concatenates its inputs and maps them through an MLP and ``tanh`` to ``(-1, 1)``.
+
+    Args:
+        in_features (int): total input size (sum of the inputs' last dimensions).
+        hidden (sequence of int): hidden widths. Defaults to ``(256, 256)``.
+
+    Examples:
+        >>> import torch
+        >>> net = RewardMLP(3)
+        >>> out = net(torch.randn(5, 2), torch.randn(5, 1))
+        >>> out.shape, bool((out.abs() < 1).all())
+        (torch.Size([5, 1]), True)
+    """
+
+    def __init__(self, in_features: int, hidden: Sequence[int] = (256, 256)) -> None:
+        super().__init__()
+        self.mlp = MLP(
+            in_features=in_features,
+            out_features=1,
+            num_cells=list(hidden),
+            activation_class=nn.ReLU,
+        )
+
+    def forward(self, *inputs: torch.Tensor) -> torch.Tensor:
+        x = inputs[0] if len(inputs) == 1 else torch.cat(inputs, dim=-1)
+        return torch.tanh(self.mlp(x))
+
+
+def make_reward_network(
+    obs_dim: int,
+    action_dim: int | None = None,
+    hidden: Sequence[int] = (256, 256),
+    in_keys: Sequence[NestedKey] | None = None,
+    out_key: NestedKey = "intrinsic_reward",
+) -> TensorDictModule:
+    """Builds the intrinsic reward network ``r_w`` (MLP, ReLU, tanh output in ``(-1, 1)``).
+
+    State-only ``r_w(s)`` by default (the published code); state-action ``r_w(s, a)`` (the
+    paper) when ``action_dim`` is given.
+
+    Args:
+        obs_dim (int): observation size.
+        action_dim (int, optional): action size; ``None`` (default) for a state-only reward.
+        hidden (sequence of int): hidden widths. Defaults to ``(256, 256)``.
+        in_keys (sequence of NestedKey, optional): input keys. Defaults to ``["observation"]``
+            (state-only) or ``["observation", "action"]``.
+        out_key (NestedKey): output key. Defaults to ``"intrinsic_reward"``.
+
+    Returns:
+        TensorDictModule: writes ``out_key`` with shape ``[*B, 1]``.
+
+    Examples:
+        >>> import torch
+        >>> from tensordict import TensorDict
+        >>> net = make_reward_network(4)
+        >>> td = net(TensorDict({"observation": torch.randn(8, 4)}, [8]))
+        >>> td["intrinsic_reward"].shape
+        torch.Size([8, 1])
+        >>> sa = make_reward_network(4, action_dim=2)
+        >>> sa.in_keys
+        ['observation', 'action']
+    """
+    for name, value in (("obs_dim", obs_dim), ("action_dim", action_dim)):
+        if value is None and name == "action_dim":
+            continue
+        if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
+            raise ValueError(f"{name} must be a positive int, got {value!r}.")
+    hidden = tuple(hidden)
+    if not hidden or any(isinstance(h, bool) or not isinstance(h, int) or h <= 0 for h in hidden):
+        raise ValueError(f"hidden must be a non-empty sequence of positive ints, got {hidden!r}.")
+    if in_keys is None:
+        in_keys = ["observation"] if action_dim is None else ["observation", "action"]
+    in_keys = list(in_keys)
+    expected = 1 if action_dim is None else 2
+    if len(in_keys) != expected:
+        raise ValueError(
+            f"in_keys must name {expected} input(s) ({'state' if expected == 1 else 'state, action'}), "
+            f"got {in_keys}."
+        )
+    in_features = obs_dim + (action_dim or 0)
+    return TensorDictModule(RewardMLP(in_features, hidden), in_keys=in_keys, out_keys=[out_key])

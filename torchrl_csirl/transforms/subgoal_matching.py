@@ -1,0 +1,395 @@
+"""The CSIRL matching reward r_m: potential-based shaping toward the current curricular subgoal.
+
+For a transition ``(s, s')``, the curriculum trajectory ``s^e_0 .. s^e_{L-1}`` and subgoal ``g``:
+
+1. :func:`nearest_expert_index`: ``j* = argmin_j || e(s) - e(s^e_j) ||_2`` on the ego features
+   ``e`` (ties go to the later index);
+2. :func:`matching_target_index`: ``t = g if j* < g`` else ``min(j* + 1, L - 1)`` (rule
+   ``"next"``, the published code) or ``L - 1`` (rule ``"final"``, the paper's "head for s_T");
+3. :func:`matching_potential`: ``psi(x) = || h(x) - h(s^e_t) ||_2`` on the position features ``h``;
+4. :func:`matching_reward`: ``r_m = sign * scale * (psi(s) - psi(s'))`` (``sign=+1``: positive when
+   ``s'`` is closer to the target than ``s``).
+
+All four are vectorised over the batch (a ``[B, L]`` distance matrix and an ``argmin``).
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import torch
+from tensordict import TensorDictBase
+from tensordict.utils import NestedKey
+
+from torchrl_csirl.transforms._utils import TransitionRewardTransform
+
+__all__ = [
+    "SubgoalMatchingReward",
+    "matching_potential",
+    "matching_reward",
+    "matching_target_index",
+    "distinct_expert_states",
+    "nearest_expert_index",
+]
+
+_TARGET_RULES = ("next", "final")
+
+
+def nearest_expert_index(states: torch.Tensor, expert_states: torch.Tensor) -> torch.Tensor:
+    """Index of the nearest expert state (Euclidean), ties broken toward the later index.
+
+    Identical expert states resolve to the last occurrence exactly (they are merged before the
+    search); equidistant *distinct* states resolve to the later index up to float rounding.
+
+    Args:
+        states (torch.Tensor): ``[B, F]`` query features.
+        expert_states (torch.Tensor): ``[L, F]`` expert features.
+
+    Returns:
+        torch.Tensor: ``[B]`` int64 indices ``j*`` in ``[0, L-1]``.
+
+    Examples:
+        >>> import torch
+        >>> expert = torch.tensor([[0.0], [1.0], [1.0], [2.0]])
+        >>> nearest_expert_index(torch.tensor([[0.4], [1.1], [9.0]]), expert).tolist()
+        [0, 2, 3]
+    """
+    rows, index = distinct_expert_states(expert_states)
+    return _nearest_distinct(states, rows, index)
+
+
+def distinct_expert_states(expert_states: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Distinct expert states, ordered by decreasing index of their last occurrence.
+
+    Returns:
+        (torch.Tensor, torch.Tensor): ``[U, F]`` rows and ``[U]`` their last-occurrence indices.
+    """
+    uniq, inverse = torch.unique(expert_states, dim=0, return_inverse=True)
+    positions = torch.arange(expert_states.shape[0], device=expert_states.device)
+    last = torch.full((uniq.shape[0],), -1, dtype=torch.int64, device=expert_states.device)
+    last = last.scatter_reduce(0, inverse, positions, reduce="amax")
+    order = last.argsort(descending=True)
+    return uniq[order].contiguous(), last[order]
+
+
+def _nearest_distinct(states: torch.Tensor, rows: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
+    # ||s - e||^2 - ||s||^2 = ||e||^2 - 2 s.e: one small matmul; argmin's first-occurrence rule
+    # picks the latest expert index on ties since rows are ordered by decreasing index
+    rows = rows.to(states.dtype)
+    scores = torch.addmm((rows * rows).sum(-1), states, rows.T, alpha=-2.0)
+    return index[scores.argmin(dim=-1)]
+
+
+def matching_target_index(
+    nearest: torch.Tensor, subgoal: int, length: int, rule: str = "next"
+) -> torch.Tensor:
+    """Index of the expert state the matching reward heads for.
+
+    ``t = g`` while the agent is behind the subgoal (``j* < g``); once at or past it,
+    ``t = min(j* + 1, L - 1)`` (``rule="next"``, published code) or ``t = L - 1``
+    (``rule="final"``, the paper).
+
+    Args:
+        nearest (torch.Tensor): ``[B]`` nearest expert indices ``j*``.
+        subgoal (int): the current subgoal ``g``.
+        length (int): the curriculum trajectory length ``L``.
+        rule (str): ``"next"`` (default) or ``"final"``.
+
+    Examples:
+        >>> import torch
+        >>> matching_target_index(torch.tensor([0, 2, 3, 4]), subgoal=2, length=5).tolist()
+        [2, 3, 4, 4]
+        >>> matching_target_index(torch.tensor([0, 2]), subgoal=2, length=5, rule="final").tolist()
+        [2, 4]
+    """
+    if rule == "next":
+        past = torch.clamp(nearest + 1, max=length - 1)
+    elif rule == "final":
+        past = torch.full_like(nearest, length - 1)
+    else:
+        raise ValueError(f"target rule must be one of {_TARGET_RULES}, got {rule!r}.")
+    return torch.where(nearest < subgoal, torch.full_like(nearest, subgoal), past)
+
+
+def matching_potential(positions: torch.Tensor, target_positions: torch.Tensor) -> torch.Tensor:
+    """The potential ``psi(x) = || h(x) - h(s^e_t) ||_2`` (position features already selected).
+
+    Args:
+        positions (torch.Tensor): ``[B, P]`` position features ``h(x)``.
+        target_positions (torch.Tensor): ``[B, P]`` position features of the targets.
+
+    Examples:
+        >>> import torch
+        >>> matching_potential(torch.tensor([[3.0, 0.0]]), torch.tensor([[0.0, 4.0]])).tolist()
+        [5.0]
+    """
+    return torch.linalg.vector_norm(positions - target_positions, dim=-1)
+
+
+def matching_reward(
+    observation: torch.Tensor,
+    next_observation: torch.Tensor,
+    expert_observations: torch.Tensor,
+    subgoal: int,
+    *,
+    ego_feature_indices: Sequence[int] | torch.Tensor | None = None,
+    position_feature_indices: Sequence[int] | torch.Tensor | None = None,
+    scale: float = 1.0,
+    target: str = "next",
+    sign: float = 1.0,
+) -> torch.Tensor:
+    """The matching reward ``r_m = sign * scale * (psi(s) - psi(s'))`` for a batch of transitions.
+
+    The target (and hence the potential) is determined by ``s`` and used for both ``s`` and ``s'``.
+
+    Args:
+        observation (torch.Tensor): ``[*B, D]`` states ``s``.
+        next_observation (torch.Tensor): ``[*B, D]`` next states ``s'``.
+        expert_observations (torch.Tensor): ``[L, D]`` curriculum trajectory.
+        subgoal (int): the current subgoal ``g`` in ``[0, L-1]``.
+        ego_feature_indices: features used for the nearest-state search (default: all).
+        position_feature_indices: features of the potential (default: all).
+        scale (float): reward scale. Defaults to ``1.0``.
+        target (str): target rule, ``"next"`` or ``"final"``.
+        sign (float): ``+1`` (default, shaping toward the target) or ``-1``.
+
+    Returns:
+        torch.Tensor: ``[*B]`` rewards.
+
+    Examples:
+        >>> import torch
+        >>> expert = torch.tensor([[0.0], [1.0], [2.0], [3.0]])
+        >>> # behind subgoal 2: heads for s^e_2; moving from 0.0 to 0.5 gains 0.5
+        >>> matching_reward(torch.tensor([[0.0]]), torch.tensor([[0.5]]), expert, 2, scale=10.0)
+        tensor([5.])
+    """
+    batch_shape = observation.shape[:-1]
+    obs = observation.reshape(-1, observation.shape[-1])
+    next_obs = next_observation.reshape(-1, next_observation.shape[-1]).to(obs.dtype)
+    expert = expert_observations.to(device=obs.device, dtype=obs.dtype)
+    ego = _feature_index(ego_feature_indices, obs)
+    pos = _feature_index(position_feature_indices, obs)
+    rows, row_index = distinct_expert_states(expert.index_select(-1, ego))
+    reward = _matching_reward_from_features(
+        obs.index_select(-1, ego),
+        obs.index_select(-1, pos),
+        next_obs.index_select(-1, pos),
+        rows,
+        row_index,
+        expert.index_select(-1, pos),
+        int(subgoal),
+        target,
+        sign * scale,
+    )
+    return reward.reshape(batch_shape)
+
+
+def _feature_index(indices: Sequence[int] | torch.Tensor | None, like: torch.Tensor) -> torch.Tensor:
+    if indices is None:
+        return torch.arange(like.shape[-1], device=like.device)
+    return torch.as_tensor(indices, dtype=torch.int64, device=like.device)
+
+
+def _matching_reward_from_features(
+    ego: torch.Tensor,
+    position: torch.Tensor,
+    next_position: torch.Tensor,
+    expert_rows: torch.Tensor,
+    expert_row_index: torch.Tensor,
+    expert_position: torch.Tensor,
+    subgoal: int,
+    target: str,
+    factor: float,
+) -> torch.Tensor:
+    """Steps 1-4 on pre-selected features (flat ``[B, F]``); ``factor = sign * scale``.
+
+    ``expert_rows``/``expert_row_index`` come from :func:`distinct_expert_states`.
+    """
+    nearest = _nearest_distinct(ego, expert_rows, expert_row_index)
+    target_index = matching_target_index(nearest, subgoal, expert_position.shape[0], target)
+    target_position = expert_position[target_index]
+    delta = matching_potential(position, target_position) - matching_potential(next_position, target_position)
+    return delta.mul_(factor)
+
+
+def _expert_observation_tensor(expert: Any, include_final: bool) -> torch.Tensor:
+    """``[L, D]`` states from a tensor, a trajectory TensorDict or an ExpertDemonstrations."""
+    from torchrl_csirl.data.expert import ExpertDemonstrations
+
+    if isinstance(expert, ExpertDemonstrations):
+        return expert.trajectory_observations(0, include_final=include_final)
+    if isinstance(expert, TensorDictBase):
+        obs = expert.get("observation")
+        if include_final:
+            obs = torch.cat([obs, expert.get(("next", "observation"))[-1:]], 0)
+        return obs
+    try:
+        return torch.as_tensor(expert)
+    except Exception as err:  # noqa: BLE001
+        raise TypeError(
+            "expert_observations must be a [L, D] tensor, a trajectory TensorDict or "
+            f"ExpertDemonstrations, got {type(expert).__name__}."
+        ) from err
+
+
+def _check_indices(indices: Sequence[int] | None, dim: int, name: str) -> torch.Tensor | None:
+    if indices is None:
+        return None
+    idx = torch.as_tensor(list(indices), dtype=torch.int64)
+    if idx.ndim != 1 or idx.numel() == 0:
+        raise ValueError(f"{name} must be a non-empty sequence of ints, got {indices!r}.")
+    if (idx < 0).any() or (idx >= dim).any():
+        raise ValueError(f"{name} {idx.tolist()} out of range for observations of size {dim}.")
+    return idx
+
+
+class SubgoalMatchingReward(TransitionRewardTransform):
+    """Writes the CSIRL matching reward ``r_m(s, s'; g)`` under ``("next", out_key)``.
+
+    Works as an environment transform (in a :class:`~torchrl.envs.TransformedEnv`, over a
+    single, serial or parallel env: the transform and its subgoal live in the main process) and
+    as a replay-buffer transform that recomputes the reward of sampled transitions
+    (``observation``, ``("next", "observation")``) for the *current* subgoal. The subgoal is set
+    with :meth:`set_subgoal` and used from the next step / sample on.
+
+    The reward is written under its own key (default ``"matching_reward"``, declared in the
+    observation spec so that ``env.reward_key`` is unchanged). To train on it, sum it (with the
+    intrinsic reward) into ``("next", "reward")`` with
+    :class:`~torchrl_csirl.transforms.CombineRewards`, or point the loss's ``reward`` key at it
+    (``loss.set_keys(reward="matching_reward")``).
+
+    Args:
+        expert_observations: the curriculum trajectory: a ``[L, D]`` tensor, a trajectory
+            TensorDict (its ``"observation"``) or :class:`~torchrl_csirl.data.ExpertDemonstrations`
+            (its first trajectory).
+
+    Keyword Args:
+        subgoal (int): initial subgoal ``g``. Defaults to ``0``.
+        ego_feature_indices (sequence of int, optional): features for the nearest-state search
+            (e.g. ``ScenarioSpec.ego_feature_indices``). Defaults to all features.
+        position_feature_indices (sequence of int, optional): features of the potential
+            (e.g. ``ScenarioSpec.position_feature_indices``). Defaults to all features.
+        scale (float): reward scale (published: 700 highway, 500 merge, 100 roundabout and
+            intersection). Defaults to ``1.0``.
+        target (str): ``"next"`` (default, published code) or ``"final"`` (paper).
+        sign (float): ``+1`` (default) or ``-1``.
+        in_key (NestedKey): observation key. Defaults to ``"observation"``.
+        out_key (NestedKey): output key inside ``"next"``. Defaults to ``"matching_reward"``.
+        include_final (bool): with a trajectory input, append its last next-observation.
+
+    Examples:
+        >>> import torch
+        >>> from tensordict import TensorDict
+        >>> expert = torch.tensor([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [3.0, 0.0]])
+        >>> t = SubgoalMatchingReward(expert, subgoal=2, scale=10.0, position_feature_indices=[0])
+        >>> td = TensorDict({"observation": torch.zeros(1, 2),
+        ...                  "next": {"observation": torch.tensor([[0.5, 0.0]])}}, [1])
+        >>> t(td)["next", "matching_reward"]
+        tensor([[5.]])
+        >>> t.set_subgoal(0)  # now past the subgoal: head for s^e_1
+        >>> t(td)["next", "matching_reward"]
+        tensor([[5.]])
+    """
+
+    def __init__(
+        self,
+        expert_observations: Any,
+        *,
+        subgoal: int = 0,
+        ego_feature_indices: Sequence[int] | None = None,
+        position_feature_indices: Sequence[int] | None = None,
+        scale: float = 1.0,
+        target: str = "next",
+        sign: float = 1.0,
+        in_key: NestedKey = "observation",
+        out_key: NestedKey = "matching_reward",
+        include_final: bool = False,
+    ) -> None:
+        super().__init__(in_keys=[in_key], out_key=out_key)
+        expert = _expert_observation_tensor(expert_observations, include_final)
+        if expert.ndim != 2 or expert.shape[0] < 1:
+            raise ValueError(f"expert observations must have shape [L, D] with L >= 1, got {tuple(expert.shape)}.")
+        if not torch.is_floating_point(expert):
+            expert = expert.float()
+        if not torch.isfinite(expert).all():
+            raise ValueError("expert observations contain NaN or infinite values.")
+        if target not in _TARGET_RULES:
+            raise ValueError(f"target must be one of {_TARGET_RULES}, got {target!r}.")
+        if sign not in (1, -1, 1.0, -1.0):
+            raise ValueError(f"sign must be +1 or -1, got {sign!r}.")
+        dim = expert.shape[-1]
+        ego = _check_indices(ego_feature_indices, dim, "ego_feature_indices")
+        pos = _check_indices(position_feature_indices, dim, "position_feature_indices")
+        expert = expert.detach().clone()
+        self.register_buffer("expert_observations", expert)
+        ego = ego if ego is not None else torch.arange(dim)
+        pos = pos if pos is not None else torch.arange(dim)
+        # features selected once: a call costs one [B, L] distance matrix and a few [B] ops
+        rows, row_index = distinct_expert_states(expert.index_select(-1, ego))
+        self.register_buffer("_expert_rows", rows)
+        self.register_buffer("_expert_row_index", row_index)
+        self.register_buffer("_expert_pos", expert.index_select(-1, pos))
+        self.register_buffer("_ego_idx", ego)
+        self.register_buffer("_pos_idx", pos)
+        self.scale = float(scale)
+        self.target = target
+        self.sign = float(sign)
+        self._subgoal = 0
+        self.set_subgoal(subgoal)
+
+    @property
+    def length(self) -> int:
+        """int: the curriculum trajectory length ``L``."""
+        return int(self.expert_observations.shape[0])
+
+    @property
+    def subgoal(self) -> int:
+        """int: the current subgoal ``g``."""
+        return self._subgoal
+
+    def set_subgoal(self, subgoal: int) -> None:
+        """Sets the subgoal ``g`` (an int in ``[0, L-1]``), used from the next step / sample on."""
+        if isinstance(subgoal, torch.Tensor) and subgoal.numel() == 1 and not subgoal.is_floating_point():
+            subgoal = int(subgoal.item())
+        if isinstance(subgoal, bool) or not isinstance(subgoal, int):
+            raise TypeError(f"subgoal must be an int, got {type(subgoal).__name__}.")
+        if not 0 <= subgoal < self.length:
+            raise ValueError(f"subgoal must be in [0, {self.length - 1}], got {subgoal}.")
+        self._subgoal = int(subgoal)
+
+    def _transition_reward(
+        self, tensordict: TensorDictBase, next_tensordict: TensorDictBase
+    ) -> torch.Tensor:
+        key = self.in_keys[0]
+        obs = tensordict.get(key)
+        next_obs = next_tensordict.get(key)
+        batch_shape = obs.shape[:-1]
+        obs = obs.reshape(-1, obs.shape[-1])
+        next_obs = next_obs.reshape(-1, next_obs.shape[-1])
+        dtype = self.expert_observations.dtype
+        if obs.dtype != dtype:
+            obs, next_obs = obs.to(dtype), next_obs.to(dtype)
+        reward = _matching_reward_from_features(
+            obs.index_select(-1, self._ego_idx),
+            obs.index_select(-1, self._pos_idx),
+            next_obs.index_select(-1, self._pos_idx),
+            self._expert_rows,
+            self._expert_row_index,
+            self._expert_pos,
+            self._subgoal,
+            self.target,
+            self.sign * self.scale,
+        )
+        return reward.reshape(batch_shape).to(torch.float32)
+
+    def get_extra_state(self) -> dict[str, Any]:
+        return {"subgoal": self._subgoal}
+
+    def set_extra_state(self, state: dict[str, Any]) -> None:
+        self.set_subgoal(int(state["subgoal"]))
+
+    def __repr__(self) -> str:
+        return (
+            f"{type(self).__name__}(length={self.length}, subgoal={self._subgoal}, scale={self.scale}, "
+            f"target={self.target!r}, sign={self.sign}, in_key={self.in_keys[0]!r}, out_key={self.out_key!r})"
+        )
