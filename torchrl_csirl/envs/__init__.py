@@ -1,1 +1,47 @@
-"""envs."""
+"""The paper's driving scenarios (highway-env based) and the accomplish-rate metric.
+
+Importing this package registers the gymnasium ids ``csirl/highway-fast-v0``,
+``csirl/merge-v0``, ``csirl/roundabout-v0`` and ``csirl/intersection-v0``.
+
+* :data:`SCENARIOS` / :class:`ScenarioSpec`: what each scenario is (observation layout,
+  episode limit, finish position, matching-reward scale).
+* :func:`make_gym_env` (gymnasium) and :func:`make_env` (TorchRL ``GymEnv``).
+* :func:`accomplish_rate` and friends: the paper's evaluation metric.
+"""
+from __future__ import annotations
+
+from torchrl_csirl.envs.metrics import (
+    accomplish_rate,
+    accomplish_rate_from_rollout,
+    area_under_curve,
+    normalized_accomplish_rate,
+    success_from_rollout,
+)
+from torchrl_csirl.envs.scenarios import (
+    SCENARIOS,
+    ScenarioSpec,
+    make_gym_env,
+    register_scenarios,
+    resolve_scenario,
+    scenario_config_overrides,
+)
+from torchrl_csirl.envs.torchrl_env import INFO_KEYS, info_spec, make_env
+
+register_scenarios()
+
+__all__ = [
+    "INFO_KEYS",
+    "SCENARIOS",
+    "ScenarioSpec",
+    "accomplish_rate",
+    "accomplish_rate_from_rollout",
+    "area_under_curve",
+    "info_spec",
+    "make_env",
+    "make_gym_env",
+    "normalized_accomplish_rate",
+    "register_scenarios",
+    "resolve_scenario",
+    "scenario_config_overrides",
+    "success_from_rollout",
+]

@@ -1,0 +1,265 @@
+"""The paper's four driving scenarios: specifications, gymnasium registration, factory.
+
+Each :class:`ScenarioSpec` describes one scene (see ``docs/SCENARIOS.md``): the gymnasium id
+registered on ``import torchrl_csirl.envs``, the flattened observation layout (which entries
+are the ego vehicle, which are its position), the episode limit, the finish position used by
+the accomplish-rate metric and the published matching-reward scale.
+"""
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Mapping
+
+import gymnasium as gym
+import numpy as np
+
+from torchrl_csirl.envs.driving import (
+    CSIRLHighwayEnv,
+    CSIRLIntersectionEnv,
+    CSIRLMergeEnv,
+    CSIRLRoundaboutEnv,
+)
+
+__all__ = [
+    "SCENARIOS",
+    "ScenarioSpec",
+    "make_gym_env",
+    "register_scenarios",
+    "resolve_scenario",
+    "scenario_config_overrides",
+]
+
+
+@dataclass(frozen=True)
+class ScenarioSpec:
+    """Static description of a CSIRL driving scenario.
+
+    Attributes:
+        name: short name ("highway-fast", "merge", "roundabout", "intersection").
+        gym_id: registered gymnasium id ("csirl/<name>-v0").
+        base_env: the highway-env scene it derives from.
+        entry_point: "module:Class" of the environment.
+        features: per-vehicle Kinematics features, in observation order.
+        features_range: feature -> (low, high) range mapped to [-1, 1] (then clipped).
+        vehicles_count: observed vehicles (ego first, then the nearest others).
+        obs_dim: flattened observation size (``vehicles_count * len(features)``).
+        action_dim: 2 ([acceleration, steering] in [-1, 1]).
+        max_steps: episode limit in policy steps (0.2 s each); reaching it truncates.
+        finish_position: (x, y) [m] of the finish, for the accomplish rate.
+        ego_feature_indices: flattened-observation indices of the ego row.
+        position_feature_indices: flattened indices of the ego position used by the
+            matching reward (x for highway/merge, (x, y) for roundabout/intersection).
+        matching_scale: published scale of the matching reward.
+        dt: seconds per step.
+        description: one line on the scene.
+
+    Examples:
+        >>> from torchrl_csirl.envs import SCENARIOS
+        >>> spec = SCENARIOS["merge"]
+        >>> spec.obs_dim, spec.max_steps, spec.position_feature_indices
+        (25, 60, (1,))
+        >>> spec.normalize_position((400.0, 4.0)).tolist()  # merge matches on x only
+        [0.8]
+    """
+
+    name: str
+    gym_id: str
+    base_env: str
+    entry_point: str
+    features: tuple[str, ...]
+    features_range: Mapping[str, tuple[float, float]]
+    vehicles_count: int
+    obs_dim: int
+    action_dim: int
+    max_steps: int
+    finish_position: tuple[float, float]
+    ego_feature_indices: tuple[int, ...]
+    position_feature_indices: tuple[int, ...]
+    matching_scale: float
+    dt: float = 0.2
+    description: str = ""
+    config: Mapping = field(default_factory=dict, repr=False, compare=False)
+
+    @property
+    def position_features(self) -> tuple[str, ...]:
+        """Names of the position features used by the matching reward ("x" or ("x", "y"))."""
+        return tuple(self.features[i] for i in self.position_feature_indices)
+
+    def normalize_position(self, position) -> np.ndarray:
+        """Map a world position (x[, y]) [m] to the observation's normalised coordinates.
+
+        Only the coordinates named by :attr:`position_features` are returned (unclipped).
+        """
+        position = np.asarray(position, dtype=np.float64).reshape(-1)
+        out = []
+        for i, name in enumerate(("x", "y")):
+            if name in self.position_features:
+                lo, hi = self.features_range[name]
+                out.append(-1.0 + (position[i] - lo) * 2.0 / (hi - lo))
+        return np.asarray(out)
+
+    @property
+    def normalized_finish_position(self) -> np.ndarray:
+        """The finish position in normalised observation coordinates (see :meth:`normalize_position`)."""
+        return self.normalize_position(self.finish_position)
+
+    def default_config(self) -> dict:
+        """A deep copy of the scenario's full highway-env config."""
+        return copy.deepcopy(dict(self.config))
+
+
+def _spec(
+    name: str,
+    env_class: type,
+    base_env: str,
+    position_features: tuple[str, ...],
+    matching_scale: float,
+    description: str,
+) -> ScenarioSpec:
+    config = env_class.default_config()
+    obs = config["observation"]
+    features = tuple(obs["features"])
+    n_features = len(features)
+    vehicles_count = int(obs["vehicles_count"])
+    return ScenarioSpec(
+        name=name,
+        gym_id=f"csirl/{name}-v0",
+        base_env=base_env,
+        entry_point=f"{env_class.__module__}:{env_class.__name__}",
+        features=features,
+        features_range=MappingProxyType(
+            {k: (float(v[0]), float(v[1])) for k, v in obs["features_range"].items()}
+        ),
+        vehicles_count=vehicles_count,
+        obs_dim=vehicles_count * n_features,
+        action_dim=2,
+        max_steps=int(config["max_steps"]),
+        finish_position=tuple(float(v) for v in config["finish_position"]),
+        ego_feature_indices=tuple(range(n_features)),
+        position_feature_indices=tuple(features.index(f) for f in position_features),
+        matching_scale=float(matching_scale),
+        dt=1.0 / config["policy_frequency"],
+        description=description,
+        config=MappingProxyType(config),
+    )
+
+
+SCENARIOS: dict[str, ScenarioSpec] = {
+    spec.name: spec
+    for spec in (
+        _spec(
+            "highway-fast",
+            CSIRLHighwayEnv,
+            "highway-fast-v0",
+            ("x",),
+            700.0,
+            "3-lane highway, 20 vehicles; ego at 35 m/s overtakes traffic limited to 25 m/s",
+        ),
+        _spec(
+            "merge",
+            CSIRLMergeEnv,
+            "merge-v0",
+            ("x",),
+            500.0,
+            "highway with an on-ramp merging vehicle; ends past x = 370 m",
+        ),
+        _spec(
+            "roundabout",
+            CSIRLRoundaboutEnv,
+            "roundabout-v0",
+            ("x", "y"),
+            100.0,
+            "4-lane roundabout, 6 vehicles; ego enters from the south and exits north",
+        ),
+        _spec(
+            "intersection",
+            CSIRLIntersectionEnv,
+            "intersection-v0",
+            ("x", "y"),
+            100.0,
+            "4-way intersection, 2 lanes per approach, dense traffic; ego turns left",
+        ),
+    )
+}
+
+
+def register_scenarios() -> None:
+    """Register the ``csirl/<name>-v0`` gymnasium ids (idempotent)."""
+    for spec in SCENARIOS.values():
+        if spec.gym_id not in gym.registry:
+            gym.register(
+                id=spec.gym_id,
+                entry_point=spec.entry_point,
+                max_episode_steps=None,
+                disable_env_checker=True,
+                order_enforce=False,
+            )
+
+
+def resolve_scenario(name: str | ScenarioSpec) -> ScenarioSpec:
+    """The :class:`ScenarioSpec` for a scenario name, gym id or spec (ValueError if unknown)."""
+    if isinstance(name, ScenarioSpec):
+        return name
+    if name in SCENARIOS:
+        return SCENARIOS[name]
+    for spec in SCENARIOS.values():
+        if name == spec.gym_id:
+            return spec
+    raise ValueError(f"Unknown scenario {name!r}; expected one of {sorted(SCENARIOS)}.")
+
+
+def make_gym_env(name: str, render_mode: str | None = None, **config_overrides) -> gym.Env:
+    """Create a CSIRL scenario as a gymnasium environment.
+
+    Args:
+        name: scenario name (key of :data:`SCENARIOS`) or its gym id.
+        render_mode: ``None`` or ``"rgb_array"`` (headless pictures need
+            ``offscreen_rendering=True``, set automatically for "rgb_array").
+        **config_overrides: highway-env config entries replacing the scenario's (top-level
+            keys; nested dicts such as "observation" are merged one level deep so that a
+            partial dict does not drop the other entries). ``fast=False`` selects the
+            stock pandas observation and stock trajectory prediction.
+
+    Returns:
+        the unwrapped environment (episode limit implemented as truncation inside).
+
+    Examples:
+        >>> from torchrl_csirl.envs import make_gym_env
+        >>> env = make_gym_env("merge")
+        >>> obs, info = env.reset(seed=0)
+        >>> obs.shape, round(info["distance_to_finish"], 1)
+        ((25,), 370.0)
+    """
+    spec = resolve_scenario(name)
+    register_scenarios()
+    config = scenario_config_overrides(spec, **config_overrides)
+    if render_mode == "rgb_array":
+        config.setdefault("offscreen_rendering", True)
+    env = gym.make(spec.gym_id, config=config, render_mode=render_mode)
+    return env.unwrapped
+
+
+def scenario_config_overrides(name: str | ScenarioSpec, **config_overrides) -> dict:
+    """Turn keyword overrides into a highway-env ``config=`` dict that is safe to pass.
+
+    highway-env's ``configure`` updates the config shallowly, so a partial nested dict (e.g.
+    ``observation={"see_behind": True}``) would drop the scenario's other observation entries;
+    nested dicts are therefore merged one level deep with the scenario's defaults.
+
+    Examples:
+        >>> cfg = scenario_config_overrides("merge", observation={"see_behind": True})
+        >>> cfg["observation"]["see_behind"], cfg["observation"]["vehicles_count"]
+        (True, 5)
+    """
+    spec = resolve_scenario(name)
+    config = {}
+    for key, value in config_overrides.items():
+        base = spec.config.get(key)
+        if isinstance(value, Mapping) and isinstance(base, Mapping):
+            merged = copy.deepcopy(dict(base))
+            merged.update(copy.deepcopy(dict(value)))
+            value = merged
+        config[key] = value
+    return config

@@ -1,0 +1,109 @@
+"""TorchRL environments for the CSIRL driving scenarios."""
+from __future__ import annotations
+
+import torch
+from torchrl.data import Bounded, Categorical, Composite, Unbounded
+from torchrl.envs import EnvBase
+from torchrl.envs.gym_like import default_info_dict_reader
+from torchrl.envs.libs.gym import GymEnv
+
+from torchrl_csirl.envs.scenarios import (
+    register_scenarios,
+    resolve_scenario,
+    scenario_config_overrides,
+)
+
+__all__ = ["INFO_KEYS", "ScenarioInfoReader", "info_spec", "make_env"]
+
+#: info entries read into the TensorDict (root at reset, under "next" after a step)
+INFO_KEYS: tuple[str, ...] = (
+    "distance_to_finish",
+    "progress",
+    "crashed",
+    "offroad",
+    "arrived",
+    "success",
+)
+
+
+class ScenarioInfoReader(default_info_dict_reader):
+    """Info reader writing the scenario entries with the dtypes of their specs.
+
+    TorchRL's default reader expects numpy values; the scenarios report Python floats/bools.
+    """
+
+    def __call__(self, info_dict: dict, tensordict):
+        spec = self.info_spec
+        for key in self.keys:
+            if key in info_dict:
+                value = torch.as_tensor(info_dict[key], dtype=spec[key].dtype)
+            else:
+                value = spec[key].zero()
+            tensordict.set(key, value.to(tensordict.device) if tensordict.device else value)
+        return tensordict
+
+
+def info_spec(keys=INFO_KEYS) -> Composite:
+    """Specs of the scenario info entries (float32 distance/progress, bool flags).
+
+    Examples:
+        >>> info_spec()["distance_to_finish"].dtype
+        torch.float32
+    """
+    specs = {
+        "distance_to_finish": Unbounded((), dtype=torch.float32),
+        "progress": Bounded(0.0, 1.0, (), dtype=torch.float32),
+    }
+    for flag in ("crashed", "offroad", "arrived", "success"):
+        specs[flag] = Categorical(2, (), dtype=torch.bool)
+    unknown = set(keys) - set(specs)
+    if unknown:
+        raise ValueError(f"Unknown info keys {sorted(unknown)}; expected a subset of {INFO_KEYS}.")
+    return Composite({k: specs[k] for k in keys}, shape=())
+
+
+def make_env(
+    name: str,
+    seed: int | None = None,
+    device: torch.device | str = "cpu",
+    info_keys=INFO_KEYS,
+    **overrides,
+) -> EnvBase:
+    """Create a CSIRL scenario as a TorchRL environment.
+
+    A :class:`~torchrl.envs.libs.gym.GymEnv` on the registered ``csirl/<name>-v0`` id with the
+    scenario info entries (``"distance_to_finish"``, ``"progress"``, ``"crashed"``,
+    ``"offroad"``, ``"arrived"``, ``"success"``) read into the TensorDict with fixed specs.
+    The episode limit appears as ``"truncated"``; crashes, off-road and the scene's own end
+    conditions as ``"terminated"``.
+
+    The function is defined at module level, so ``functools.partial(make_env, name, ...)`` is a
+    picklable factory for :class:`~torchrl.envs.ParallelEnv` and collectors.
+
+    Args:
+        name: scenario name ("highway-fast", "merge", "roundabout", "intersection") or gym id.
+        seed: seed applied with ``env.set_seed`` (None: unseeded).
+        device: device of the output TensorDicts.
+        info_keys: which info entries to read.
+        **overrides: highway-env config entries (see :func:`~torchrl_csirl.envs.make_gym_env`),
+            e.g. ``fast=False`` for the stock observation code.
+
+    Returns:
+        the TorchRL environment.
+
+    Examples:
+        >>> from torchrl_csirl.envs import make_env
+        >>> env = make_env("merge", seed=0)
+        >>> td = env.rollout(3, break_when_any_done=False)
+        >>> td["observation"].shape, td["next", "distance_to_finish"].shape
+        (torch.Size([3, 25]), torch.Size([3]))
+    """
+    spec = resolve_scenario(name)
+    register_scenarios()
+    config = scenario_config_overrides(spec, **overrides)
+    env = GymEnv(spec.gym_id, config=config, device=device)
+    reader = ScenarioInfoReader(list(info_keys), spec=info_spec(info_keys))
+    env.set_info_dict_reader(reader)
+    if seed is not None:
+        env.set_seed(seed)
+    return env
