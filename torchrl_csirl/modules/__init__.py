@@ -1,1 +1,12 @@
-"""modules."""
+"""Networks of the CSIRL learner: actor, critic and intrinsic reward."""
+from __future__ import annotations
+
+from torchrl_csirl.modules.actor_critic import (
+    BoundedLogStdNormalParams,
+    MaskedReLU,
+    make_actor,
+    make_qvalue,
+)
+from torchrl_csirl.modules.reward import make_reward_network
+
+__all__ = ["BoundedLogStdNormalParams", "MaskedReLU", "make_actor", "make_qvalue", "make_reward_network"]

@@ -1,0 +1,240 @@
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+from tensordict import TensorDict
+from tensordict.nn import TensorDictModule
+
+from torchrl.objectives import SACLoss, SoftUpdate
+
+from torchrl_csirl.modules.actor_critic import make_actor, make_qvalue
+from torchrl_csirl.objectives import EnsembleSACLoss, qvalue_dispersion
+
+OBS, ACT, HID = 5, 2, (16, 16)
+
+
+def _batch(n=8, seed=1, **flags):
+    g = torch.Generator().manual_seed(seed)
+    td = TensorDict(
+        {
+            "observation": torch.randn(n, OBS, generator=g),
+            "action": torch.rand(n, ACT, generator=g) * 2 - 1,
+            ("next", "observation"): torch.randn(n, OBS, generator=g),
+            ("next", "reward"): torch.randn(n, 1, generator=g),
+            ("next", "done"): torch.zeros(n, 1, dtype=torch.bool),
+            ("next", "terminated"): torch.zeros(n, 1, dtype=torch.bool),
+            ("next", "truncated"): torch.zeros(n, 1, dtype=torch.bool),
+        },
+        [n],
+    )
+    for key, value in flags.items():
+        td["next", key] = torch.full((n, 1), value)
+    return td
+
+
+def _loss(**kwargs):
+    torch.manual_seed(0)
+    return EnsembleSACLoss(make_actor(OBS, ACT, hidden=HID), make_qvalue(OBS, ACT, hidden=HID), **kwargs)
+
+
+def test_defaults():
+    loss = _loss()
+    assert loss.num_qvalue_nets == 5
+    assert loss.fixed_alpha and math.isclose(loss._alpha.item(), 0.01, rel_tol=1e-6)
+    assert math.isclose(loss.value_estimator.gamma.item(), 0.99, rel_tol=1e-6)
+    assert loss.loss_function == "l2"
+    assert not any(p is loss.log_alpha for p in loss.parameters())
+
+
+def test_critics_are_independently_initialised():
+    loss = _loss()
+    params = loss.qvalue_network_params
+    for key, value in params.items(True, True):
+        assert value.shape[0] == 5
+        flat = value.detach().reshape(5, -1)
+        for i in range(5):
+            for j in range(i + 1, 5):
+                assert not torch.equal(flat[i], flat[j]), key
+    # each member follows nn.Linear's default init: |W| <= 1/sqrt(fan_in)
+    first = params["module", "mlp", "0", "weight"]
+    bound = 1 / math.sqrt(OBS + ACT)
+    assert first.abs().max() <= bound
+    # ... and is not a uniform resampling over the [min, max] of a single init
+    stds = first.detach().reshape(5, -1).std(1)
+    assert torch.allclose(stds, torch.full_like(stds, bound / math.sqrt(3)), rtol=0.15)
+    # targets start equal to the online critics
+    for key, value in loss.target_qvalue_network_params.items(True, True):
+        assert torch.equal(value, params.get(key).detach())
+
+
+def test_list_of_critics():
+    torch.manual_seed(0)
+    critics = [make_qvalue(OBS, ACT, hidden=HID) for _ in range(3)]
+    loss = EnsembleSACLoss(make_actor(OBS, ACT, hidden=HID), critics, num_qvalue_nets=3)
+    w = loss.qvalue_network_params["module", "mlp", "0", "weight"]
+    for k, critic in enumerate(critics):
+        assert torch.equal(w[k], critic.module.mlp[0].weight)
+    with pytest.raises(ValueError, match="num_qvalue_nets"):
+        EnsembleSACLoss(make_actor(OBS, ACT, hidden=HID), critics, num_qvalue_nets=5)
+
+
+def test_qvalues_match_each_member():
+    loss = _loss()
+    td = _batch()
+    q = loss.qvalues(td)
+    assert q.shape == (5, 8)
+    member = make_qvalue(OBS, ACT, hidden=HID)
+    for k in range(5):
+        with loss.qvalue_network_params[k].to_module(member):
+            expected = member(td.select("observation", "action"))["state_action_value"].squeeze(-1)
+        torch.testing.assert_close(q[k], expected)
+
+
+def test_dispersion():
+    loss = _loss()
+    td = _batch()
+    q = loss.qvalues(td).detach()
+    var = ((q - q.mean(0)) ** 2).mean(0)
+    torch.testing.assert_close(loss.qvalue_dispersion(td), var)
+    torch.testing.assert_close(loss.qvalue_dispersion(q), var)
+    torch.testing.assert_close(loss.qvalue_dispersion(q, "abs_cv"), (var / q.mean(0)).abs())
+    abs_cv_loss = _loss(dispersion="abs_cv")
+    torch.testing.assert_close(abs_cv_loss.qvalue_dispersion(q), (var / q.mean(0)).abs())
+    with pytest.raises(ValueError):
+        qvalue_dispersion(q, "std")
+    with pytest.raises(ValueError):
+        qvalue_dispersion(q[:1])
+    with pytest.raises(ValueError):
+        _loss(dispersion="bogus")
+
+
+def _plain_sac_like(loss: EnsembleSACLoss) -> SACLoss:
+    plain = SACLoss(
+        loss.actor_network,
+        make_qvalue(OBS, ACT, hidden=HID),
+        num_qvalue_nets=5,
+        alpha_init=0.01,
+        fixed_alpha=True,
+        loss_function="l2",
+    )
+    plain.make_value_estimator(gamma=0.99)
+    with torch.no_grad():
+        plain.actor_network_params.update_(loss.actor_network_params.data)
+        plain.qvalue_network_params.update_(loss.qvalue_network_params.data)
+        plain.target_qvalue_network_params.update_(loss.target_qvalue_network_params.data)
+    return plain
+
+
+@pytest.mark.parametrize("differentiable", [False, True])
+def test_identical_to_plain_sac(differentiable):
+    loss = _loss()
+    plain = _plain_sac_like(loss)
+    td = _batch(16)
+    td["next", "terminated"][:4] = True
+    td["next", "done"][:8] = True
+    td["next", "truncated"][4:8] = True
+    torch.manual_seed(3)
+    expected = plain(td.clone())
+    reward = td["next", "reward"].clone().requires_grad_(differentiable)
+    td_e = td.clone()
+    td_e["next", "reward"] = reward
+    loss.differentiable_reward = differentiable
+    torch.manual_seed(3)
+    out = loss(td_e)
+    for key in ("loss_qvalue", "loss_actor", "loss_alpha", "entropy"):
+        assert torch.equal(out[key], expected[key]), key
+    if differentiable:
+        (grad,) = torch.autograd.grad(out["loss_qvalue"], reward)
+        assert grad.abs().sum() > 0
+    else:
+        assert not out["loss_qvalue"].requires_grad or not reward.requires_grad
+
+
+def test_differentiable_reward_gradient_is_exact():
+    """d L_Q / d r = -2/B * sum_k (Q_k - y) for the summed squared error."""
+    loss = _loss()
+    td = _batch(6)
+    reward = td["next", "reward"].clone().requires_grad_(True)
+    td["next", "reward"] = reward
+    with loss.differentiable_reward_mode():
+        torch.manual_seed(0)
+        target = loss._compute_target_v2(td)
+        torch.manual_seed(0)
+        loss_q, _ = loss.qvalue_v2_loss(td)
+    assert not loss.differentiable_reward
+    (grad,) = torch.autograd.grad(loss_q, reward)
+    q = loss.qvalues(td).detach()
+    expected = (-2.0 / 6 * (q - target.detach()).sum(0)).unsqueeze(-1)
+    torch.testing.assert_close(grad, expected)
+
+
+def test_truncation_is_not_termination():
+    loss = _loss()
+    base = _batch(6)
+    truncated = _batch(6, done=True, truncated=True, terminated=False)
+    terminated = _batch(6, done=True, truncated=False, terminated=True)
+    targets = {}
+    for name, td in (("base", base), ("truncated", truncated), ("terminated", terminated)):
+        torch.manual_seed(0)
+        with torch.no_grad():
+            targets[name] = loss._compute_target_v2(td)
+    reward = base["next", "reward"].squeeze(-1)
+    # truncated transitions bootstrap exactly like ongoing ones
+    assert torch.equal(targets["truncated"], targets["base"])
+    assert not torch.allclose(targets["truncated"], reward)
+    # terminated transitions do not bootstrap
+    torch.testing.assert_close(targets["terminated"], reward)
+
+
+def test_set_keys_reward_and_terminated():
+    loss = _loss()
+    loss.set_keys(reward="local_reward", terminated="term")
+    td = _batch(6)
+    td["next", "local_reward"] = td["next", "reward"] * 0 + 3.0
+    td["next", "term"] = torch.ones(6, 1, dtype=torch.bool)
+    del td["next", "reward"]
+    assert ("next", "local_reward") in loss.in_keys
+    with torch.no_grad():
+        target = loss._compute_target_v2(td)
+    torch.testing.assert_close(target, torch.full((6,), 3.0))
+
+
+def test_using_params_swaps_and_restores():
+    loss = _loss()
+    td = _batch(6)
+    q0 = loss.qvalues(td).detach()
+    zeros = loss.qvalue_network_params.data.apply(torch.zeros_like)
+    with loss.using_params(qvalue_params=zeros):
+        assert torch.equal(loss.qvalues(td), torch.zeros(5, 6))
+    assert torch.equal(loss.qvalues(td).detach(), q0)
+    # the actor loss sees non-detached critic parameters when asked to
+    phi = loss.qvalue_network_params.data.apply(lambda p: p.clone().requires_grad_(True))
+    with loss.using_params(actor_loss_qvalue_params=phi):
+        loss_actor, _ = loss.actor_loss(td)
+    grads = torch.autograd.grad(loss_actor, list(phi.values(True, True)), allow_unused=True)
+    assert any(g is not None and g.abs().sum() > 0 for g in grads)
+    # ... and the default actor loss does not
+    loss_actor, _ = loss.actor_loss(td)
+    loss_actor.backward()
+    assert all(p.grad is None for p in loss.qvalue_network_params.values(True, True))
+    with pytest.raises(ValueError):
+        with loss.using_params(qvalue_params=zeros[:2]):
+            pass
+
+
+def test_training_step_with_soft_update():
+    loss = _loss()
+    updater = SoftUpdate(loss, tau=0.005)
+    optim = torch.optim.Adam(loss.parameters(), lr=1e-3)
+    target_before = loss.target_qvalue_network_params.clone()
+    td = _batch(8)
+    out = loss(td)
+    (out["loss_qvalue"] + out["loss_actor"]).backward()
+    optim.step()
+    updater.step()
+    online = loss.qvalue_network_params.data
+    for key, value in loss.target_qvalue_network_params.items(True, True):
+        expected = 0.995 * target_before.get(key) + 0.005 * online.get(key)
+        torch.testing.assert_close(value, expected)

@@ -1,0 +1,267 @@
+from __future__ import annotations
+
+import pytest
+import torch
+from tensordict import TensorDict
+from tensordict.nn import TensorDictModule
+from torch import nn
+
+from torchrl_csirl.modules import make_actor, make_qvalue, make_reward_network
+from torchrl_csirl.objectives import EnsembleSACLoss, MetaRewardLoss
+from torchrl_csirl.objectives.meta_reward import sgd_lookahead
+
+OBS, ACT = 3, 2
+
+
+def _tiny_reward(dtype=torch.float64) -> TensorDictModule:
+    net = nn.Sequential(nn.Linear(OBS, 4), nn.Tanh(), nn.Linear(4, 1), nn.Tanh()).to(dtype)
+    return TensorDictModule(net, in_keys=["observation"], out_keys=["intrinsic_reward"])
+
+
+def _setup(dtype=torch.float64, num_critics=3, **meta_kwargs):
+    torch.manual_seed(0)
+    actor = make_actor(OBS, ACT, hidden=(6,)).to(dtype)
+    critic = make_qvalue(OBS, ACT, hidden=(6,)).to(dtype)
+    sac = EnsembleSACLoss(actor, critic, num_qvalue_nets=num_critics).to(dtype)
+    reward = _tiny_reward(dtype)
+    meta = MetaRewardLoss(sac, reward, **meta_kwargs)
+    g = torch.Generator().manual_seed(1)
+    n = 5
+    online = TensorDict(
+        {
+            "observation": torch.randn(n, OBS, generator=g, dtype=dtype),
+            "action": torch.rand(n, ACT, generator=g, dtype=dtype) * 2 - 1,
+            ("next", "observation"): torch.randn(n, OBS, generator=g, dtype=dtype),
+            ("next", "matching_reward"): torch.randn(n, 1, generator=g, dtype=dtype),
+            ("next", "done"): torch.zeros(n, 1, dtype=torch.bool),
+            ("next", "terminated"): torch.zeros(n, 1, dtype=torch.bool),
+        },
+        [n],
+    )
+    online["next", "terminated"][0] = True
+    expert = TensorDict(
+        {
+            "observation": torch.randn(4, OBS, generator=g, dtype=dtype),
+            "action": torch.rand(4, ACT, generator=g, dtype=dtype) * 1.6 - 0.8,
+        },
+        [4],
+    )
+    regularizer = online.clone()
+    regularizer["observation"] = torch.randn(n, OBS, generator=g, dtype=dtype)
+    return sac, reward, meta, online, expert, regularizer
+
+
+def _meta_value(meta, online, expert, regularizer, seed=123) -> torch.Tensor:
+    torch.manual_seed(seed)
+    return meta(online, expert, regularizer)["loss_meta"].detach()
+
+
+def _finite_difference(meta, reward, online, expert, regularizer, eps=1e-6):
+    grads = []
+    for p in reward.parameters():
+        g = torch.zeros_like(p)
+        flat = p.data.view(-1)
+        for i in range(flat.numel()):
+            orig = flat[i].item()
+            flat[i] = orig + eps
+            up = _meta_value(meta, online, expert, regularizer)
+            flat[i] = orig - eps
+            down = _meta_value(meta, online, expert, regularizer)
+            flat[i] = orig
+            g.view(-1)[i] = (up - down) / (2 * eps)
+        grads.append(g)
+    return grads
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        dict(reward_l1_coef=0.0),  # the chain w -> phi' -> theta' -> L_meta alone
+        dict(reward_l1_coef=1.0),
+        dict(reward_l1_coef=0.0, deterministic_expert_action=True),
+    ],
+)
+def test_meta_gradient_matches_finite_differences(kwargs):
+    sac, reward, meta, online, expert, regularizer = _setup(**kwargs)
+    torch.manual_seed(123)
+    out = meta(online, expert, regularizer)
+    out["loss_meta"].backward()
+    analytic = [p.grad.clone() for p in reward.parameters()]
+    numeric = _finite_difference(meta, reward, online, expert, regularizer)
+    for a, n in zip(analytic, numeric):
+        torch.testing.assert_close(a, n, rtol=1e-4, atol=1e-8)
+    total = torch.cat([a.flatten() for a in analytic])
+    assert total.abs().max() > 1e-6  # not silently zero
+    assert torch.isclose(out["meta_grad_norm"], total.norm())
+
+
+def test_meta_gradient_matches_unrolled_reference():
+    """Independent re-derivation with explicit per-critic loops (no vmap, no SACLoss)."""
+    sac, reward, meta, online, expert, regularizer = _setup(reward_l1_coef=0.0, num_critics=2)
+    lr, gamma, alpha = meta.lr_inner, 0.99, 0.01
+    actor = sac.actor_network
+    critic = make_qvalue(OBS, ACT, hidden=(6,)).to(torch.float64)
+
+    def q_of(params, obs, act):
+        with params.to_module(critic):
+            return critic(TensorDict({"observation": obs, "action": act}, obs.shape[:1]))[
+                "state_action_value"
+            ].squeeze(-1)
+
+    def sample(params, obs):
+        with params.to_module(actor):
+            dist = actor.get_dist(TensorDict({"observation": obs}, obs.shape[:1]))
+        a = dist.rsample()
+        return a, dist.log_prob(a)
+
+    theta = sac.actor_network_params.data.apply(lambda p: p.clone().requires_grad_(True))
+    phi = [sac.qvalue_network_params.data[k].apply(lambda p: p.clone().requires_grad_(True)) for k in range(2)]
+    target_phi = [sac.target_qvalue_network_params.data[k] for k in range(2)]
+    w = list(reward.parameters())
+    torch.manual_seed(123)
+    # same random draws, same order as MetaRewardLoss: target action, actor action, expert action
+    r = online["next", "matching_reward"].squeeze(-1) + reward(online.select("observation"))["intrinsic_reward"].squeeze(-1)
+    with torch.no_grad():
+        a2, logp2 = sample(theta, online["next", "observation"])
+        v = torch.stack([q_of(tp, online["next", "observation"], a2) for tp in target_phi]) - alpha * logp2
+        v = v.min(0).values
+        not_term = (~online["next", "terminated"].squeeze(-1)).double()
+    y = r + gamma * not_term * v
+    loss_q = sum(((q_of(p, online["observation"], online["action"]) - y) ** 2).mean() for p in phi)
+    phi_new = []
+    for p in phi:
+        keys = list(p.keys(True, True))
+        grads = torch.autograd.grad(loss_q, [p.get(k) for k in keys], create_graph=True)
+        phi_new.append(TensorDict({k: p.get(k) - lr * g for k, g in zip(keys, grads)}, []))
+    a, logp = sample(theta, online["observation"])
+    qmin = torch.stack([q_of(p, online["observation"], a) for p in phi_new]).min(0).values
+    loss_pi = (alpha * logp - qmin).mean()
+    keys = list(theta.keys(True, True))
+    grads = torch.autograd.grad(loss_pi, [theta.get(k) for k in keys], create_graph=True)
+    theta_new = TensorDict({k: theta.get(k) - lr * g for k, g in zip(keys, grads)}, [])
+    a_hat, _ = sample(theta_new, expert["observation"])
+    ref = 100.0 * ((a_hat - expert["action"]) ** 2).mean()
+    ref_grads = torch.autograd.grad(ref, w)
+
+    torch.manual_seed(123)
+    out = meta(online, expert)
+    torch.testing.assert_close(out["loss_meta"].detach(), ref.detach(), rtol=1e-10, atol=1e-12)
+    out["loss_meta"].backward()
+    for p, g in zip(w, ref_grads):
+        torch.testing.assert_close(p.grad, g, rtol=1e-8, atol=1e-12)
+        assert g.abs().max() > 0
+
+
+def test_actor_and_critic_untouched():
+    sac, reward, meta, online, expert, regularizer = _setup(dtype=torch.float32)
+    before = {
+        name: getattr(sac, name).data.clone()
+        for name in ("actor_network_params", "qvalue_network_params", "target_qvalue_network_params")
+    }
+    out = meta(online, expert, regularizer)
+    out["loss_meta"].backward()
+    for p in sac.parameters():
+        assert p.grad is None
+    for p in sac.actor_network.parameters():
+        assert p.grad is None
+    for name, value in before.items():
+        assert (getattr(sac, name).data == value).all()
+    assert all(p.grad is not None for p in reward.parameters())
+    # only the reward network's parameters are exposed by the meta loss
+    assert {id(p) for p in meta.parameters()} == {id(p) for p in reward.parameters()}
+    assert not sac.differentiable_reward
+
+
+def test_reward_keys():
+    sac, reward, meta, online, expert, regularizer = _setup(dtype=torch.float32)
+    td = online.exclude(("next", "matching_reward"))
+    with pytest.raises(KeyError, match="matching_reward"):
+        meta(td, expert)
+    no_matching = MetaRewardLoss(sac, reward, use_matching_reward=False)
+    assert ("next", "matching_reward") not in no_matching.in_keys
+    out = no_matching(td, expert)
+    assert torch.isfinite(out["loss_meta"])
+    meta.set_keys(matching_reward="r_m")
+    td = online.rename_key_(("next", "matching_reward"), ("next", "r_m"))
+    assert ("next", "r_m") in meta.in_keys
+    assert torch.isfinite(meta(td, expert)["loss_meta"])
+
+
+def test_matching_reward_enters_the_critic_target():
+    sac, reward, meta, online, expert, _ = _setup(reward_l1_coef=0.0)
+    torch.manual_seed(5)
+    base = meta(online, expert)["loss_inner_qvalue"]
+    shifted = online.clone()
+    shifted["next", "matching_reward"] += 1.0
+    torch.manual_seed(5)
+    assert not torch.isclose(meta(shifted, expert)["loss_inner_qvalue"], base)
+
+
+def test_bad_inputs():
+    sac, reward, *_ = _setup(dtype=torch.float32)
+    with pytest.raises(TypeError):
+        MetaRewardLoss(object(), reward)
+    with pytest.raises(ValueError):
+        MetaRewardLoss(sac, reward, lr_inner=0.0)
+
+
+def test_with_project_reward_network_and_adam_step():
+    torch.manual_seed(0)
+    sac = EnsembleSACLoss(make_actor(OBS, ACT, hidden=(8,)), make_qvalue(OBS, ACT, hidden=(8,)))
+    reward = make_reward_network(OBS, hidden=(8,))
+    meta = MetaRewardLoss(sac, reward)
+    optim = torch.optim.Adam(meta.parameters(), lr=1e-3)
+    _, _, _, online, expert, _ = _setup(dtype=torch.float32)
+    before = [p.detach().clone() for p in reward.parameters()]
+    meta(online, expert)["loss_meta"].backward()
+    optim.step()
+    assert any(not torch.equal(b, p) for b, p in zip(before, reward.parameters()))
+
+
+def test_sgd_lookahead():
+    p = TensorDict({"a": torch.tensor([1.0, 2.0], requires_grad=True)}, [])
+    w = torch.tensor(2.0, requires_grad=True)
+    new = sgd_lookahead((w * p["a"] ** 2).sum(), p, lr=0.5)
+    torch.testing.assert_close(new["a"], torch.tensor([1.0 - 2.0, 2.0 - 4.0]))
+    (gw,) = torch.autograd.grad(new["a"].sum(), w)
+    assert gw.item() == pytest.approx(-0.5 * 2 * 3.0)
+
+
+def test_joint_sac_update_matches_separate_losses():
+    """joint_sac_update: same meta-loss/gradient, and the SAC losses/gradients of sac(td)."""
+    sac, reward, meta, online, expert, regularizer = _setup()
+    joint = MetaRewardLoss(sac, reward, joint_sac_update=True)
+    torch.manual_seed(7)
+    separate = meta(online, expert, regularizer)
+    separate["loss_meta"].backward()
+    meta_grads = [p.grad.clone() for p in reward.parameters()]
+    reward.zero_grad()
+
+    torch.manual_seed(7)
+    out = joint(online, expert, regularizer)
+    for key in ("loss_meta", "loss_imitation", "loss_inner_qvalue", "loss_inner_actor"):
+        torch.testing.assert_close(out[key], separate[key], rtol=0, atol=0)
+    (out["loss_qvalue"] + out["loss_meta"]).backward()
+    for p, g in zip(reward.parameters(), meta_grads):
+        torch.testing.assert_close(p.grad, g, rtol=0, atol=0)
+    joint_q_grads = [p.grad.clone() for p in sac.qvalue_network_params.values(True, True)]
+    assert all(p.grad is None for p in sac.actor_network_params.values(True, True))
+
+    # reference: plain SAC critic loss on the local reward r_m + r_w (no grad)
+    sac.zero_grad(set_to_none=True)
+    td = online.clone()
+    with torch.no_grad():
+        td["next", "reward"] = td["next", "matching_reward"] + reward(td.select("observation"))["intrinsic_reward"]
+    torch.manual_seed(7)
+    ref_q, _ = sac.qvalue_v2_loss(td)
+    torch.testing.assert_close(out["loss_qvalue"], ref_q.detach(), rtol=1e-12, atol=0)
+    ref_q.backward()
+    for p, g in zip(sac.qvalue_network_params.values(True, True), joint_q_grads):
+        torch.testing.assert_close(g, p.grad, rtol=1e-10, atol=1e-12)
+
+    # the actor loss is SACLoss's (detached critics): gradients reach the actor only
+    sac.zero_grad(set_to_none=True)
+    out["loss_actor"].backward()
+    assert all(p.grad is not None for p in sac.actor_network_params.values(True, True))
+    assert all(p.grad is None for p in sac.qvalue_network_params.values(True, True))
+    assert torch.isclose(out["alpha"], torch.tensor(0.01, dtype=out["alpha"].dtype))

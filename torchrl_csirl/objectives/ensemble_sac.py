@@ -1,0 +1,330 @@
+"""SAC with an ensemble of independently initialised critics (the CSIRL learner)."""
+from __future__ import annotations
+
+import contextlib
+import copy
+from collections.abc import Iterator, Sequence
+
+import torch
+from tensordict import TensorDictBase, TensorDictParams
+from tensordict.nn import TensorDictModule
+from torch import nn
+
+from torchrl.objectives import SACLoss
+from torchrl.objectives.utils import ValueEstimators
+from torchrl.objectives.value import TD0Estimator
+
+__all__ = ["EnsembleSACLoss", "qvalue_dispersion", "reinitialize_module"]
+
+_DISPERSIONS = ("variance", "abs_cv")
+
+
+def reinitialize_module(module: nn.Module) -> nn.Module:
+    """Re-draws every parameter of ``module`` with its layers' default initialisation (in place).
+
+    Each submodule exposing ``reset_parameters()`` (``nn.Linear``, ...) is reset.
+
+    Examples:
+        >>> import torch
+        >>> lin = torch.nn.Linear(3, 4)
+        >>> w = lin.weight.detach().clone()
+        >>> _ = reinitialize_module(lin)
+        >>> bool((lin.weight != w).any())
+        True
+    """
+    found = False
+    for sub in module.modules():
+        reset = getattr(sub, "reset_parameters", None)
+        if callable(reset):
+            reset()
+            found = True
+    if not found and any(True for _ in module.parameters()):
+        raise ValueError(
+            f"Cannot re-initialise {type(module).__name__}: none of its submodules defines "
+            "reset_parameters(). Pass a list of independently initialised critics instead."
+        )
+    return module
+
+
+def qvalue_dispersion(qvalues: torch.Tensor, dispersion: str = "variance") -> torch.Tensor:
+    """Disagreement of an ensemble of Q estimates along dim 0 (CSIRL's uncertainty U).
+
+    Args:
+        qvalues (Tensor): ``[N, *batch]`` per-critic values.
+        dispersion (str): ``"variance"`` (population variance across critics, the paper's
+            choice) or ``"abs_cv"`` (``|variance / mean|``, the published code's choice;
+            unstable when the mean Q is close to 0).
+
+    Returns:
+        a ``[*batch]`` tensor.
+
+    Examples:
+        >>> import torch
+        >>> q = torch.tensor([[1.0, 2.0], [3.0, 2.0]])
+        >>> qvalue_dispersion(q)
+        tensor([1., 0.])
+        >>> qvalue_dispersion(q, "abs_cv")
+        tensor([0.5000, 0.0000])
+    """
+    if dispersion not in _DISPERSIONS:
+        raise ValueError(f"dispersion must be one of {_DISPERSIONS}, got {dispersion!r}.")
+    if qvalues.ndim < 1 or qvalues.shape[0] < 2:
+        raise ValueError(
+            f"qvalues must have shape [N, *batch] with N >= 2 critics, got {tuple(qvalues.shape)}."
+        )
+    var = qvalues.var(dim=0, correction=0)
+    if dispersion == "variance":
+        return var
+    return (var / qvalues.mean(dim=0)).abs()
+
+
+class EnsembleSACLoss(SACLoss):
+    """SAC loss with ``N`` independently initialised critics, as used by CSIRL.
+
+    A thin subclass of :class:`~torchrl.objectives.SACLoss` (version 2, no value
+    network). All SAC equations are TorchRL's; this class adds:
+
+    * **independent critic initialisation**: :meth:`SACLoss.convert_to_functional` would
+      expand a single critic and resample every parameter uniformly between its min and
+      max; here each member is a deep copy of ``qvalue_network`` re-drawn with its
+      layers' default initialisation (member 0 keeps the given weights). A list of
+      ``N`` critics is also accepted and used as is.
+    * :meth:`qvalues` / :meth:`qvalue_dispersion`: per-critic ``Q_k(s, a)`` and their
+      disagreement (curricular subgoal selection).
+    * CSIRL defaults: fixed ``alpha = 0.01``, ``gamma = 0.99`` (TD(0)), squared-error
+      critic loss summed over critics.
+    * a **differentiable-reward mode** (:attr:`differentiable_reward` or the
+      :meth:`differentiable_reward_mode` context manager): the critic target
+      ``y = r + gamma (1 - terminated) V(s')`` keeps the graph of the reward ``r``
+      (the bootstrap ``V(s')`` stays under ``no_grad``), which the meta-gradient of
+      :class:`~torchrl_csirl.objectives.MetaRewardLoss` needs. Values are bit-identical
+      to ordinary mode (the target is offset by ``r - r.detach()``, an exact zero).
+    * :meth:`using_params`: evaluates the SAC losses with swapped-in (possibly
+      non-leaf, graph-carrying) actor / critic parameters, including in the actor loss,
+      which otherwise evaluates Q with *detached* critic parameters.
+
+    Truncation is not termination: TorchRL's TD(0) estimator bootstraps with
+    ``(1 - ("next", "terminated"))``, and only falls back on ``("next", "done")`` when no
+    ``terminated`` entry exists. Batches must therefore carry ``("next", "terminated")``.
+
+    Target critics are updated by the user with :class:`~torchrl.objectives.SoftUpdate`
+    (``tau=0.005`` in the published code; the paper states 0.05).
+
+    Args:
+        actor_network (ProbabilisticActor): the policy (see
+            :func:`~torchrl_csirl.modules.make_actor`).
+        qvalue_network (TensorDictModule or list of them): one critic (copied and
+            re-initialised ``num_qvalue_nets`` times) or ``num_qvalue_nets`` critics.
+
+    Keyword Args:
+        num_qvalue_nets (int): ensemble size. Defaults to ``5``.
+        alpha_init (float): entropy coefficient. Defaults to ``0.01``.
+        fixed_alpha (bool): keep alpha fixed. Defaults to ``True`` (CSIRL).
+        gamma (float): discount of the TD(0) target. Defaults to ``0.99``.
+        loss_function (str): critic regression loss. Defaults to ``"l2"`` (squared error,
+            as in the published code; ``SACLoss`` defaults to ``"smooth_l1"``).
+        dispersion (str): default measure of :meth:`qvalue_dispersion`, ``"variance"``
+            (paper) or ``"abs_cv"`` (``|var / mean|``, code). Defaults to ``"variance"``.
+        reinitialize_qvalue (bool): re-draw each copied member. Defaults to ``True``.
+        differentiable_reward (bool): initial value of :attr:`differentiable_reward`.
+            Defaults to ``False``.
+        **kwargs: forwarded to :class:`~torchrl.objectives.SACLoss`.
+
+    Examples:
+        >>> import torch
+        >>> from tensordict import TensorDict
+        >>> from torchrl_csirl.modules import make_actor, make_qvalue
+        >>> loss = EnsembleSACLoss(make_actor(4, 2, hidden=(8,)), make_qvalue(4, 2, hidden=(8,)))
+        >>> td = TensorDict({
+        ...     "observation": torch.randn(6, 4), "action": torch.rand(6, 2) * 2 - 1,
+        ...     ("next", "observation"): torch.randn(6, 4), ("next", "reward"): torch.randn(6, 1),
+        ...     ("next", "done"): torch.zeros(6, 1, dtype=torch.bool),
+        ...     ("next", "terminated"): torch.zeros(6, 1, dtype=torch.bool)}, [6])
+        >>> out = loss(td)
+        >>> sorted(k for k in out.keys() if k.startswith("loss"))
+        ['loss_actor', 'loss_alpha', 'loss_qvalue']
+        >>> loss.qvalues(td).shape, loss.qvalue_dispersion(td).shape
+        (torch.Size([5, 6]), torch.Size([6]))
+    """
+
+    def __init__(
+        self,
+        actor_network: TensorDictModule,
+        qvalue_network: TensorDictModule | Sequence[TensorDictModule],
+        *,
+        num_qvalue_nets: int = 5,
+        alpha_init: float = 0.01,
+        fixed_alpha: bool = True,
+        gamma: float = 0.99,
+        loss_function: str = "l2",
+        dispersion: str = "variance",
+        reinitialize_qvalue: bool = True,
+        differentiable_reward: bool = False,
+        **kwargs,
+    ) -> None:
+        if kwargs.get("value_network") is not None:
+            raise ValueError("EnsembleSACLoss implements SAC v2 only: value_network must be None.")
+        if not isinstance(num_qvalue_nets, int) or num_qvalue_nets < 1:
+            raise ValueError(f"num_qvalue_nets must be a positive int, got {num_qvalue_nets!r}.")
+        if dispersion not in _DISPERSIONS:
+            raise ValueError(f"dispersion must be one of {_DISPERSIONS}, got {dispersion!r}.")
+        members = self._make_members(qvalue_network, num_qvalue_nets, reinitialize_qvalue)
+        super().__init__(
+            actor_network,
+            members,
+            num_qvalue_nets=num_qvalue_nets,
+            alpha_init=alpha_init,
+            fixed_alpha=fixed_alpha,
+            loss_function=loss_function,
+            **kwargs,
+        )
+        self.make_value_estimator(ValueEstimators.TD0, gamma=gamma)
+        self.dispersion = dispersion
+        self.differentiable_reward = differentiable_reward
+        self.__dict__["_actor_loss_qvalue_params"] = None
+
+    @staticmethod
+    def _make_members(
+        qvalue_network: TensorDictModule | Sequence[TensorDictModule],
+        num_qvalue_nets: int,
+        reinitialize_qvalue: bool,
+    ) -> list[TensorDictModule]:
+        if isinstance(qvalue_network, (list, tuple)):
+            if len(qvalue_network) != num_qvalue_nets:
+                raise ValueError(
+                    f"Got {len(qvalue_network)} critics but num_qvalue_nets={num_qvalue_nets}."
+                )
+            return list(qvalue_network)
+        if not isinstance(qvalue_network, nn.Module):
+            raise TypeError(
+                f"qvalue_network must be a TensorDictModule or a list of them, got {type(qvalue_network)}."
+            )
+        members = [qvalue_network]
+        for _ in range(num_qvalue_nets - 1):
+            member = copy.deepcopy(qvalue_network)
+            if reinitialize_qvalue:
+                reinitialize_module(member)
+            members.append(member)
+        return members
+
+    # ------------------------------------------------------------------ ensemble queries
+    def qvalues(self, tensordict: TensorDictBase) -> torch.Tensor:
+        """Per-critic ``Q_k(s, a)`` for the observation/action entries of ``tensordict``.
+
+        Gradients flow to the critic parameters unless called under ``torch.no_grad()``.
+
+        Returns:
+            a ``[N, *batch]`` tensor.
+        """
+        td_in = tensordict.select(*self.qvalue_network.in_keys, strict=True)
+        td_out = self._vmap_qnetworkN0(td_in, self.qvalue_network_params)
+        return td_out.get(self.tensor_keys.state_action_value).squeeze(-1)
+
+    def qvalue_dispersion(
+        self,
+        tensordict_or_qvalues: TensorDictBase | torch.Tensor,
+        dispersion: str | None = None,
+    ) -> torch.Tensor:
+        """Disagreement of the critics (see :func:`qvalue_dispersion`).
+
+        Args:
+            tensordict_or_qvalues: a TensorDict (evaluated with :meth:`qvalues`) or a
+                precomputed ``[N, *batch]`` tensor.
+            dispersion (str, optional): overrides :attr:`dispersion`.
+
+        Returns:
+            a ``[*batch]`` tensor.
+        """
+        if isinstance(tensordict_or_qvalues, torch.Tensor):
+            qvals = tensordict_or_qvalues
+        else:
+            qvals = self.qvalues(tensordict_or_qvalues)
+        return qvalue_dispersion(qvals, dispersion or self.dispersion)
+
+    # ------------------------------------------------------------------ differentiable reward
+    @property
+    def differentiable_reward(self) -> bool:
+        """Whether the critic target carries the graph of the reward."""
+        return self.__dict__.get("_differentiable_reward", False)
+
+    @differentiable_reward.setter
+    def differentiable_reward(self, value: bool) -> None:
+        self.__dict__["_differentiable_reward"] = bool(value)
+
+    @contextlib.contextmanager
+    def differentiable_reward_mode(self, mode: bool = True) -> Iterator[EnsembleSACLoss]:
+        """Context manager setting :attr:`differentiable_reward` temporarily."""
+        prev = self.differentiable_reward
+        self.differentiable_reward = mode
+        try:
+            yield self
+        finally:
+            self.differentiable_reward = prev
+
+    def _compute_target_v2(self, tensordict: TensorDictBase) -> torch.Tensor:
+        target = super()._compute_target_v2(tensordict)
+        if not self.differentiable_reward:
+            return target
+        estimator = self.value_estimator
+        if not isinstance(estimator, TD0Estimator) or estimator.average_rewards:
+            raise ValueError(
+                "differentiable_reward requires the TD(0) value estimator without reward "
+                f"averaging (got {type(estimator).__name__})."
+            )
+        reward = tensordict.get(("next", self.tensor_keys.reward))
+        if not reward.requires_grad:
+            return target
+        # d target / d reward = 1 for TD(0); ``reward - reward.detach()`` is exactly 0.
+        return target + (reward - reward.detach()).reshape(target.shape)
+
+    # ------------------------------------------------------------------ parameter swapping
+    @property
+    def _cached_detached_qvalue_params(self):
+        override = self.__dict__.get("_actor_loss_qvalue_params")
+        if override is not None:
+            return override
+        return SACLoss._cached_detached_qvalue_params.fget(self)
+
+    @contextlib.contextmanager
+    def using_params(
+        self,
+        actor_params: TensorDictBase | None = None,
+        qvalue_params: TensorDictBase | None = None,
+        *,
+        actor_loss_qvalue_params: TensorDictBase | None = None,
+    ) -> Iterator[EnsembleSACLoss]:
+        """Evaluates the losses with swapped-in parameters (graph-carrying tensors allowed).
+
+        Args:
+            actor_params (TensorDictBase, optional): replaces :attr:`actor_network_params`.
+            qvalue_params (TensorDictBase, optional): replaces :attr:`qvalue_network_params`
+                (shape ``[N]``) in the critic loss and in :meth:`qvalues`.
+
+        Keyword Args:
+            actor_loss_qvalue_params (TensorDictBase, optional): critic parameters used by
+                :meth:`actor_loss` *without* detaching them (SACLoss detaches the critic
+                there). Defaults to the detached current critic parameters.
+        """
+        swapped = {}
+        for name, params in (
+            ("actor_network_params", actor_params),
+            ("qvalue_network_params", qvalue_params),
+        ):
+            if params is None:
+                continue
+            current = self._modules[name]
+            if params.batch_size != current.batch_size:
+                raise ValueError(
+                    f"{name}: expected batch size {current.batch_size}, got {params.batch_size}."
+                )
+            if not isinstance(params, TensorDictParams):
+                params = TensorDictParams(params, no_convert=True)
+            swapped[name] = current
+            self._modules[name] = params
+        prev_override = self.__dict__.get("_actor_loss_qvalue_params")
+        self.__dict__["_actor_loss_qvalue_params"] = actor_loss_qvalue_params
+        try:
+            yield self
+        finally:
+            self._modules.update(swapped)
+            self.__dict__["_actor_loss_qvalue_params"] = prev_override

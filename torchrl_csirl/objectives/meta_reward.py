@@ -1,0 +1,367 @@
+"""Meta-gradient loss of the CSIRL intrinsic reward (paper Eq. 12-16)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+from tensordict import TensorDict, TensorDictBase
+from tensordict.nn import TensorDictModule
+from tensordict.utils import NestedKey
+
+from torchrl.envs.utils import ExplorationType, set_exploration_type
+from torchrl.objectives.common import LossModule
+
+from torchrl_csirl.objectives.ensemble_sac import EnsembleSACLoss
+
+__all__ = ["MetaRewardLoss"]
+
+
+def _leaves_like(params: TensorDictBase) -> TensorDictBase:
+    """Detached copies (sharing storage) of ``params`` that are fresh autograd leaves."""
+    return params.apply(lambda p: p.detach().requires_grad_(True))
+
+
+def sgd_lookahead(
+    loss: torch.Tensor, params: TensorDictBase, lr: float, *, create_graph: bool = True
+) -> TensorDictBase:
+    """One differentiable plain-SGD step ``params - lr * grad(loss, params)`` (Eq. 12 / 14).
+
+    With ``create_graph=True`` the returned parameters keep the graph of the gradient, so
+    anything ``loss`` depended on (e.g. the reward parameters ``w``) stays reachable.
+
+    Examples:
+        >>> import torch
+        >>> from tensordict import TensorDict
+        >>> p = TensorDict({"w": torch.ones(2, requires_grad=True)}, [])
+        >>> w = torch.tensor(3.0, requires_grad=True)
+        >>> new = sgd_lookahead((w * p["w"]).sum(), p, lr=0.1)
+        >>> new["w"]  # 1 - 0.1 * w
+        tensor([0.7000, 0.7000], grad_fn=<SubBackward0>)
+    """
+    return _sgd_lookahead_and_grads(loss, params, lr, create_graph=create_graph)[0]
+
+
+def _sgd_lookahead_and_grads(
+    loss: torch.Tensor, params: TensorDictBase, lr: float, *, create_graph: bool = True
+) -> tuple[TensorDictBase, list[torch.Tensor]]:
+    keys = list(params.keys(True, True))
+    tensors = [params.get(k) for k in keys]
+    grads = torch.autograd.grad(loss, tensors, create_graph=create_graph, allow_unused=True)
+    grads = [torch.zeros_like(t) if g is None else g for t, g in zip(tensors, grads)]
+    out = params.empty()
+    for key, tensor, grad in zip(keys, tensors, grads):
+        out.set(key, tensor - lr * grad)
+    return out, grads
+
+
+def _linear_surrogate(
+    value: torch.Tensor, params: list[torch.Tensor], grads: list[torch.Tensor]
+) -> torch.Tensor:
+    """A scalar equal to ``value`` whose gradient w.r.t. ``params`` is exactly ``grads``."""
+    linear = sum((p * g.detach()).sum() for p, g in zip(params, grads))
+    return value.detach() + (linear - linear.detach())
+
+
+class MetaRewardLoss(LossModule):
+    r"""Meta-gradient loss of the CSIRL intrinsic reward network ``r_w`` (paper Eq. 12-16).
+
+    On an online batch whose reward is ``r = r_m + r_w(s)`` (matching reward already in
+    the batch, intrinsic reward recomputed here with its graph):
+
+    1. ``phi' = phi - lr_in * grad_phi L_Q(phi, w)`` (critic loss of the ensemble SAC,
+       reward differentiable, graph kept);
+    2. ``theta' = theta - lr_in * grad_theta L_pi(theta, phi')`` (actor loss evaluated with
+       the *non-detached* ``phi'``, graph kept);
+    3. ``L_meta = scale * (mean_e (a_hat - a_e)^2 + reward_l1_coef * mean |r_w(s)|)`` with
+       ``a_hat ~ pi_theta'(s_e)`` reparameterised (or its deterministic mean action).
+
+    All SAC math is delegated to ``sac_loss`` (its ``qvalue_v2_loss`` and ``actor_loss``
+    evaluated with swapped-in parameters through :meth:`EnsembleSACLoss.using_params`).
+    The current actor/critic parameters enter as detached leaves sharing their storage:
+    the meta-loss never writes gradients into the actor or the critic.
+
+    **Gradient delivery.** ``forward`` computes the meta-gradient ``dL_meta/dw`` eagerly
+    with ``torch.autograd.grad`` restricted to the reward parameters (so autograd prunes
+    the second-order paths towards ``phi``/``theta`` that are never needed) and returns
+    ``"loss_meta"`` as a linear surrogate with the value of ``L_meta`` whose gradient is
+    exactly that meta-gradient: ``loss_meta.backward()`` fills ``reward_network``'s
+    ``.grad`` and nothing else. Call it before stepping the actor/critic optimisers or
+    after, it does not matter (the graph is already consumed).
+
+    **Rewards.** The reward the critic regresses on is
+    ``td["next", matching_reward] + td_reward_net[intrinsic_reward]`` where the reward
+    network is applied to the online batch's root entries (``"observation"`` for the
+    state-only ``r_w(s)``), and it is written (on a shallow copy) at
+    ``("next", sac_loss.tensor_keys.reward)``, the key the critic loss reads. With
+    ``use_matching_reward=False`` only ``r_w`` is used. The entry ``("next", reward)`` of the input batch (if any) is ignored.
+
+    Hyper-parameter notes: ``lr_in = 0.01`` (plain SGD) and the reward Adam learning rate
+    ``1e-3`` follow the published code; the paper states the two swapped (0.001 / 0.01).
+    ``scale = 100`` and the ``|r_w|`` regulariser also come from the code.
+
+    Args:
+        sac_loss (EnsembleSACLoss): the learner's loss; its current parameters are used.
+        reward_network (TensorDictModule): ``r_w``; writes ``intrinsic_reward``.
+
+    Keyword Args:
+        lr_inner (float): inner SGD step size. Defaults to ``0.01``.
+        scale (float): multiplies the meta-objective. Defaults to ``100.0``.
+        reward_l1_coef (float): weight of ``mean |r_w(s)|``. ``0`` disables it.
+            Defaults to ``1.0``.
+        deterministic_expert_action (bool): use the mean action of ``pi_theta'`` instead of
+            a reparameterised sample. Defaults to ``False``.
+        use_matching_reward (bool): add ``("next", matching_reward)`` to ``r_w``.
+            Defaults to ``True``.
+        joint_sac_update (bool): also return the ordinary SAC losses of ``sac_loss`` on
+            the same batch and local reward (``"loss_qvalue"``, ``"loss_actor"``,
+            ``"loss_alpha"``, ``"alpha"``, ``"entropy"``), sharing the critic-target and
+            critic forward/backward computations with the meta step (the critic loss
+            ``L_Q(phi, w)`` and its gradient are the same quantities; ``loss_qvalue``
+            carries that gradient as a linear surrogate). One backward of
+            ``loss_qvalue + loss_actor + loss_meta`` then yields the real SAC gradients
+            and the meta-gradient. Inner steps are then taken from the pre-update
+            actor/critic (the published code takes them after the real steps).
+            Defaults to ``False``.
+
+    Examples:
+        >>> import torch
+        >>> from tensordict import TensorDict
+        >>> from tensordict.nn import TensorDictModule
+        >>> from torchrl_csirl.modules import make_actor, make_qvalue
+        >>> sac = EnsembleSACLoss(make_actor(4, 2, hidden=(8,)), make_qvalue(4, 2, hidden=(8,)))
+        >>> reward = TensorDictModule(torch.nn.Sequential(torch.nn.Linear(4, 1), torch.nn.Tanh()),
+        ...     in_keys=["observation"], out_keys=["intrinsic_reward"])
+        >>> meta = MetaRewardLoss(sac, reward)
+        >>> online = TensorDict({
+        ...     "observation": torch.randn(6, 4), "action": torch.rand(6, 2) * 2 - 1,
+        ...     ("next", "observation"): torch.randn(6, 4),
+        ...     ("next", "matching_reward"): torch.randn(6, 1),
+        ...     ("next", "done"): torch.zeros(6, 1, dtype=torch.bool),
+        ...     ("next", "terminated"): torch.zeros(6, 1, dtype=torch.bool)}, [6])
+        >>> expert = TensorDict({"observation": torch.randn(3, 4), "action": torch.rand(3, 2)}, [3])
+        >>> out = meta(online, expert)
+        >>> out["loss_meta"].backward()
+        >>> reward.module[0].weight.grad is not None
+        True
+    """
+
+    @dataclass
+    class _AcceptedKeys:
+        """Configurable tensordict keys (``set_keys``).
+
+        Attributes:
+            matching_reward (NestedKey): matching reward, read at
+                ``("next", matching_reward)`` of the online batch (unless the loss was
+                built with ``use_matching_reward=False``). Defaults to ``"matching_reward"``.
+            intrinsic_reward (NestedKey): output key of the reward network.
+                Defaults to the network's first out-key (``"intrinsic_reward"``).
+            expert_observation (NestedKey): observation key of the expert batch.
+                Defaults to ``"observation"``.
+            expert_action (NestedKey): action key of the expert batch.
+                Defaults to ``"action"``.
+        """
+
+        matching_reward: NestedKey = "matching_reward"
+        intrinsic_reward: NestedKey = "intrinsic_reward"
+        expert_observation: NestedKey = "observation"
+        expert_action: NestedKey = "action"
+
+    default_keys = _AcceptedKeys
+    tensor_keys: _AcceptedKeys
+    out_keys = [
+        "loss_meta",
+        "loss_imitation",
+        "loss_reward_l1",
+        "loss_inner_qvalue",
+        "loss_inner_actor",
+        "intrinsic_reward_mean",
+        "meta_grad_norm",
+    ]
+
+    def __init__(
+        self,
+        sac_loss: EnsembleSACLoss,
+        reward_network: TensorDictModule,
+        *,
+        lr_inner: float = 0.01,
+        scale: float = 100.0,
+        reward_l1_coef: float = 1.0,
+        deterministic_expert_action: bool = False,
+        use_matching_reward: bool = True,
+        joint_sac_update: bool = False,
+    ) -> None:
+        if not isinstance(sac_loss, EnsembleSACLoss):
+            raise TypeError(f"sac_loss must be an EnsembleSACLoss, got {type(sac_loss).__name__}.")
+        if not isinstance(reward_network, torch.nn.Module):
+            raise TypeError(
+                f"reward_network must be a TensorDictModule, got {type(reward_network).__name__}."
+            )
+        if lr_inner <= 0 or scale <= 0 or reward_l1_coef < 0:
+            raise ValueError(
+                "Need lr_inner > 0, scale > 0 and reward_l1_coef >= 0, got "
+                f"{lr_inner}, {scale}, {reward_l1_coef}."
+            )
+        super().__init__()
+        # not registered as a submodule: meta_loss.parameters() are the reward's only.
+        self.__dict__["sac_loss"] = sac_loss
+        self.reward_network = reward_network
+        self.lr_inner = float(lr_inner)
+        self.scale = float(scale)
+        self.reward_l1_coef = float(reward_l1_coef)
+        self.deterministic_expert_action = bool(deterministic_expert_action)
+        self.use_matching_reward = bool(use_matching_reward)
+        self.joint_sac_update = bool(joint_sac_update)
+        out_keys = list(getattr(reward_network, "out_keys", []))
+        if out_keys and out_keys[0] != self.tensor_keys.intrinsic_reward:
+            self.set_keys(intrinsic_reward=out_keys[0])
+
+    def _forward_value_estimator_keys(self, **kwargs) -> None:
+        pass
+
+    @property
+    def in_keys(self) -> list[NestedKey]:
+        keys = list(self.sac_loss.in_keys) + list(self.reward_network.in_keys)
+        if self.use_matching_reward:
+            keys.append(("next", self.tensor_keys.matching_reward))
+        reward = ("next", self.sac_loss.tensor_keys.reward)
+        return [k for k in dict.fromkeys(keys) if k != reward]
+
+    # ------------------------------------------------------------------ pieces of the loss
+    def intrinsic_reward(self, tensordict: TensorDictBase) -> torch.Tensor:
+        """``r_w`` on the root entries of ``tensordict`` (graph kept)."""
+        td_in = tensordict.select(*self.reward_network.in_keys, strict=True)
+        return self.reward_network(td_in).get(self.tensor_keys.intrinsic_reward)
+
+    def local_reward(self, tensordict: TensorDictBase, r_w: torch.Tensor) -> torch.Tensor:
+        """``r = r_m + r_w`` (``r_m`` read at ``("next", matching_reward)``, no grad)."""
+        if not self.use_matching_reward:
+            return r_w
+        key = self.tensor_keys.matching_reward
+        r_m = tensordict.get(("next", key), None)
+        if r_m is None:
+            raise KeyError(
+                f"The online batch has no ('next', {key!r}) entry (matching reward). "
+                "Set it, or build the loss with use_matching_reward=False to use r_w only."
+            )
+        return r_m.detach() + r_w.reshape(r_m.shape)
+
+    def inner_critic_step(self, tensordict: TensorDictBase, actor_params, qvalue_params):
+        """Eq. 12: ``phi' = phi - lr_in * grad_phi L_Q(phi, w)``, graph kept."""
+        sac = self.sac_loss
+        with sac.using_params(actor_params, qvalue_params), sac.differentiable_reward_mode():
+            loss_q, _ = sac.qvalue_v2_loss(tensordict)
+        qvalue_params_new, grads = _sgd_lookahead_and_grads(loss_q, qvalue_params, self.lr_inner)
+        return qvalue_params_new, loss_q, grads
+
+    def inner_actor_step(self, tensordict: TensorDictBase, actor_params, qvalue_params_new):
+        """Eq. 14: ``theta' = theta - lr_in * grad_theta L_pi(theta, phi')``, graph kept."""
+        sac = self.sac_loss
+        with sac.using_params(actor_params, actor_loss_qvalue_params=qvalue_params_new):
+            loss_pi, _ = sac.actor_loss(tensordict)
+        return sgd_lookahead(loss_pi, actor_params, self.lr_inner), loss_pi
+
+    def imitation_loss(self, expert: TensorDictBase, actor_params) -> torch.Tensor:
+        """Eq. 16: ``mean (a_hat - a_e)^2`` with ``a_hat ~ pi_theta'(s_e)``."""
+        actor = self.sac_loss.actor_network
+        td_in = expert.select(self.tensor_keys.expert_observation, strict=True)
+        obs_key = actor.in_keys[0]
+        if self.tensor_keys.expert_observation != obs_key:
+            td_in = td_in.rename_key_(self.tensor_keys.expert_observation, obs_key)
+        exploration = (
+            ExplorationType.DETERMINISTIC
+            if self.deterministic_expert_action
+            else ExplorationType.RANDOM
+        )
+        with set_exploration_type(exploration), actor_params.to_module(
+            actor, preserve_module_state=False
+        ):
+            dist = actor.get_dist(td_in)
+            a_hat = dist.deterministic_sample if self.deterministic_expert_action else dist.rsample()
+        a_e = expert.get(self.tensor_keys.expert_action)
+        if a_hat.shape != a_e.shape:
+            raise ValueError(
+                f"Expert action shape {tuple(a_e.shape)} does not match the policy's {tuple(a_hat.shape)}."
+            )
+        return (a_hat - a_e).pow(2).mean()
+
+    def forward(
+        self,
+        tensordict: TensorDictBase,
+        expert: TensorDictBase,
+        regularizer: TensorDictBase | None = None,
+    ) -> TensorDictBase:
+        """Computes ``L_meta`` and its gradient w.r.t. the reward network.
+
+        Args:
+            tensordict (TensorDictBase): online batch (the SAC loss's keys plus
+                ``("next", matching_reward)``).
+            expert (TensorDictBase): expert pairs (``observation``, ``action``), e.g. 32.
+            regularizer (TensorDictBase, optional): batch on which ``mean |r_w(s)|`` is
+                taken (the code uses a fresh online batch). Defaults to ``tensordict``.
+
+        Returns:
+            a TensorDict with ``"loss_meta"`` (backpropagates into the reward network only)
+            and detached diagnostics.
+        """
+        if tensordict.ndim != 1 or expert.ndim != 1:
+            raise ValueError(
+                f"Expected flat batches, got batch sizes {tensordict.batch_size} and {expert.batch_size}."
+            )
+        sac = self.sac_loss
+        w_params = [p for p in self.reward_network.parameters() if p.requires_grad]
+        if not w_params:
+            raise ValueError("The reward network has no trainable parameters.")
+        theta = _leaves_like(sac.actor_network_params)
+        phi = _leaves_like(sac.qvalue_network_params)
+
+        r_w = self.intrinsic_reward(tensordict)
+        td = tensordict.copy()
+        td.set("next", tensordict.get("next").copy())
+        td.set(("next", sac.tensor_keys.reward), self.local_reward(tensordict, r_w))
+
+        phi_new, loss_q, grads_phi = self.inner_critic_step(td, theta, phi)
+        theta_new, loss_pi = self.inner_actor_step(td, theta, phi_new)
+        loss_imitation = self.imitation_loss(expert, theta_new)
+
+        if self.reward_l1_coef > 0:
+            r_reg = r_w if regularizer is None else self.intrinsic_reward(regularizer)
+            loss_l1 = r_reg.abs().mean()
+            loss = self.scale * (loss_imitation + self.reward_l1_coef * loss_l1)
+        else:
+            loss_l1 = r_w.new_zeros(())
+            loss = self.scale * loss_imitation
+
+        grads = torch.autograd.grad(loss, w_params, allow_unused=True)
+        grads = [torch.zeros_like(p) if g is None else g for p, g in zip(w_params, grads)]
+        # same value as ``loss``, gradient w.r.t. w exactly ``grads``, nothing else.
+        out = {
+            "loss_meta": _linear_surrogate(loss, w_params, grads),
+            "loss_imitation": loss_imitation.detach(),
+            "loss_reward_l1": loss_l1.detach(),
+            "loss_inner_qvalue": loss_q.detach(),
+            "loss_inner_actor": loss_pi.detach(),
+            "intrinsic_reward_mean": r_w.detach().mean(),
+            "meta_grad_norm": torch.stack([g.pow(2).sum() for g in grads]).sum().sqrt(),
+        }
+        if self.joint_sac_update:
+            out.update(self._sac_losses(td, loss_q, grads_phi))
+        return TensorDict(out, batch_size=[])
+
+    def _sac_losses(
+        self, td: TensorDictBase, loss_q: torch.Tensor, grads_phi: list[torch.Tensor]
+    ) -> dict[str, torch.Tensor]:
+        """The ordinary SAC losses, reusing ``L_Q(phi, w)`` and its gradient."""
+        sac = self.sac_loss
+        phi_real = list(sac.qvalue_network_params.values(True, True))
+        loss_qvalue = _linear_surrogate(loss_q, phi_real, grads_phi)
+        loss_actor, metadata = sac.actor_loss(td)
+        log_prob = metadata["log_prob"]
+        weights = sac._maybe_get_priority_weight(td)
+        loss_alpha = sac._reduce_loss(sac._alpha_loss(log_prob), tensordict=td, weights=weights)
+        return {
+            "loss_qvalue": loss_qvalue,
+            "loss_actor": loss_actor,
+            "loss_alpha": loss_alpha,
+            "alpha": sac._alpha,
+            "entropy": -log_prob.mean(),
+        }
