@@ -26,28 +26,13 @@ import time
 
 import torch
 from tensordict import TensorDict
-from tensordict.nn import TensorDictModule
-from torch import nn
 
 from torchrl.objectives import SoftUpdate
 
-from torchrl_csirl.modules.actor_critic import make_actor, make_qvalue
+from torchrl_csirl.modules import make_actor, make_qvalue, make_reward_network
 from torchrl_csirl.objectives import EnsembleSACLoss, MetaRewardLoss
 
 OBS_DIM, ACTION_DIM, EXPERT_BATCH = 25, 2, 32
-
-
-def _reward_network(obs_dim: int) -> TensorDictModule:
-    try:  # the project's reward network when available
-        from torchrl_csirl.modules.reward import make_reward_network
-
-        return make_reward_network(obs_dim)
-    except ImportError:
-        net = nn.Sequential(
-            nn.Linear(obs_dim, 256), nn.ReLU(), nn.Linear(256, 256), nn.ReLU(),
-            nn.Linear(256, 1), nn.Tanh(),
-        )
-        return TensorDictModule(net, in_keys=["observation"], out_keys=["intrinsic_reward"])
 
 
 def _online_batch(batch: int) -> TensorDict:
@@ -81,7 +66,7 @@ def main() -> None:
 
     sac = EnsembleSACLoss(make_actor(OBS_DIM, ACTION_DIM), make_qvalue(OBS_DIM, ACTION_DIM))
     updater = SoftUpdate(sac, tau=0.005)
-    reward_net = _reward_network(OBS_DIM)
+    reward_net = make_reward_network(OBS_DIM)
     meta = MetaRewardLoss(sac, reward_net)
     joint = MetaRewardLoss(sac, reward_net, joint_sac_update=True)
     adam = dict(fused=True) if args.fused_adam else {}
