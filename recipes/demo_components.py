@@ -129,7 +129,7 @@ def main() -> None:
         online.extend(batch.reshape(-1))
         for _ in range(args.updates_per_batch):
             # one joint step: real SAC losses and the meta-gradient share the critic pass
-            out = meta(online.sample(), expert.sample())
+            out = meta(online.sample(), expert.sample(), regularizer=online.sample())
             optim_sac.zero_grad()
             optim_reward.zero_grad()
             (out["loss_qvalue"] + out["loss_actor"] + out["loss_meta"]).backward()

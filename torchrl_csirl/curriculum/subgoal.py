@@ -21,6 +21,11 @@ from tensordict import TensorDict, TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
+from torchrl_csirl.objectives.ensemble_sac import _DISPERSIONS, qvalue_dispersion
+
+#: The paper's decision uncertainty ``U`` (Eq. 6): the ensemble's dispersion, one implementation.
+critic_uncertainty = qvalue_dispersion
+
 __all__ = [
     "SubgoalCurriculum",
     "SubgoalSelection",
@@ -28,39 +33,10 @@ __all__ = [
     "scan_subgoal",
 ]
 
-_DISPERSIONS = ("variance", "abs_cv")
 
 
 class _HasQValues(Protocol):
     def qvalues(self, tensordict: TensorDictBase) -> torch.Tensor: ...
-
-
-def critic_uncertainty(qvalues: torch.Tensor, dispersion: str = "variance") -> torch.Tensor:
-    """The decision uncertainty ``U = mu(Q_1, ..., Q_N)`` across the ensemble (dim 0).
-
-    Args:
-        qvalues (torch.Tensor): ``[N, *batch]`` per-critic values, ``N >= 2``.
-        dispersion (str): ``"variance"`` (population variance, paper; default) or ``"abs_cv"``
-            (``|variance / mean|``, published code; unstable near a zero mean).
-
-    Returns:
-        torch.Tensor: ``[*batch]``.
-
-    Examples:
-        >>> import torch
-        >>> critic_uncertainty(torch.tensor([[1.0, 2.0], [3.0, 2.0]]))
-        tensor([1., 0.])
-        >>> critic_uncertainty(torch.tensor([[1.0, 2.0], [3.0, 2.0]]), "abs_cv")
-        tensor([0.5000, 0.0000])
-    """
-    if dispersion not in _DISPERSIONS:
-        raise ValueError(f"dispersion must be one of {_DISPERSIONS}, got {dispersion!r}.")
-    if qvalues.ndim < 1 or qvalues.shape[0] < 2:
-        raise ValueError(f"qvalues must have shape [N, *batch] with N >= 2, got {tuple(qvalues.shape)}.")
-    var = qvalues.var(dim=0, unbiased=False)
-    if dispersion == "variance":
-        return var
-    return (var / qvalues.mean(dim=0)).abs()
 
 
 def scan_subgoal(

@@ -1,4 +1,4 @@
-"""Meta-gradient loss of the CSIRL intrinsic reward (paper Eq. 12-16)."""
+"""Meta-gradient loss of the CSIRL intrinsic reward (paper Eq. 11-15)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -24,7 +24,7 @@ def _leaves_like(params: TensorDictBase) -> TensorDictBase:
 def sgd_lookahead(
     loss: torch.Tensor, params: TensorDictBase, lr: float, *, create_graph: bool = True
 ) -> TensorDictBase:
-    """One differentiable plain-SGD step ``params - lr * grad(loss, params)`` (Eq. 12 / 14).
+    """One differentiable plain-SGD step ``params - lr * grad(loss, params)`` (Eq. 12 / 13).
 
     With ``create_graph=True`` the returned parameters keep the graph of the gradient, so
     anything ``loss`` depended on (e.g. the reward parameters ``w``) stays reachable.
@@ -63,7 +63,7 @@ def _linear_surrogate(
 
 
 class MetaRewardLoss(LossModule):
-    r"""Meta-gradient loss of the CSIRL intrinsic reward network ``r_w`` (paper Eq. 12-16).
+    r"""Meta-gradient loss of the CSIRL intrinsic reward network ``r_w`` (paper Eq. 11-15).
 
     On an online batch whose reward is ``r = r_m + r_w(s)`` (matching reward already in
     the batch, intrinsic reward recomputed here with its graph):
@@ -254,14 +254,14 @@ class MetaRewardLoss(LossModule):
         return qvalue_params_new, loss_q, grads
 
     def inner_actor_step(self, tensordict: TensorDictBase, actor_params, qvalue_params_new):
-        """Eq. 14: ``theta' = theta - lr_in * grad_theta L_pi(theta, phi')``, graph kept."""
+        """Eq. 13: ``theta' = theta - lr_in * grad_theta L_pi(theta, phi')``, graph kept."""
         sac = self.sac_loss
         with sac.using_params(actor_params, actor_loss_qvalue_params=qvalue_params_new):
             loss_pi, _ = sac.actor_loss(tensordict)
         return sgd_lookahead(loss_pi, actor_params, self.lr_inner), loss_pi
 
     def imitation_loss(self, expert: TensorDictBase, actor_params) -> torch.Tensor:
-        """Eq. 16: ``mean (a_hat - a_e)^2`` with ``a_hat ~ pi_theta'(s_e)``."""
+        """Eq. 11: ``mean (a_hat - a_e)^2`` with ``a_hat ~ pi_theta'(s_e)``."""
         actor = self.sac_loss.actor_network
         td_in = expert.select(self.tensor_keys.expert_observation, strict=True)
         obs_key = actor.in_keys[0]
