@@ -1,1 +1,23 @@
-"""data."""
+"""Expert demonstrations: the :class:`ExpertDemonstrations` container, its ``.npz`` format and importers."""
+from __future__ import annotations
+
+from torchrl_csirl.data.expert import FORMAT_VERSION, ExpertDemonstrations
+from torchrl_csirl.data.published import RestrictedUnpickler, import_published, load_published_dict
+from torchrl_csirl.data.shipped import (
+    available_expert_datasets,
+    curriculum_trajectory,
+    expert_dataset_path,
+    load_expert_demonstrations,
+)
+
+__all__ = [
+    "ExpertDemonstrations",
+    "FORMAT_VERSION",
+    "RestrictedUnpickler",
+    "available_expert_datasets",
+    "curriculum_trajectory",
+    "expert_dataset_path",
+    "import_published",
+    "load_expert_demonstrations",
+    "load_published_dict",
+]

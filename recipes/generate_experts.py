@@ -1,0 +1,208 @@
+"""Roll the privileged expert driver and write expert demonstrations (``ExpertDemonstrations`` ``.npz``).
+
+Episode ``i`` is reset with seed ``--seed + i``; the expert itself is deterministic, so the same
+command writes the same bytes. The script ends with ONE JSON line with the statistics of every
+rolled episode (``success_rate``, ``crash_rate``, ``accomplish_rate``, ``episodes``, ``kept``,
+``rejected``).
+
+Examples:
+    python recipes/generate_experts.py --scenario merge --episodes 5 --seed 0 --out /tmp/merge_5.npz
+    python recipes/generate_experts.py --scenario roundabout --episodes 25 --seed 1000 \\
+        --only-successful --out /tmp/roundabout_25.npz
+    python recipes/generate_experts.py --scenario highway-fast --episodes 1 --empty-road --out /tmp/c.npz
+    # evaluation only (no file): 100 seeded episodes
+    python recipes/generate_experts.py --scenario intersection --episodes 100 --seed 10000
+    # the shipped datasets of one scenario (torchrl_csirl/data/experts/<scenario>/)
+    python recipes/generate_experts.py --scenario merge --shipped
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from typing import Any
+
+import numpy as np
+
+SHIPPED_SEED = 20230608
+"""Base seed of the shipped datasets (trajectory 0 of the empty-road curriculum uses this seed)."""
+SHIPPED_TRAJECTORIES = 25
+
+
+def _progress(iterable: Any, total: int, desc: str) -> Any:
+    try:
+        from tqdm import tqdm
+    except ImportError:  # pragma: no cover
+        return iterable
+    return tqdm(iterable, total=total, desc=desc, file=sys.stderr, dynamic_ncols=True)
+
+
+def roll_episodes(
+    scenario: str,
+    episodes: int,
+    seed: int,
+    empty_road: bool = False,
+    only_successful: bool = False,
+    max_attempts: int | None = None,
+    desc: str | None = None,
+) -> tuple[list[dict], list[dict]]:
+    """Roll expert episodes with seeds ``seed, seed + 1, ...``.
+
+    With ``only_successful``, rolls until ``episodes`` successful ones are collected (at most
+    ``max_attempts`` episodes, default ``4 * episodes``). Returns (kept episodes, all episodes).
+    """
+    from torchrl_csirl.envs import make_gym_env
+    from torchrl_csirl.envs.expert import make_expert, rollout_expert
+
+    env = make_gym_env(scenario)
+    expert = make_expert(scenario)
+    attempts = episodes if not only_successful else (max_attempts or 4 * episodes)
+    kept: list[dict] = []
+    rolled: list[dict] = []
+    bar = _progress(range(attempts), attempts, desc or scenario)
+    for i in bar:
+        episode = rollout_expert(env, seed=seed + i, expert=expert, scenario=scenario, empty_road=empty_road)
+        rolled.append(episode)
+        if episode["success"] or not only_successful:
+            kept.append(episode)
+        if hasattr(bar, "set_postfix"):
+            bar.set_postfix(
+                kept=len(kept),
+                success=f"{np.mean([e['success'] for e in rolled]):.2f}",
+                accomplish=f"{np.mean([e['accomplish_rate'] for e in rolled]):.3f}",
+            )
+        if only_successful and len(kept) >= episodes:
+            break
+    env.close()
+    return kept, rolled
+
+
+def summarize(rolled: list[dict], kept: list[dict]) -> dict[str, Any]:
+    """Statistics over all rolled episodes (success / crash / accomplish rates)."""
+    return {
+        "episodes": len(rolled),
+        "kept": len(kept),
+        "rejected": len(rolled) - len(kept),
+        "success_rate": float(np.mean([e["success"] for e in rolled])),
+        "crash_rate": float(np.mean([e["crashed"] for e in rolled])),
+        "offroad_rate": float(np.mean([e["offroad"] for e in rolled])),
+        "accomplish_rate": float(np.mean([e["accomplish_rate"] for e in rolled])),
+        "accomplish_rate_min": float(np.min([e["accomplish_rate"] for e in rolled])),
+        "mean_length": float(np.mean([e["length"] for e in rolled])),
+    }
+
+
+def build_demonstrations(episodes: list[dict], metadata: dict[str, Any]):
+    """Pack episodes into an :class:`~torchrl_csirl.data.ExpertDemonstrations`."""
+    from torchrl_csirl.data.expert import ExpertDemonstrations
+
+    records = [
+        {
+            "observation": e["observation"],
+            "action": e["action"],
+            "next_observation": e["next_observation"],
+            "terminated": e["terminated"],
+            "truncated": e["truncated"],
+            "reward": e["reward"],
+        }
+        for e in episodes
+    ]
+    per_episode = [
+        {
+            "seed": e["seed"],
+            "empty_road": e["empty_road"],
+            "success": e["success"],
+            "accomplish_rate": round(e["accomplish_rate"], 6),
+            "length": e["length"],
+        }
+        for e in episodes
+    ]
+    return ExpertDemonstrations.from_episodes(records, metadata={**metadata, "episodes": per_episode})
+
+
+def generate_shipped(scenario: str, out_dir: str, seed: int = SHIPPED_SEED) -> dict[str, Any]:
+    """Write ``empty_25.npz`` and ``traffic_25.npz`` for a scenario.
+
+    * traffic episodes: the first 25 *successful* expert episodes with seeds ``seed + 1, seed + 2, ...``;
+    * ``traffic_25``: those 25 (trajectory 0 = the with-traffic curriculum trajectory);
+    * ``empty_25``: trajectory 0 replaced by the empty-road curriculum trajectory (seed ``seed``),
+      followed by traffic episodes 1..24.
+
+    Smaller dataset sizes (1, 5, 10, 15, 20) are the nested prefixes (``ExpertDemonstrations.subset``).
+    """
+    empty, empty_rolled = roll_episodes(scenario, 1, seed, empty_road=True, only_successful=True, max_attempts=10, desc=f"{scenario} empty")
+    if not empty:
+        raise RuntimeError(f"the expert failed the empty-road episode of {scenario!r}.")
+    traffic, rolled = roll_episodes(
+        scenario, SHIPPED_TRAJECTORIES, seed + 1, only_successful=True, max_attempts=8 * SHIPPED_TRAJECTORIES,
+        desc=f"{scenario} traffic",
+    )
+    if len(traffic) < SHIPPED_TRAJECTORIES:
+        raise RuntimeError(f"only {len(traffic)} successful traffic episodes for {scenario!r}.")
+    stats = summarize(rolled, traffic)
+    base_meta = {
+        "scenario": scenario,
+        "generator": "torchrl_csirl.envs.expert.ExpertDriver",
+        "command": f"python recipes/generate_experts.py --scenario {scenario} --shipped --seed {seed}",
+        "base_seed": seed,
+        "action_units": "normalised: [acceleration / 15 m/s^2, steering / (pi/2) rad]",
+    }
+    os.makedirs(out_dir, exist_ok=True)
+    written = {}
+    for curriculum, episodes in (("empty", empty + traffic[1:]), ("traffic", traffic)):
+        demos = build_demonstrations(
+            episodes, {**base_meta, "curriculum": curriculum, "num_trajectories": len(episodes)}
+        )
+        path = demos.save(os.path.join(out_dir, f"{curriculum}_{SHIPPED_TRAJECTORIES}.npz"))
+        written[curriculum] = path
+    return {**stats, "scenario": scenario, "files": written, "empty_road_episodes": len(empty_rolled)}
+
+
+def main(argv: list[str] | None = None) -> dict[str, Any]:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--scenario", required=True, choices=["highway-fast", "merge", "roundabout", "intersection"])
+    parser.add_argument("--episodes", type=int, default=25, help="episodes to roll (kept ones with --only-successful)")
+    parser.add_argument("--seed", type=int, default=None, help="seed of the first episode (then +1 per episode)")
+    parser.add_argument("--out", default=None, help="output .npz (omit to only evaluate)")
+    parser.add_argument("--empty-road", action="store_true", help="remove all other vehicles (curriculum trajectory)")
+    parser.add_argument("--only-successful", action="store_true", help="keep only successful episodes")
+    parser.add_argument("--max-attempts", type=int, default=None, help="cap on episodes rolled with --only-successful")
+    parser.add_argument("--shipped", action="store_true", help="write the shipped datasets of --scenario")
+    parser.add_argument("--shipped-dir", default=None, help="output folder of --shipped (default: the package's)")
+    args = parser.parse_args(argv)
+    if args.episodes < 1:
+        parser.error("--episodes must be >= 1")
+
+    if args.shipped:
+        from torchrl_csirl.data.shipped import EXPERTS_DIR
+
+        out_dir = args.shipped_dir or os.path.join(EXPERTS_DIR, args.scenario)
+        result = generate_shipped(args.scenario, out_dir, SHIPPED_SEED if args.seed is None else args.seed)
+    else:
+        seed = 0 if args.seed is None else args.seed
+        kept, rolled = roll_episodes(
+            args.scenario, args.episodes, seed, args.empty_road, args.only_successful, args.max_attempts
+        )
+        result = {"scenario": args.scenario, "seed": seed, **summarize(rolled, kept)}
+        if args.out:
+            if not kept:
+                raise SystemExit("no episode kept: nothing written")
+            meta = {
+                "scenario": args.scenario,
+                "generator": "torchrl_csirl.envs.expert.ExpertDriver",
+                "base_seed": seed,
+                "empty_road": bool(args.empty_road),
+                "only_successful": bool(args.only_successful),
+                "num_trajectories": len(kept),
+                "action_units": "normalised: [acceleration / 15 m/s^2, steering / (pi/2) rad]",
+            }
+            result["out"] = build_demonstrations(kept, meta).save(args.out)
+        if args.only_successful:
+            print(f"rejected {result['rejected']} of {result['episodes']} episodes", file=sys.stderr)
+    print(json.dumps(result, sort_keys=True))
+    return result
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,187 @@
+"""Tests of the expert driver, the shipped demonstrations and the generation recipe."""
+from __future__ import annotations
+
+import importlib.util
+import math
+import os
+
+import numpy as np
+import pytest
+import torch
+
+from torchrl_csirl.data.shipped import (
+    CURRICULA,
+    DATASET_SIZES,
+    available_expert_datasets,
+    curriculum_trajectory,
+    load_expert_demonstrations,
+)
+from torchrl_csirl.envs import SCENARIOS, make_gym_env
+from torchrl_csirl.envs.expert import (
+    ExpertDriver,
+    clear_traffic,
+    make_expert,
+    normalize_action,
+    rollout_expert,
+)
+
+SCENARIO_NAMES = ["highway-fast", "merge", "roundabout", "intersection"]
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+_EPISODES: dict[str, dict] = {}
+
+
+def _shipped_traffic_seed(scenario: str) -> int:
+    """Seed of a successful with-traffic expert episode (trajectory 1 of the shipped file)."""
+    return int(load_expert_demonstrations(scenario, 5).metadata["episodes"][1]["seed"])
+
+
+def _expert_episode(scenario: str) -> dict:
+    if scenario not in _EPISODES:
+        env = make_gym_env(scenario)
+        _EPISODES[scenario] = rollout_expert(env, seed=_shipped_traffic_seed(scenario), scenario=scenario)
+        env.close()
+    return _EPISODES[scenario]
+
+
+def _load_recipe():
+    path = os.path.join(ROOT, "recipes", "generate_experts.py")
+    spec = importlib.util.spec_from_file_location("generate_experts", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+# ---------------------------------------------------------------------------------------------- expert
+@pytest.mark.parametrize("scenario", SCENARIO_NAMES)
+def test_expert_completes_route_with_traffic(scenario):
+    episode = _expert_episode(scenario)
+    assert episode["success"], f"{scenario}: expert failed (accomplish {episode['accomplish_rate']:.3f})"
+    assert not episode["crashed"] and not episode["offroad"]
+    # merge ends at x > 370 while its finish is x = 400: raw accomplish rate ceiling ~0.92
+    floor = 0.9 if scenario == "merge" else 0.97
+    assert episode["accomplish_rate"] >= floor
+    actions = episode["action"]
+    assert actions.dtype == np.float32 and actions.shape[1] == 2
+    assert np.abs(actions).max() <= 1.0
+
+
+@pytest.mark.parametrize("scenario", SCENARIO_NAMES)
+def test_expert_reproduces_shipped_trajectory(scenario):
+    episode = _expert_episode(scenario)
+    demos = load_expert_demonstrations(scenario, 5, curriculum="traffic")
+    stored = demos.trajectory(1)
+    assert stored["action"].shape[0] == episode["length"]
+    torch.testing.assert_close(stored["action"], torch.as_tensor(episode["action"]))
+    torch.testing.assert_close(stored["observation"], torch.as_tensor(episode["observation"]))
+
+
+def test_expert_beats_random_policy():
+    scenario = "intersection"
+    expert_rate = _expert_episode(scenario)["accomplish_rate"]
+    env = make_gym_env(scenario)
+    rng = np.random.default_rng(0)
+    random_rates = []
+    for seed in range(3):
+        _, info = env.reset(seed=seed)
+        distances = [info["distance_to_finish"]]
+        while True:
+            _, _, terminated, truncated, info = env.step(rng.uniform(-1, 1, size=2).astype(np.float32))
+            distances.append(info["distance_to_finish"])
+            if terminated or truncated:
+                break
+        d = np.asarray(distances)
+        random_rates.append(float(np.clip((d[0] - d.min()) / d[0], 0, 1)))
+    assert expert_rate > np.mean(random_rates) + 0.5
+
+
+def test_clear_traffic_leaves_only_ego():
+    env = make_gym_env("intersection")
+    env.reset(seed=0)
+    obs = clear_traffic(env)
+    assert env.unwrapped.road.vehicles == [env.unwrapped.vehicle]
+    rows = obs.reshape(5, -1)
+    assert rows[0, 0] == 1 and np.all(rows[1:, 0] == 0)  # presence of the other rows
+
+
+def test_normalize_action_units_and_clipping():
+    np.testing.assert_allclose(normalize_action(7.5, math.pi / 4), [0.5, 0.5])
+    np.testing.assert_allclose(normalize_action(-100.0, 10.0), [-1.0, 1.0])
+    assert normalize_action(0.0, 0.0).dtype == np.float32
+
+
+def test_make_expert_rejects_unknown_scenario_and_overrides_config():
+    with pytest.raises(ValueError, match="Unknown scenario"):
+        make_expert("parking")
+    with pytest.raises(ValueError, match="Unknown scenario"):
+        ExpertDriver("parking")
+    assert make_expert("merge", horizon=7).config.horizon == 7
+
+
+# ---------------------------------------------------------------------------------------------- shipped data
+def test_all_shipped_datasets_available():
+    assert available_expert_datasets() == {s: list(CURRICULA) for s in SCENARIO_NAMES}
+
+
+@pytest.mark.parametrize("scenario", SCENARIO_NAMES)
+def test_shipped_datasets_counts_shapes_and_nested_prefixes(scenario):
+    spec = SCENARIOS[scenario]
+    full = {c: load_expert_demonstrations(scenario, 25, curriculum=c) for c in CURRICULA}
+    for curriculum, demos in full.items():
+        assert demos.num_trajectories == 25
+        assert demos.observation_dim == spec.obs_dim and demos.action_dim == 2
+        td = demos.transitions()
+        assert td["action"].dtype == torch.float32
+        assert td["action"].abs().max() <= 1.0
+        assert torch.all(td["observation"].abs() <= 1.0)
+        assert all(e["success"] for e in demos.metadata["episodes"])
+        assert demos.metadata["curriculum"] == curriculum
+        for n in DATASET_SIZES:
+            small = load_expert_demonstrations(scenario, n, curriculum=curriculum)
+            assert small.num_trajectories == n
+            # nested prefixes: file N = file 1's trajectory + N - 1 others, in order
+            for i in range(n):
+                torch.testing.assert_close(small.trajectory(i)["action"], demos.trajectory(i)["action"])
+    # both curricula share trajectories 1..24; trajectory 0 differs
+    for i in (1, 24):
+        torch.testing.assert_close(
+            full["empty"].trajectory(i)["observation"], full["traffic"].trajectory(i)["observation"]
+        )
+    assert not torch.equal(
+        full["empty"].trajectory(0)["observation"][:5], full["traffic"].trajectory(0)["observation"][:5]
+    )
+    # the empty-road curriculum trajectory sees no other vehicle (presence features of rows 1..4)
+    empty_obs = curriculum_trajectory(scenario, "empty")["observation"].reshape(-1, 5, spec.obs_dim // 5)
+    assert torch.all(empty_obs[:, 1:, 0] <= -1.0 + 1e-6) or torch.all(empty_obs[:, 1:, 0] == 0)
+    traffic_obs = curriculum_trajectory(scenario, "traffic")["observation"].reshape(-1, 5, spec.obs_dim // 5)
+    assert torch.any(traffic_obs[:, 1:, 0] > 0)
+
+
+def test_shipped_loader_errors():
+    with pytest.raises(ValueError, match="Unknown scenario"):
+        load_expert_demonstrations("parking")
+    with pytest.raises(ValueError, match="num_trajectories"):
+        load_expert_demonstrations("merge", 7)
+    with pytest.raises(TypeError):
+        load_expert_demonstrations("merge", 5.0)
+    with pytest.raises(ValueError, match="curriculum"):
+        load_expert_demonstrations("merge", 5, curriculum="busy")
+
+
+# ---------------------------------------------------------------------------------------------- recipe
+def test_generate_experts_same_seed_same_bytes(tmp_path, capsys):
+    recipe = _load_recipe()
+    paths = [tmp_path / "a.npz", tmp_path / "b.npz"]
+    results = []
+    for path in paths:
+        results.append(
+            recipe.main(["--scenario", "merge", "--episodes", "1", "--seed", "3", "--empty-road", "--out", str(path)])
+        )
+    assert paths[0].read_bytes() == paths[1].read_bytes()
+    last_line = capsys.readouterr().out.strip().splitlines()[-1]
+    assert '"success_rate"' in last_line and '"accomplish_rate"' in last_line
+    assert results[0]["episodes"] == 1 and results[0]["success_rate"] == 1.0
+    from torchrl_csirl.data import ExpertDemonstrations
+
+    demos = ExpertDemonstrations.load(paths[0])
+    assert demos.num_trajectories == 1 and demos.metadata["empty_road"] is True

@@ -1,0 +1,702 @@
+"""A privileged expert driver for the four CSIRL driving scenarios.
+
+The expert reads the simulator state (road network, ego vehicle, other vehicles) from ``env.unwrapped``
+and returns continuous actions in the learner's normalised units: ``[acceleration / 15, steering / (pi / 2)]``
+clipped to ``[-1, 1]``.
+
+It is a *route-following controller with a short-horizon look-ahead*:
+
+* **lateral**: highway-env's own cascaded lateral-position / heading controller
+  (:meth:`highway_env.vehicle.controller.ControlledVehicle.steering_control`) tracking the centre line
+  of the target lane along the route to the scenario's destination;
+* **longitudinal**: the Intelligent Driver Model (IDM, as in
+  :class:`highway_env.vehicle.behavior.IDMVehicle`) towards a target speed, following the nearest
+  vehicle on the ego's *path* (which also covers vehicles crossing it) and, for "yield" behaviours,
+  a virtual stopped vehicle at the stop line of the roundabout entry / intersection;
+* **decision** (lane choice, MOBIL-like, and gap acceptance at junctions): every step a handful of
+  candidate behaviours (target lane x target speed x go/yield) are simulated for a few seconds on a
+  light copy of the road in which the other vehicles run their own (deterministic) IDM/MOBIL models
+  and react to the ego. The behaviour with the most route progress that neither collides, leaves the
+  road nor comes closer than a safety margin to another vehicle is applied for one step. Since the
+  others' behaviour models are deterministic, the look-ahead is an exact prediction of the traffic
+  within the horizon (vehicles spawned later by the environment are the only unknown).
+
+Examples:
+    >>> from torchrl_csirl.envs.expert import make_expert, rollout_expert
+    >>> from torchrl_csirl.envs import make_gym_env
+    >>> env = make_gym_env("merge")
+    >>> episode = rollout_expert(env, seed=0, empty_road=True)
+    >>> bool(episode["success"]), episode["action"].shape[1]
+    (True, 2)
+"""
+from __future__ import annotations
+
+import copy
+import dataclasses
+import math
+from typing import Any, Sequence
+
+import numpy as np
+
+ACCELERATION_SCALE = 15.0
+"""Physical acceleration [m/s^2] of a normalised action of 1."""
+STEERING_SCALE = math.pi / 2
+"""Physical steering angle [rad] of a normalised action of 1."""
+
+__all__ = [
+    "ACCELERATION_SCALE",
+    "STEERING_SCALE",
+    "ExpertConfig",
+    "ExpertDriver",
+    "EXPERT_CONFIGS",
+    "clear_traffic",
+    "make_expert",
+    "rollout_expert",
+    "normalize_action",
+]
+
+
+@dataclasses.dataclass(frozen=True)
+class ExpertConfig:
+    """Per-scenario settings of :class:`ExpertDriver`.
+
+    Args:
+        destination: road-network node the route leads to (``None``: keep driving along the road).
+        speeds: candidate target speeds [m/s] for the "go" behaviours.
+        lane_choice: whether the expert may choose among the parallel lanes of the current road.
+        preferred_lane: lane id the expert prefers near the end of the route (``None``: no preference).
+        yield_roads: road segments ``(from, to)`` whose end is a stop line at which the expert may
+            wait (roundabout entry, intersection approach).
+        horizon: look-ahead horizon in steps.
+        safety_margin: minimal gap [m] (between vehicle outlines, approximately) kept to others.
+        max_acceleration: largest acceleration the expert commands [m/s^2].
+        max_braking: largest deceleration the expert commands [m/s^2].
+        finish_position: the scenario's finish position (used to rank behaviours near the end).
+        replan_every: steps between two decisions (the chosen behaviour's controllers run every step).
+        perception_radius: only vehicles within this distance [m] are simulated in the look-ahead.
+        time_headway: IDM desired time gap to the vehicle ahead [s].
+        jam_distance: IDM desired centre-to-centre distance at standstill [m].
+    """
+
+    destination: str | None
+    speeds: tuple[float, ...]
+    lane_choice: bool = False
+    preferred_lane: int | None = None
+    yield_roads: tuple[tuple[str, str], ...] = ()
+    horizon: int = 15
+    safety_margin: float = 1.5
+    max_acceleration: float = 6.0
+    max_braking: float = 12.0
+    finish_position: tuple[float, float] | None = None
+    replan_every: int = 2
+    perception_radius: float = 120.0
+    time_headway: float = 1.0
+    jam_distance: float = 10.0
+
+
+EXPERT_CONFIGS: dict[str, ExpertConfig] = {
+    "highway-fast": ExpertConfig(
+        destination=None,
+        speeds=(30.0, 22.0),
+        lane_choice=True,
+        preferred_lane=2,
+        horizon=12,
+        perception_radius=60.0,
+        finish_position=(650.0, 8.0),
+    ),
+    "merge": ExpertConfig(
+        destination="d",
+        speeds=(40.0, 30.0, 22.0),
+        lane_choice=True,
+        horizon=15,
+        time_headway=0.6,
+        jam_distance=8.0,
+        perception_radius=80.0,
+        max_acceleration=8.0,
+        finish_position=(400.0, 4.0),
+    ),
+    "roundabout": ExpertConfig(
+        destination="nxr",
+        speeds=(24.0, 18.0, 12.0),
+        lane_choice=True,
+        max_acceleration=8.0,
+        yield_roads=(("ses", "se"),),
+        horizon=20,
+        perception_radius=60.0,
+        finish_position=(2.0, -75.0),
+    ),
+    "intersection": ExpertConfig(
+        destination="o11",
+        speeds=(12.0, 10.0, 7.0),
+        lane_choice=False,
+        yield_roads=(("o10", "ir10"),),
+        perception_radius=60.0,
+        horizon=20,
+        finish_position=(-45.0, -2.0),
+    ),
+}
+
+
+def normalize_action(acceleration: float, steering: float) -> np.ndarray:
+    """Convert a physical command into the learner's normalised action.
+
+    Args:
+        acceleration: longitudinal acceleration [m/s^2].
+        steering: front-wheel steering angle [rad].
+
+    Returns:
+        ``float32`` array ``[acceleration / 15, steering / (pi / 2)]`` clipped to ``[-1, 1]``.
+
+    Examples:
+        >>> normalize_action(7.5, math.pi / 4).tolist()
+        [0.5, 0.5]
+    """
+    action = np.array([acceleration / ACCELERATION_SCALE, steering / STEERING_SCALE], dtype=np.float64)
+    return np.clip(action, -1.0, 1.0).astype(np.float32)
+
+
+# ----------------------------------------------------------------------------------------------------
+# Light copies of the simulator state for look-ahead
+# ----------------------------------------------------------------------------------------------------
+class _LaneLocator:
+    """Exact, faster ``RoadNetwork.get_closest_lane_index`` for the look-ahead copies.
+
+    highway-env scans every lane of the network for every vehicle at every step. A lane's
+    ``distance_with_heading`` is never smaller than the Euclidean distance from the position to the
+    lane's centre curve, so lanes whose (inflated) bounding box does not contain the position cannot
+    beat a candidate closer than the inflation ``margin``: only nearby lanes are scanned, in the
+    network's order (same tie-breaking), with a full scan as fallback.
+    """
+
+    def __init__(self, network: Any, margin: float = 15.0) -> None:
+        self.network = network
+        self.margin = margin
+        self.indexes: list[tuple] = []
+        self.lanes: list[Any] = []
+        boxes = []
+        for _from, to_dict in network.graph.items():
+            for _to, lanes in to_dict.items():
+                for _id, lane in enumerate(lanes):
+                    samples = np.linspace(0.0, float(lane.length), max(2, int(lane.length // 2) + 2))
+                    points = np.array([lane.position(s, 0.0) for s in samples])
+                    boxes.append(np.concatenate([points.min(0) - margin, points.max(0) + margin]))
+                    self.indexes.append((_from, _to, _id))
+                    self.lanes.append(lane)
+        self.boxes = np.array(boxes)
+
+    def __call__(self, position: np.ndarray, heading: float | None = None) -> tuple:
+        x, y = float(position[0]), float(position[1])
+        b = self.boxes
+        near = np.flatnonzero((b[:, 0] <= x) & (x <= b[:, 2]) & (b[:, 1] <= y) & (y <= b[:, 3]))
+        if len(near):
+            distances = [self.lanes[i].distance_with_heading(position, heading) for i in near]
+            best = int(np.argmin(distances))
+            if distances[best] <= self.margin:
+                return self.indexes[near[best]]
+        distances = [lane.distance_with_heading(position, heading) for lane in self.lanes]
+        return self.indexes[int(np.argmin(distances))]
+
+
+_FAST_NETWORKS: dict[int, tuple[Any, Any]] = {}
+
+
+def fast_network(network: Any) -> Any:
+    """A shallow copy of a road network with a faster (same result) closest-lane search."""
+    cached = _FAST_NETWORKS.get(id(network))
+    if cached is not None and cached[0] is network:
+        return cached[1]
+    fast = copy.copy(network)
+    fast.get_closest_lane_index = _LaneLocator(network)
+    if len(_FAST_NETWORKS) > 64:
+        _FAST_NETWORKS.clear()
+    _FAST_NETWORKS[id(network)] = (network, fast)
+    return fast
+
+
+def clone_road(road: Any, center: np.ndarray | None = None, radius: float = math.inf) -> tuple[Any, dict[int, Any]]:
+    """Copy a highway-env road so that stepping the copy leaves the original untouched.
+
+    The (immutable) road network is shared; vehicles, objects and the random generator are copied.
+    With ``center``/``radius``, only vehicles within ``radius`` metres of ``center`` are kept.
+
+    Returns:
+        the copy and a map ``id(original vehicle) -> copied vehicle``.
+    """
+    new_road = copy.copy(road)
+    new_road.network = fast_network(road.network)
+    new_road.np_random = copy.deepcopy(road.np_random)
+    mapping: dict[int, Any] = {}
+
+    def _copy_object(obj: Any) -> Any:
+        clone = copy.copy(obj)
+        clone.position = np.array(obj.position, dtype=float)
+        if isinstance(getattr(obj, "action", None), dict):
+            clone.action = dict(obj.action)
+        if getattr(obj, "route", None) is not None:
+            clone.route = list(obj.route)
+        if hasattr(obj, "log"):
+            clone.log = []
+        clone.road = new_road
+        mapping[id(obj)] = clone
+        return clone
+
+    vehicles = road.vehicles
+    if center is not None and math.isfinite(radius):
+        vehicles = [v for v in vehicles if np.abs(v.position - center).max() <= radius]
+    new_road.vehicles = [_copy_object(v) for v in vehicles]
+    new_road.objects = [_copy_object(o) for o in road.objects]
+    return new_road, mapping
+
+
+# ----------------------------------------------------------------------------------------------------
+# Low-level control
+# ----------------------------------------------------------------------------------------------------
+@dataclasses.dataclass
+class _Behaviour:
+    """A candidate behaviour: a lane on the route, a target speed, and an optional stop line."""
+
+    lane_id: int | None
+    speed: float
+    stop: bool = False
+
+    def key(self) -> tuple:
+        return (self.lane_id, self.speed, self.stop)
+
+
+class _RouteFollower:
+    """Lane-level route, path geometry and the IDM + steering controllers of the ego vehicle."""
+
+    # highway-env ControlledVehicle gains
+    TAU_HEADING = 0.2
+    TAU_LATERAL = 0.6
+    TAU_PURSUIT = 0.5 * TAU_HEADING
+    MAX_STEERING = math.pi / 3
+    # IDM parameters (IDMVehicle's exponent; gap parameters in ExpertConfig)
+    DELTA = 4.0
+    COMFORT_DECELERATION = 5.0
+
+    def __init__(
+        self, network: Any, roads: Sequence[tuple[str, str]], config: ExpertConfig, dt: float = 0.2
+    ) -> None:
+        self.network = network
+        self.dt = dt
+        self.roads = list(roads)
+        self.config = config
+        self.road_index = 0
+
+    def copy(self) -> _RouteFollower:
+        clone = copy.copy(self)
+        return clone
+
+    # --- route bookkeeping -------------------------------------------------------------------------
+    def lanes_of(self, k: int) -> list[Any]:
+        _from, _to = self.roads[k]
+        return self.network.graph[_from][_to]
+
+    def lane_id_on(self, k: int, position: np.ndarray, lane_id: int | None) -> int:
+        lanes = self.lanes_of(k)
+        if lane_id is not None and self.config.lane_choice:
+            return int(min(max(lane_id, 0), len(lanes) - 1))
+        distances = [abs(lane.local_coordinates(position)[1]) for lane in lanes]
+        return int(np.argmin(distances))
+
+    def update(self, vehicle: Any) -> None:
+        """Advance along the route when the ego has passed the end of the current road."""
+        while self.road_index < len(self.roads) - 1:
+            lane = self.lanes_of(self.road_index)[0]
+            long, _ = lane.local_coordinates(vehicle.position)
+            if long < lane.length:
+                # also accept the ego already being on a later road of the route
+                if vehicle.lane_index[:2] in self.roads[self.road_index + 1 :]:
+                    self.road_index = self.roads.index(vehicle.lane_index[:2])
+                    continue
+                break
+            self.road_index += 1
+
+    def path_lanes(self, position: np.ndarray, lane_id: int | None, count: int = 4) -> list[Any]:
+        lanes = []
+        current = None
+        for k in range(self.road_index, min(self.road_index + count, len(self.roads))):
+            if current is None:
+                current = self.lane_id_on(k, position, lane_id)
+            else:
+                n = len(self.lanes_of(k))
+                if lane_id is not None and self.config.lane_choice:
+                    current = int(min(max(lane_id, 0), n - 1))
+                elif n != len(self.lanes_of(k - 1)):
+                    end = lanes[-1].position(lanes[-1].length, 0)
+                    current = self.lane_id_on(k, end, None)
+            lanes.append(self.lanes_of(k)[current])
+        return lanes
+
+    def progress(self, vehicle: Any) -> float:
+        """Distance travelled along the route (road lengths of passed roads + longitudinal position)."""
+        passed = sum(self.lanes_of(k)[0].length for k in range(self.road_index))
+        lane = self.lanes_of(self.road_index)[0]
+        return passed + lane.local_coordinates(vehicle.position)[0]
+
+    # --- controllers -------------------------------------------------------------------------------
+    def steering(self, vehicle: Any, lane: Any) -> float:
+        long, lat = lane.local_coordinates(vehicle.position)
+        speed = max(abs(vehicle.speed), 1e-2)
+        future_heading = lane.heading_at(long + speed * self.TAU_PURSUIT)
+        lateral_speed_command = -lat / self.TAU_LATERAL
+        heading_command = math.asin(float(np.clip(lateral_speed_command / speed, -1, 1)))
+        heading_ref = future_heading + float(np.clip(heading_command, -math.pi / 4, math.pi / 4))
+        heading_error = (heading_ref - vehicle.heading + math.pi) % (2 * math.pi) - math.pi
+        heading_rate = heading_error / self.TAU_HEADING
+        slip = math.asin(float(np.clip(vehicle.LENGTH / 2 / speed * heading_rate, -1, 1)))
+        steering = math.atan(2 * math.tan(slip))
+        return float(np.clip(steering, -self.MAX_STEERING, self.MAX_STEERING))
+
+    def idm(self, speed: float, target_speed: float, gap: float | None, front_speed: float) -> float:
+        accel_max = self.config.max_acceleration
+        acceleration = accel_max * (1 - (max(speed, 0.0) / max(target_speed, 1e-2)) ** self.DELTA)
+        if target_speed <= 0.0:
+            acceleration = -accel_max * np.sign(speed)
+        if gap is not None:
+            dv = speed - front_speed
+            d_star = (
+                self.config.jam_distance
+                + max(speed, 0.0) * self.config.time_headway
+                + speed * dv / (2 * math.sqrt(accel_max * self.COMFORT_DECELERATION))
+            )
+            acceleration -= accel_max * (max(d_star, 0.0) / max(gap, 0.5)) ** 2
+        return float(np.clip(acceleration, -self.config.max_braking, self.config.max_acceleration))
+
+    def front_obstacle(
+        self, vehicle: Any, others: Sequence[Any], lanes: Sequence[Any], stop_at: float | None
+    ) -> tuple[float | None, float]:
+        """Nearest obstacle ahead on the path: (bumper-to-bumper gap, its speed along the path)."""
+        origin = lanes[0].local_coordinates(vehicle.position)[0]
+        best_gap, best_speed = None, 0.0
+        if stop_at is not None:
+            best_gap, best_speed = stop_at - origin - vehicle.LENGTH / 2, 0.0
+        offset = 0.0
+        for lane in lanes:
+            for other in others:
+                if other is vehicle:
+                    continue
+                if np.abs(other.position - vehicle.position).max() > 80:
+                    continue
+                long, lat = lane.local_coordinates(other.position)
+                if not (-2.5 <= long <= lane.length + 2.5) or abs(lat) > 2.6:
+                    continue
+                s = offset + long - origin
+                if s <= 0.5:
+                    continue
+                gap = s - vehicle.LENGTH
+                if best_gap is None or gap < best_gap:
+                    heading = lane.heading_at(long)
+                    direction = np.array([math.cos(heading), math.sin(heading)])
+                    best_gap = gap
+                    best_speed = float(np.dot(getattr(other, "velocity", np.zeros(2)), direction))
+            offset += lane.length
+        return best_gap, best_speed
+
+    def control(self, vehicle: Any, others: Sequence[Any], behaviour: _Behaviour) -> tuple[float, float]:
+        """Physical (acceleration, steering) for the ego under a behaviour."""
+        self.update(vehicle)
+        lanes = self.path_lanes(vehicle.position, behaviour.lane_id)
+        stop_at = None
+        if behaviour.stop:
+            stop_at = self.stop_line(vehicle, lanes)
+        # steer towards the lane we are on or the next one when the current lane is ending
+        lane = lanes[0]
+        long, _ = lane.local_coordinates(vehicle.position)
+        if long > lane.length and len(lanes) > 1:
+            lane = lanes[1]
+        steering = self.steering(vehicle, lane)
+        gap, front_speed = self.front_obstacle(vehicle, others, lanes, stop_at)
+        acceleration = self.idm(vehicle.speed, behaviour.speed, gap, front_speed)
+        acceleration = max(acceleration, -max(vehicle.speed, 0.0) / self.dt)  # brake to a stop, never reverse
+        return acceleration, steering
+
+    def stop_line(self, vehicle: Any, lanes: Sequence[Any]) -> float | None:
+        """Path coordinate (from the start of ``lanes[0]``) of the next stop line, if any is ahead."""
+        offset = 0.0
+        for i, k in enumerate(range(self.road_index, min(self.road_index + len(lanes), len(self.roads)))):
+            if self.roads[k] in self.config.yield_roads:
+                return offset + lanes[i].length - 1.0
+            offset += lanes[i].length
+        return None
+
+    def can_stop(self, vehicle: Any, lanes: Sequence[Any]) -> bool:
+        stop = self.stop_line(vehicle, lanes)
+        if stop is None:
+            return False
+        remaining = stop - lanes[0].local_coordinates(vehicle.position)[0] - vehicle.LENGTH / 2
+        return remaining > vehicle.speed**2 / (2 * self.config.max_braking) - 0.5
+
+
+# ----------------------------------------------------------------------------------------------------
+# The expert
+# ----------------------------------------------------------------------------------------------------
+class ExpertDriver:
+    """Privileged expert driver for a CSIRL driving scenario.
+
+    Args:
+        scenario: one of ``"highway-fast"``, ``"merge"``, ``"roundabout"``, ``"intersection"``.
+        config: optional :class:`ExpertConfig` overriding the scenario's defaults.
+        dt: simulation step [s] (0.2 s in all CSIRL scenarios).
+
+    Examples:
+        >>> from torchrl_csirl.envs import make_gym_env
+        >>> env = make_gym_env("highway-fast")
+        >>> _ = env.reset(seed=0)
+        >>> expert = ExpertDriver("highway-fast")
+        >>> expert.reset(env)
+        >>> action = expert.act(env)
+        >>> action.shape, bool(abs(action).max() <= 1)
+        ((2,), True)
+    """
+
+    def __init__(self, scenario: str, config: ExpertConfig | None = None, dt: float = 0.2) -> None:
+        if scenario not in EXPERT_CONFIGS and config is None:
+            raise ValueError(f"Unknown scenario {scenario!r}; expected one of {sorted(EXPERT_CONFIGS)}.")
+        self.scenario = scenario
+        self.config = config or EXPERT_CONFIGS[scenario]
+        self.dt = dt
+        self._route: _RouteFollower | None = None
+        self._previous: _Behaviour | None = None
+        self._steps = 0
+
+    # --- public API --------------------------------------------------------------------------------
+    def reset(self, env: Any) -> None:
+        """Plan the route of the ego vehicle of a freshly reset environment."""
+        base = env.unwrapped
+        vehicle = base.vehicle
+        network = base.road.network
+        start = vehicle.lane_index[:2]
+        roads = [start]
+        if self.config.destination is not None and start[1] != self.config.destination:
+            path = network.shortest_path(start[1], self.config.destination)
+            if not path:
+                raise ValueError(
+                    f"No route from {start} to {self.config.destination!r} in scenario {self.scenario!r}."
+                )
+            nodes = [start[1], *path] if path[0] != start[1] else list(path)
+            roads += [(a, b) for a, b in zip(nodes[:-1], nodes[1:])]
+        self._route = _RouteFollower(network, roads, self.config, self.dt)
+        self._previous = None
+        self._steps = 0
+
+    def act(self, env: Any) -> np.ndarray:
+        """Normalised action ``[acceleration / 15, steering / (pi / 2)]`` for the current state."""
+        if self._route is None:
+            self.reset(env)
+        base = env.unwrapped
+        if self._previous is None or self._steps % self.config.replan_every == 0:
+            behaviour = self.decide(base.road, base.vehicle)
+        else:
+            behaviour = self._previous
+        self._steps += 1
+        self._previous = behaviour
+        acceleration, steering = self._route.control(base.vehicle, base.road.vehicles, behaviour)
+        return normalize_action(acceleration, steering)
+
+    __call__ = act
+
+    # --- decision ----------------------------------------------------------------------------------
+    def candidates(self, vehicle: Any) -> list[_Behaviour]:
+        route = self._route
+        route.update(vehicle)
+        lane_ids: list[int | None] = [None]
+        if self.config.lane_choice:
+            current = route.lane_id_on(route.road_index, vehicle.position, None)
+            n = len(route.lanes_of(route.road_index))
+            options = {int(np.clip(current + d, 0, n - 1)) for d in (-1, 0, 1)}
+            if self._previous is not None and self._previous.lane_id is not None:
+                options.add(int(np.clip(self._previous.lane_id, 0, n - 1)))  # keep the committed lane
+            lane_ids = sorted(options)
+        behaviours = [_Behaviour(lane, speed) for lane in lane_ids for speed in self.config.speeds]
+        lanes = route.path_lanes(vehicle.position, None)
+        if route.can_stop(vehicle, lanes):
+            behaviours.append(_Behaviour(lane_ids[0] if len(lane_ids) == 1 else None, max(self.config.speeds), stop=True))
+        behaviours.append(_Behaviour(None, 0.0))  # emergency braking
+        return behaviours
+
+    def decide(self, road: Any, vehicle: Any) -> _Behaviour:
+        """Choose the behaviour with the best simulated outcome over the look-ahead horizon."""
+        best, best_score = None, -math.inf
+        for behaviour in self.candidates(vehicle):
+            score = self.evaluate(road, vehicle, behaviour)
+            if self._previous is not None and behaviour.key() == self._previous.key():
+                score += 2.0  # hysteresis: avoid dithering between near-equivalent behaviours
+            if score > best_score:
+                best, best_score = behaviour, score
+        return best
+
+    def evaluate(self, road: Any, vehicle: Any, behaviour: _Behaviour) -> float:
+        """Simulate a behaviour and score it: route progress, minus penalties for risk and lane changes."""
+        sim_road, mapping = clone_road(road, vehicle.position, self.config.perception_radius)
+        ego = mapping[id(vehicle)]
+        route = self._route.copy()
+        start = route.progress(ego)
+        min_gap = math.inf
+        failed_at = None
+        for t in range(self.config.horizon):
+            acceleration, steering = route.control(ego, sim_road.vehicles, behaviour)
+            ego.act({"acceleration": acceleration, "steering": steering})
+            sim_road.act()
+            sim_road.step(self.dt)
+            if ego.crashed or not ego.on_road:
+                failed_at = t
+                break
+            min_gap = min(min_gap, self._clearance(ego, sim_road))
+            route.update(ego)
+        if failed_at is not None:
+            return -1e6 + 1e3 * failed_at + route.progress(ego) - start
+        score = route.progress(ego) - start
+        if min_gap < self.config.safety_margin:
+            score -= 200.0 * (self.config.safety_margin - min_gap) + 100.0
+        score -= self._lane_penalty(ego, route, behaviour)
+        return score
+
+    def _clearance(self, ego: Any, road: Any) -> float:
+        """Approximate free distance between the ego and the nearest vehicle (outline to outline)."""
+        best = math.inf
+        direction = ego.direction
+        normal = np.array([-direction[1], direction[0]])
+        for other in road.vehicles:
+            if other is ego:
+                continue
+            delta = other.position - ego.position
+            if np.abs(delta).max() > 20:
+                continue
+            longitudinal = abs(float(delta @ direction)) - ego.LENGTH
+            lateral = abs(float(delta @ normal)) - ego.WIDTH
+            if lateral < 0.3:  # overlapping laterally: longitudinal clearance matters
+                best = min(best, longitudinal)
+            elif longitudinal < 0:  # side by side
+                best = min(best, lateral + self.config.safety_margin - 0.3)
+        return best
+
+    def _lane_penalty(self, ego: Any, route: _RouteFollower, behaviour: _Behaviour) -> float:
+        penalty = 0.0
+        if behaviour.lane_id is not None:
+            current = route.lane_id_on(route.road_index, ego.position, None)
+            penalty += 1.0 * abs(behaviour.lane_id - current)
+        preferred = self.config.preferred_lane
+        finish = self.config.finish_position
+        if preferred is not None and finish is not None and behaviour.lane_id is not None:
+            remaining = finish[0] - ego.position[0]
+            if remaining < 250:
+                penalty += 5.0 * abs(behaviour.lane_id - preferred)
+        return penalty
+
+
+def make_expert(name: str, **overrides: Any) -> ExpertDriver:
+    """Build the expert driver of a scenario, optionally overriding fields of its :class:`ExpertConfig`.
+
+    Examples:
+        >>> expert = make_expert("roundabout", horizon=10)
+        >>> expert.config.horizon
+        10
+    """
+    if name not in EXPERT_CONFIGS:
+        raise ValueError(f"Unknown scenario {name!r}; expected one of {sorted(EXPERT_CONFIGS)}.")
+    config = dataclasses.replace(EXPERT_CONFIGS[name], **overrides) if overrides else None
+    return ExpertDriver(name, config=config)
+
+
+def clear_traffic(env: Any) -> np.ndarray:
+    """Remove every vehicle but the ego from a freshly reset scenario (the empty-road curriculum).
+
+    Also stops the intersection from spawning new vehicles. Returns the recomputed observation.
+    """
+    base = env.unwrapped
+    base.road.vehicles = [v for v in base.road.vehicles if v is base.vehicle]
+    if "spawn_probability" in base.config:
+        base.config["spawn_probability"] = 0.0
+    return np.asarray(base.observation_type.observe(), dtype=np.float32).reshape(-1)
+
+
+def rollout_expert(
+    env: Any,
+    seed: int | None = None,
+    expert: ExpertDriver | None = None,
+    scenario: str | None = None,
+    empty_road: bool = False,
+    max_steps: int | None = None,
+) -> dict[str, Any]:
+    """Drive one episode with the expert and record it.
+
+    Args:
+        env: a gymnasium env of a CSIRL scenario (``make_gym_env(name)``).
+        seed: reset seed.
+        expert: the driver (default: ``make_expert`` of the env's scenario).
+        scenario: scenario name, when it cannot be read from the env.
+        empty_road: remove all other vehicles after the reset (see :func:`clear_traffic`).
+        max_steps: optional cap on the number of steps (default: until terminated/truncated).
+
+    Returns:
+        a dict with the episode in the layout of
+        :meth:`torchrl_csirl.data.ExpertDemonstrations.from_episodes` (``observation`` and
+        ``next_observation`` ``[T, D]``, ``action`` ``[T, 2]``, ``reward``, ``terminated``,
+        ``truncated`` ``[T]``) and its statistics: ``success`` (the env's ``info["success"]``: finish
+        area reached without crash), ``crashed``, ``offroad``, ``accomplish_rate``
+        (``clip((d0 - d_min) / d0, 0, 1)``), ``distances`` (``d_0..d_T``), ``length``, ``seed``.
+
+    Examples:
+        >>> from torchrl_csirl.envs import make_gym_env
+        >>> episode = rollout_expert(make_gym_env("intersection"), seed=0)
+        >>> episode["observation"].shape[1], episode["action"].shape[1]
+        (35, 2)
+    """
+    from torchrl_csirl.envs.metrics import accomplish_rate
+
+    scenario = scenario or _scenario_of(env)
+    expert = expert or make_expert(scenario)
+    obs, info = env.reset(seed=seed)
+    if empty_road:
+        obs = clear_traffic(env)
+    expert.reset(env)
+    distances = [float(info["distance_to_finish"])]
+    observations, actions, rewards, terminated, truncated = [np.asarray(obs, dtype=np.float32).ravel()], [], [], [], []
+    crashed = offroad = success = False
+    step = 0
+    while True:
+        action = expert.act(env)
+        obs, reward, term, trunc, info = env.step(action)
+        step += 1
+        observations.append(np.asarray(obs, dtype=np.float32).ravel())
+        actions.append(action)
+        rewards.append(float(reward))
+        distances.append(float(info["distance_to_finish"]))
+        crashed = crashed or bool(info.get("crashed", False))
+        offroad = offroad or bool(info.get("offroad", False))
+        success = success or bool(info.get("success", False))
+        if max_steps is not None and step >= max_steps:
+            trunc = True
+        terminated.append(bool(term))
+        truncated.append(bool(trunc) and not bool(term))
+        if term or trunc:
+            break
+    observations = np.stack(observations)
+    return {
+        "observation": observations[:-1],
+        "next_observation": observations[1:],
+        "action": np.stack(actions).astype(np.float32),
+        "reward": np.asarray(rewards, dtype=np.float32),
+        "terminated": np.asarray(terminated, dtype=bool),
+        "truncated": np.asarray(truncated, dtype=bool),
+        "distances": np.asarray(distances, dtype=np.float64),
+        "length": step,
+        "seed": seed,
+        "scenario": scenario,
+        "empty_road": bool(empty_road),
+        "success": bool(success and not crashed and not offroad),
+        "crashed": crashed,
+        "offroad": offroad,
+        "accomplish_rate": float(accomplish_rate(distances)),
+    }
+
+
+def _scenario_of(env: Any) -> str:
+    spec = getattr(env, "spec", None)
+    gym_id = getattr(spec, "id", "") or ""
+    for name in EXPERT_CONFIGS:
+        if gym_id == f"csirl/{name}-v0":
+            return name
+    raise ValueError(f"Cannot infer the scenario of env {gym_id!r}; pass scenario=...")
