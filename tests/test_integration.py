@@ -9,6 +9,7 @@ from functools import partial
 
 import pytest
 import torch
+from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
 from torchrl.envs import Compose, SerialEnv, TransformedEnv
 from torchrl.envs.utils import check_env_specs
 
@@ -72,14 +73,19 @@ def test_local_reward_in_serial_scenario_env(scenario: str) -> None:
 
 def test_subgoal_change_visible_on_replayed_transitions() -> None:
     """The same stored transitions get a new matching reward right after set_subgoal."""
-    scenario = "merge"
+    scenario = "roundabout"  # a 2-D potential: heading for another state changes the reward
     matching = _matching_transform(scenario, subgoal=1)
-    env = make_env(scenario, seed=3)
-    transitions = env.rollout(20).reshape(-1)
-    first = matching(transitions.clone())["next", "matching_reward"]
+    buffer = TensorDictReplayBuffer(storage=LazyTensorStorage(100), batch_size=10)
+    # the expert's own first 10 transitions, replayed in order
+    transitions = load_expert_demonstrations(scenario, num_trajectories=1).transitions()[:10]
+    buffer.extend(transitions)
+    buffer.append_transform(matching)
+    first = buffer[:10]["next", "matching_reward"]
     matching.set_subgoal(matching.length - 1)
-    second = matching(transitions.clone())["next", "matching_reward"]
+    second = buffer[:10]["next", "matching_reward"]
+    # heading for the next expert state vs. for the last one: different rewards
     assert not torch.allclose(first, second)
+    assert (first > 0).all()
 
 
 def test_demo_runs_end_to_end(tmp_path) -> None:
