@@ -21,6 +21,7 @@ from tensordict import TensorDict, TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
+from torchrl_csirl._validation import validate_subgoal
 from torchrl_csirl.objectives.ensemble_sac import _DISPERSIONS, qvalue_dispersion
 
 #: The paper's decision uncertainty ``U`` (Eq. 6): the ensemble's dispersion, one implementation.
@@ -205,11 +206,7 @@ class SubgoalCurriculum:
 
     def set_subgoal(self, subgoal: int) -> None:
         """Sets the current subgoal (an int in ``[0, L-1]``)."""
-        if isinstance(subgoal, bool) or not isinstance(subgoal, int):
-            raise TypeError(f"subgoal must be an int, got {type(subgoal).__name__}.")
-        if not 0 <= subgoal < self.length:
-            raise ValueError(f"subgoal must be in [0, {self.length - 1}], got {subgoal}.")
-        self._subgoal = subgoal
+        self._subgoal = validate_subgoal(subgoal, self.length)
 
     def _policy_device(self) -> torch.device:
         params = getattr(self.policy, "parameters", None)

@@ -21,6 +21,7 @@ import torch
 from tensordict import TensorDictBase
 from tensordict.utils import NestedKey
 
+from torchrl_csirl._validation import validate_subgoal
 from torchrl_csirl.transforms._utils import TransitionRewardTransform
 
 __all__ = [
@@ -349,13 +350,7 @@ class SubgoalMatchingReward(TransitionRewardTransform):
 
     def set_subgoal(self, subgoal: int) -> None:
         """Sets the subgoal ``g`` (an int in ``[0, L-1]``), used from the next step / sample on."""
-        if isinstance(subgoal, torch.Tensor) and subgoal.numel() == 1 and not subgoal.is_floating_point():
-            subgoal = int(subgoal.item())
-        if isinstance(subgoal, bool) or not isinstance(subgoal, int):
-            raise TypeError(f"subgoal must be an int, got {type(subgoal).__name__}.")
-        if not 0 <= subgoal < self.length:
-            raise ValueError(f"subgoal must be in [0, {self.length - 1}], got {subgoal}.")
-        self._subgoal = int(subgoal)
+        self._subgoal = validate_subgoal(subgoal, self.length)
 
     def _transition_reward(
         self, tensordict: TensorDictBase, next_tensordict: TensorDictBase
