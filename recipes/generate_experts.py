@@ -3,7 +3,9 @@
 Episode ``i`` is reset with seed ``--seed + i``; the expert itself is deterministic, so the same
 command writes the same bytes. The script ends with ONE JSON line with the statistics of every
 rolled episode (``success_rate``, ``crash_rate``, ``accomplish_rate``, ``episodes``, ``kept``,
-``rejected``).
+``rejected``). Recorded episodes (``--out``, ``--shipped``) end at the ego's arrival (last
+transition ``truncated`` where the env does not itself terminate there; ``--full-episodes`` keeps
+recording until the env ends the episode); evaluation without ``--out`` runs full episodes.
 
 Examples:
     python recipes/generate_experts.py --scenario merge --episodes 5 --seed 0 --out /tmp/merge_5.npz
@@ -46,8 +48,12 @@ def roll_episodes(
     only_successful: bool = False,
     max_attempts: int | None = None,
     desc: str | None = None,
+    end_at_arrival: bool = False,
 ) -> tuple[list[dict], list[dict]]:
     """Roll expert episodes with seeds ``seed, seed + 1, ...``.
+
+    With ``end_at_arrival`` (used when recording), each episode ends at the ego's arrival (see
+    :func:`~torchrl_csirl.envs.expert.rollout_expert`); otherwise it runs until the env ends it.
 
     With ``only_successful``, rolls until ``episodes`` successful ones are collected (at most
     ``max_attempts`` episodes, default ``4 * episodes``). Returns (kept episodes, all episodes).
@@ -62,7 +68,10 @@ def roll_episodes(
     rolled: list[dict] = []
     bar = _progress(range(attempts), attempts, desc or scenario)
     for i in bar:
-        episode = rollout_expert(env, seed=seed + i, expert=expert, scenario=scenario, empty_road=empty_road)
+        episode = rollout_expert(
+            env, seed=seed + i, expert=expert, scenario=scenario, empty_road=empty_road,
+            end_at_arrival=end_at_arrival,
+        )
         rolled.append(episode)
         if episode["success"] or not only_successful:
             kept.append(episode)
@@ -112,6 +121,7 @@ def build_demonstrations(episodes: list[dict], metadata: dict[str, Any]):
         {
             "seed": e["seed"],
             "empty_road": e["empty_road"],
+            "end_at_arrival": e.get("end_at_arrival", False),
             "success": e["success"],
             "accomplish_rate": round(e["accomplish_rate"], 6),
             "length": e["length"],
@@ -131,12 +141,15 @@ def generate_shipped(scenario: str, out_dir: str, seed: int = SHIPPED_SEED) -> d
 
     Smaller dataset sizes (1, 5, 10, 15, 20) are the nested prefixes (``ExpertDemonstrations.subset``).
     """
-    empty, empty_rolled = roll_episodes(scenario, 1, seed, empty_road=True, only_successful=True, max_attempts=10, desc=f"{scenario} empty")
+    empty, empty_rolled = roll_episodes(
+        scenario, 1, seed, empty_road=True, only_successful=True, max_attempts=10, desc=f"{scenario} empty",
+        end_at_arrival=True,
+    )
     if not empty:
         raise RuntimeError(f"the expert failed the empty-road episode of {scenario!r}.")
     traffic, rolled = roll_episodes(
         scenario, SHIPPED_TRAJECTORIES, seed + 1, only_successful=True, max_attempts=8 * SHIPPED_TRAJECTORIES,
-        desc=f"{scenario} traffic",
+        desc=f"{scenario} traffic", end_at_arrival=True,
     )
     if len(traffic) < SHIPPED_TRAJECTORIES:
         raise RuntimeError(f"only {len(traffic)} successful traffic episodes for {scenario!r}.")
@@ -168,6 +181,10 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     parser.add_argument("--empty-road", action="store_true", help="remove all other vehicles (curriculum trajectory)")
     parser.add_argument("--only-successful", action="store_true", help="keep only successful episodes")
     parser.add_argument("--max-attempts", type=int, default=None, help="cap on episodes rolled with --only-successful")
+    parser.add_argument(
+        "--full-episodes", action="store_true",
+        help="with --out: record until the env ends the episode (default: end at the ego's arrival)",
+    )
     parser.add_argument("--shipped", action="store_true", help="write the shipped datasets of --scenario")
     parser.add_argument("--shipped-dir", default=None, help="output folder of --shipped (default: the package's)")
     args = parser.parse_args(argv)
@@ -181,8 +198,10 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         result = generate_shipped(args.scenario, out_dir, SHIPPED_SEED if args.seed is None else args.seed)
     else:
         seed = 0 if args.seed is None else args.seed
+        # recording ends at arrival; evaluation (no --out) runs the env's full episodes
         kept, rolled = roll_episodes(
-            args.scenario, args.episodes, seed, args.empty_road, args.only_successful, args.max_attempts
+            args.scenario, args.episodes, seed, args.empty_road, args.only_successful, args.max_attempts,
+            end_at_arrival=bool(args.out) and not args.full_episodes,
         )
         result = {"scenario": args.scenario, "seed": seed, **summarize(rolled, kept)}
         if args.out:
@@ -194,6 +213,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
                 "base_seed": seed,
                 "empty_road": bool(args.empty_road),
                 "only_successful": bool(args.only_successful),
+                "end_at_arrival": not args.full_episodes,
                 "num_trajectories": len(kept),
                 "action_units": "normalised: [acceleration / 15 m/s^2, steering / (pi/2) rad]",
             }

@@ -271,6 +271,35 @@ def test_crash_and_offroad_terminate():
     assert terminated and not truncated and info["crashed"] and not info["success"]
 
 
+@pytest.mark.parametrize("name", ["roundabout", "intersection"])
+def test_other_vehicles_collide_option(name):
+    """Scene deviation: non-ego vehicles ignore each other (as highway-fast-v0), not the ego."""
+    # defaults: the intersection deviates from stock, the roundabout keeps stock collisions
+    assert SCENARIOS[name].config["other_vehicles_collide"] is (name == "roundabout")
+    env = make_gym_env(name, other_vehicles_collide=False)
+    env.reset(seed=0)
+    base = env.unwrapped
+    others = [v for v in base.road.vehicles if v is not base.vehicle]
+    assert base.vehicle.check_collisions and not any(v.check_collisions for v in others)
+    # two overlapping non-ego vehicles do not crash; one overlapping the ego does
+    a, b = others[0], others[1]
+    b.position = a.position.copy()
+    b.heading = a.heading
+    base.road.step(0.01)
+    assert not a.crashed and not b.crashed
+    a.position = base.vehicle.position.copy()
+    base.road.step(0.01)
+    assert base.vehicle.crashed
+    if name == "intersection":  # vehicles spawned during the episode too
+        for _ in range(10):
+            env.step(np.zeros(2, np.float32))
+        assert not any(v.check_collisions for v in base.road.vehicles if v is not base.vehicle)
+    # the stock behaviour is one option away
+    stock = make_gym_env(name, other_vehicles_collide=True)
+    stock.reset(seed=0)
+    assert all(v.check_collisions for v in stock.unwrapped.road.vehicles)
+
+
 def test_merge_ends_past_370():
     env = make_gym_env("merge")
     env.reset(seed=0)

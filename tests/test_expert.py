@@ -39,7 +39,9 @@ def _shipped_traffic_seed(scenario: str) -> int:
 def _expert_episode(scenario: str) -> dict:
     if scenario not in _EPISODES:
         env = make_gym_env(scenario)
-        _EPISODES[scenario] = rollout_expert(env, seed=_shipped_traffic_seed(scenario), scenario=scenario)
+        _EPISODES[scenario] = rollout_expert(
+            env, seed=_shipped_traffic_seed(scenario), scenario=scenario, end_at_arrival=True
+        )
         env.close()
     return _EPISODES[scenario]
 
@@ -58,8 +60,9 @@ def test_expert_completes_route_with_traffic(scenario):
     episode = _expert_episode(scenario)
     assert episode["success"], f"{scenario}: expert failed (accomplish {episode['accomplish_rate']:.3f})"
     assert not episode["crashed"] and not episode["offroad"]
-    # merge ends at x > 370 while its finish is x = 400: raw accomplish rate ceiling ~0.92
-    floor = 0.9 if scenario == "merge" else 0.97
+    # merge ends at x > 370 while its finish is x = 400: raw accomplish rate ceiling ~0.92;
+    # the recording ends at arrival: roundabout arrives within 5 m of a finish ~145 m away
+    floor = {"merge": 0.9, "roundabout": 0.96}.get(scenario, 0.97)
     assert episode["accomplish_rate"] >= floor
     actions = episode["action"]
     assert actions.dtype == np.float32 and actions.shape[1] == 2
@@ -155,6 +158,33 @@ def test_shipped_datasets_counts_shapes_and_nested_prefixes(scenario):
     assert torch.all(empty_obs[:, 1:, 0] <= -1.0 + 1e-6) or torch.all(empty_obs[:, 1:, 0] == 0)
     traffic_obs = curriculum_trajectory(scenario, "traffic")["observation"].reshape(-1, 5, spec.obs_dim // 5)
     assert torch.any(traffic_obs[:, 1:, 0] > 0)
+
+
+@pytest.mark.parametrize("scenario", SCENARIO_NAMES)
+def test_shipped_trajectories_end_at_arrival_without_repeated_states(scenario):
+    """Recording stops at arrival: no trailing run of identical (clipped) observations."""
+    demos = load_expert_demonstrations(scenario, 25, curriculum="empty")
+    for i in range(demos.num_trajectories):
+        traj = demos.trajectory(i)
+        obs = torch.cat([traj["observation"], traj["next", "observation"][-1:]])
+        repeated = (obs[1:] == obs[:-1]).all(-1)
+        assert not repeated.any(), f"{scenario} trajectory {i}: identical consecutive observations"
+        done = traj["next", "done"].reshape(-1)
+        assert done[-1] and not done[:-1].any()
+        if scenario in ("highway-fast", "roundabout"):  # the env does not terminate on arrival
+            assert traj["next", "truncated"].reshape(-1)[-1]
+            assert traj["action"].shape[0] < SCENARIOS[scenario].max_steps
+
+
+def test_rollout_end_at_arrival_truncates_highway():
+    env = make_gym_env("highway-fast")
+    full = rollout_expert(env, seed=1, empty_road=True)
+    cut = rollout_expert(env, seed=1, empty_road=True, end_at_arrival=True)
+    assert full["length"] == SCENARIOS["highway-fast"].max_steps and full["success"]
+    assert cut["success"] and cut["truncated"][-1] and not cut["terminated"].any()
+    assert cut["length"] < full["length"]
+    np.testing.assert_array_equal(cut["action"], full["action"][: cut["length"]])
+    assert env.unwrapped.vehicle.position[0] >= SCENARIOS["highway-fast"].finish_position[0]
 
 
 def test_shipped_loader_errors():

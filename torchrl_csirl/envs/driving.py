@@ -165,6 +165,15 @@ class CSIRLDrivingMixin:
     def is_offroad(self) -> bool:
         return not self.vehicle.on_road
 
+    def _configure_other_vehicle_collisions(self, vehicle: Vehicle) -> None:
+        """Disable collision checks of a non-ego vehicle unless ``other_vehicles_collide``.
+
+        As highway-fast-v0 does for its traffic: a vehicle that does not check collisions still
+        collides with the ego (which does), but not with other non-ego vehicles.
+        """
+        if not self.config.get("other_vehicles_collide", True):
+            vehicle.check_collisions = False
+
     def _scene_terminated(self) -> bool:
         """Scene-specific termination besides crash and off-road."""
         return False
@@ -331,6 +340,9 @@ class CSIRLRoundaboutEnv(CSIRLDrivingMixin, RoundaboutEnv):
                 "ego_speed": 8.0,
                 "other_speed": 16.0,
                 "finish_radius": 5.0,
+                # stock: other vehicles collide with each other; False lets them pass through each
+                # other as in highway-fast-v0 (measured: no gain for the expert, docs/SCENARIOS.md)
+                "other_vehicles_collide": True,
             }
         )
         return config
@@ -484,6 +496,9 @@ class CSIRLRoundaboutEnv(CSIRLDrivingMixin, RoundaboutEnv):
         vehicle.plan_route_to(self.np_random.choice(destinations))
         vehicle.randomize_behavior()
         self.road.vehicles.append(vehicle)
+        for vehicle in self.road.vehicles:
+            if vehicle is not ego:
+                self._configure_other_vehicle_collisions(vehicle)
 
     def has_arrived_at_finish(self) -> bool:
         # reached (or passed) the finish on the north exit road
@@ -578,6 +593,9 @@ class CSIRLIntersectionEnv(CSIRLDrivingMixin, IntersectionEnv):
                 "initial_vehicle_count": 10,
                 "spawn_probability": 0.6,
                 "normalize_reward": True,
+                # scene deviation (docs/SCENARIOS.md): the other vehicles do not collide with each
+                # other (as in highway-fast-v0); True restores stock highway-env behaviour
+                "other_vehicles_collide": False,
             }
         )
         return config
@@ -727,6 +745,7 @@ class CSIRLIntersectionEnv(CSIRLDrivingMixin, IntersectionEnv):
                 return None
         vehicle.plan_route_to(f"o{k}{route[1]}")
         vehicle.randomize_behavior()
+        self._configure_other_vehicle_collisions(vehicle)
         self.road.vehicles.append(vehicle)
         return vehicle
 

@@ -75,7 +75,10 @@ class ExpertConfig:
         replan_every: steps between two decisions (the chosen behaviour's controllers run every step).
         perception_radius: only vehicles within this distance [m] are simulated in the look-ahead.
         time_headway: IDM desired time gap to the vehicle ahead [s].
-        jam_distance: IDM desired centre-to-centre distance at standstill [m].
+        jam_distance: IDM desired bumper-to-bumper distance at standstill [m].
+        close_following: optional ``(time_headway, jam_distance)`` of extra "close following"
+            candidates (at the highest target speed, on every candidate lane): closing up on the
+            vehicle ahead opens room to cut in front of a vehicle in the next lane (merge).
     """
 
     destination: str | None
@@ -92,6 +95,7 @@ class ExpertConfig:
     perception_radius: float = 120.0
     time_headway: float = 1.0
     jam_distance: float = 10.0
+    close_following: tuple[float, float] | None = None
 
 
 EXPERT_CONFIGS: dict[str, ExpertConfig] = {
@@ -106,13 +110,14 @@ EXPERT_CONFIGS: dict[str, ExpertConfig] = {
     ),
     "merge": ExpertConfig(
         destination="d",
-        speeds=(40.0, 30.0, 22.0),
+        speeds=(45.0, 35.0, 22.0),
         lane_choice=True,
         horizon=15,
         time_headway=0.6,
         jam_distance=8.0,
+        close_following=(0.1, 2.0),
         perception_radius=80.0,
-        max_acceleration=8.0,
+        max_acceleration=15.0,
         finish_position=(400.0, 4.0),
     ),
     "roundabout": ExpertConfig(
@@ -127,7 +132,8 @@ EXPERT_CONFIGS: dict[str, ExpertConfig] = {
     ),
     "intersection": ExpertConfig(
         destination="o11",
-        speeds=(12.0, 10.0, 7.0),
+        speeds=(15.0, 12.0, 9.0, 7.0),
+        max_acceleration=12.0,
         lane_choice=False,
         yield_roads=(("o10", "ir10"),),
         perception_radius=60.0,
@@ -258,9 +264,10 @@ class _Behaviour:
     lane_id: int | None
     speed: float
     stop: bool = False
+    gap: tuple[float, float] | None = None  # (time headway, jam distance); None: the config's
 
     def key(self) -> tuple:
-        return (self.lane_id, self.speed, self.stop)
+        return (self.lane_id, self.speed, self.stop, self.gap)
 
 
 class _RouteFollower:
@@ -349,16 +356,24 @@ class _RouteFollower:
         steering = math.atan(2 * math.tan(slip))
         return float(np.clip(steering, -self.MAX_STEERING, self.MAX_STEERING))
 
-    def idm(self, speed: float, target_speed: float, gap: float | None, front_speed: float) -> float:
+    def idm(
+        self,
+        speed: float,
+        target_speed: float,
+        gap: float | None,
+        front_speed: float,
+        gap_parameters: tuple[float, float] | None = None,
+    ) -> float:
         accel_max = self.config.max_acceleration
+        time_headway, jam_distance = gap_parameters or (self.config.time_headway, self.config.jam_distance)
         acceleration = accel_max * (1 - (max(speed, 0.0) / max(target_speed, 1e-2)) ** self.DELTA)
         if target_speed <= 0.0:
             acceleration = -accel_max * np.sign(speed)
         if gap is not None:
             dv = speed - front_speed
             d_star = (
-                self.config.jam_distance
-                + max(speed, 0.0) * self.config.time_headway
+                jam_distance
+                + max(speed, 0.0) * time_headway
                 + speed * dv / (2 * math.sqrt(accel_max * self.COMFORT_DECELERATION))
             )
             acceleration -= accel_max * (max(d_star, 0.0) / max(gap, 0.5)) ** 2
@@ -408,7 +423,7 @@ class _RouteFollower:
             lane = lanes[1]
         steering = self.steering(vehicle, lane)
         gap, front_speed = self.front_obstacle(vehicle, others, lanes, stop_at)
-        acceleration = self.idm(vehicle.speed, behaviour.speed, gap, front_speed)
+        acceleration = self.idm(vehicle.speed, behaviour.speed, gap, front_speed, behaviour.gap)
         acceleration = max(acceleration, -max(vehicle.speed, 0.0) / self.dt)  # brake to a stop, never reverse
         return acceleration, steering
 
@@ -510,6 +525,9 @@ class ExpertDriver:
                 options.add(int(np.clip(self._previous.lane_id, 0, n - 1)))  # keep the committed lane
             lane_ids = sorted(options)
         behaviours = [_Behaviour(lane, speed) for lane in lane_ids for speed in self.config.speeds]
+        if self.config.close_following is not None:
+            top = max(self.config.speeds)
+            behaviours += [_Behaviour(lane, top, gap=tuple(self.config.close_following)) for lane in lane_ids]
         lanes = route.path_lanes(vehicle.position, None)
         if route.can_stop(vehicle, lanes):
             behaviours.append(_Behaviour(lane_ids[0] if len(lane_ids) == 1 else None, max(self.config.speeds), stop=True))
@@ -619,6 +637,7 @@ def rollout_expert(
     scenario: str | None = None,
     empty_road: bool = False,
     max_steps: int | None = None,
+    end_at_arrival: bool = False,
 ) -> dict[str, Any]:
     """Drive one episode with the expert and record it.
 
@@ -629,6 +648,11 @@ def rollout_expert(
         scenario: scenario name, when it cannot be read from the env.
         empty_road: remove all other vehicles after the reset (see :func:`clear_traffic`).
         max_steps: optional cap on the number of steps (default: until terminated/truncated).
+        end_at_arrival: end the episode at the first step where the ego has arrived
+            (``info["arrived"]``), marking that transition ``truncated`` (unless the env itself
+            terminates there). Used when recording demonstrations: highway-fast and roundabout do
+            not terminate on arrival, and the states recorded after it (driving on past the
+            finish, x clipped at the edge of the observation range) carry no information.
 
     Returns:
         a dict with the episode in the layout of
@@ -669,6 +693,8 @@ def rollout_expert(
         success = success or bool(info.get("success", False))
         if max_steps is not None and step >= max_steps:
             trunc = True
+        if end_at_arrival and info.get("arrived", False):
+            trunc = True
         terminated.append(bool(term))
         truncated.append(bool(trunc) and not bool(term))
         if term or trunc:
@@ -686,6 +712,7 @@ def rollout_expert(
         "seed": seed,
         "scenario": scenario,
         "empty_road": bool(empty_road),
+        "end_at_arrival": bool(end_at_arrival),
         "success": bool(success and not crashed and not offroad),
         "crashed": crashed,
         "offroad": offroad,
