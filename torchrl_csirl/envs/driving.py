@@ -82,6 +82,11 @@ class _EgoContinuousAction(ContinuousAction):
 class CSIRLDrivingMixin:
     """Behaviour shared by the CSIRL scenes (put first in the bases, before the upstream env)."""
 
+    def _rewards(self, action) -> dict[str, float]:
+        # upstream merge/roundabout score lane changes with ``action in [0, 2]`` (discrete
+        # meta-actions), which raises for a continuous action: score it as IDLE (no lane change)
+        return super()._rewards(_IDLE if _is_array(action) else action)
+
     #: class of the other vehicles (IDM with pinned constants, see ``_vehicles``)
     _OTHER_VEHICLES: type = ScenarioIDMVehicle
 
@@ -299,12 +304,6 @@ class CSIRLMergeEnv(CSIRLDrivingMixin, MergeEnv):
         )
         return config
 
-    def _rewards(self, action) -> dict[str, float]:
-        rewards = super()._rewards(0 if _is_array(action) else action)
-        if _is_array(action):  # no discrete lane-change action with continuous control
-            rewards["lane_change_reward"] = False
-        return rewards
-
     def _make_road(self) -> None:
         super()._make_road()
         if self.config.get("fast", True):
@@ -346,15 +345,6 @@ class CSIRLRoundaboutEnv(CSIRLDrivingMixin, RoundaboutEnv):
             }
         )
         return config
-
-    def _rewards(self, action) -> dict[str, float]:
-        return {
-            "collision_reward": self.vehicle.crashed,
-            "high_speed_reward": MDPVehicle.get_speed_index(self.vehicle)
-            / (MDPVehicle.DEFAULT_TARGET_SPEEDS.size - 1),
-            "lane_change_reward": False if _is_array(action) else action in [0, 2],
-            "on_road_reward": self.vehicle.on_road,
-        }
 
     def _make_road(self) -> None:
         center = [0, 0]
@@ -766,6 +756,10 @@ class CSIRLIntersectionEnv(CSIRLDrivingMixin, IntersectionEnv):
 
     def _scene_terminated(self) -> bool:
         return self.has_arrived(self.vehicle)
+
+
+#: highway-env's discrete meta-action index of IDLE (neither LANE_LEFT=0 nor LANE_RIGHT=2)
+_IDLE = 1
 
 
 def _is_array(action) -> bool:
