@@ -4,9 +4,10 @@ It composes, with stock TorchRL machinery:
 
 * a :class:`~torchrl.envs.ParallelEnv` of 2 workers stepping the ``merge`` scenario, driven by a
   :class:`~torchrl.collectors.Collector` with the current policy;
-* a replay buffer whose transform recomputes the CSIRL local reward at sampling time
-  (:class:`SubgoalMatchingReward` for the current subgoal + :class:`IntrinsicReward`, summed into
-  ``("next", "reward")`` by :class:`CombineRewards`);
+* a replay buffer whose transform recomputes the matching reward at sampling time
+  (:class:`SubgoalMatchingReward`, for the current subgoal); the meta-loss adds ``r_w(s)`` itself,
+  with its graph (a plain SAC step would instead sum both with :class:`IntrinsicReward` and
+  :class:`CombineRewards`, as in the README);
 * :class:`EnsembleSACLoss` (5 critics) and :class:`MetaRewardLoss` (meta-gradient of the reward net);
 * :class:`SubgoalCurriculum` moving the subgoal from the critics' disagreement;
 * an evaluation of the deterministic policy with the paper's accomplish rate.
@@ -31,7 +32,7 @@ import torch
 from tensordict.nn import TensorDictModule
 from torchrl.collectors import Collector
 from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
-from torchrl.envs import Compose, ExplorationType, ParallelEnv, set_exploration_type
+from torchrl.envs import ExplorationType, ParallelEnv, set_exploration_type
 from torchrl.objectives import SoftUpdate
 
 from torchrl_csirl.curriculum import SubgoalCurriculum
@@ -39,7 +40,7 @@ from torchrl_csirl.data import load_expert_demonstrations
 from torchrl_csirl.envs import SCENARIOS, accomplish_rate_from_rollout, make_env
 from torchrl_csirl.modules import make_actor, make_qvalue, make_reward_network
 from torchrl_csirl.objectives import EnsembleSACLoss, MetaRewardLoss
-from torchrl_csirl.transforms import CombineRewards, IntrinsicReward, SubgoalMatchingReward
+from torchrl_csirl.transforms import SubgoalMatchingReward
 
 
 LOGGED_LOSSES = ("loss_qvalue", "loss_actor", "loss_meta", "loss_imitation")
@@ -61,21 +62,6 @@ def make_parallel_env(scenario: str, workers: int, seed: int) -> ParallelEnv:
     env = ParallelEnv(workers, partial(make_env, scenario))
     env.set_seed(seed)
     return env
-
-
-def make_reward_transform(
-    matching: SubgoalMatchingReward, reward_network: TensorDictModule
-) -> Compose:
-    """Local reward r = r_m(s, s'; g) + r_w(s), recomputed for every sampled batch.
-
-    ``("next", "matching_reward")`` feeds the meta-loss (which recomputes ``r_w`` with its graph);
-    ``("next", "reward")`` is the training reward a plain SAC step would read.
-    """
-    return Compose(
-        matching,
-        IntrinsicReward(reward_network),
-        CombineRewards(["matching_reward", "intrinsic_reward"]),
-    )
 
 
 def evaluate(scenario: str, actor: TensorDictModule, seed: int) -> float:
@@ -111,7 +97,7 @@ def main() -> None:
     online = TensorDictReplayBuffer(
         storage=LazyTensorStorage(100_000),
         batch_size=256,
-        transform=make_reward_transform(matching, reward_network),
+        transform=matching,  # r_m(s, s'; g) for the subgoal current at sampling time
     )
     expert = demos.as_replay_buffer(batch_size=32)
     optim_sac = torch.optim.Adam(sac.parameters(), lr=3e-4)
