@@ -121,6 +121,24 @@ def test_make_expert_rejects_unknown_scenario_and_overrides_config():
     assert make_expert("merge", horizon=7).config.horizon == 7
 
 
+def test_roundabout_exit_approach_lane_is_the_outer_ring_lane():
+    env = make_gym_env("roundabout")
+    env.reset(seed=0)
+    expert = make_expert("roundabout")
+    expert.reset(env)
+    route = expert._route
+    k_exit = route.roads.index(("nx", "nxs"))
+    outer = len(route.lanes_of(k_exit - 1)) - 1
+    # only the last ring road before the exit forces the lane; progress is measured on the outer lane
+    assert route.approach_lane(k_exit - 1) == outer
+    assert route.approach_lane(k_exit - 2) is None and route.approach_lane(k_exit) is None
+    assert route.reference_lane(k_exit - 2) == outer and route.reference_lane(k_exit) == 0
+    lanes = route.path_lanes(env.unwrapped.vehicle.position, lane_id=0, count=len(route.roads))
+    assert lanes[k_exit - 1] is route.lanes_of(k_exit - 1)[outer]
+    assert lanes[k_exit - 2] is route.lanes_of(k_exit - 2)[0]
+    env.close()
+
+
 # ---------------------------------------------------------------------------------------------- shipped data
 def test_all_shipped_datasets_available():
     assert available_expert_datasets() == {s: list(CURRICULA) for s in SCENARIO_NAMES}

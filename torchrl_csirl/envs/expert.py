@@ -79,6 +79,12 @@ class ExpertConfig:
         close_following: optional ``(time_headway, jam_distance)`` of extra "close following"
             candidates (at the highest target speed, on every candidate lane): closing up on the
             vehicle ahead opens room to cut in front of a vehicle in the next lane (merge).
+        approach_roads: on the last ``approach_roads`` roads before a road with fewer lanes (the
+            roundabout's exit), every lane-choosing behaviour drives on the one lane that leads
+            onto it; with ``approach_roads > 0`` route progress is also measured along that lane
+            (not along lane 0, the inner ring lane, which would favour the inner lanes).
+        approach_lane_cost: score penalty [m of progress] per lane still to cross, at the end of the
+            look-ahead, to reach the lane that leads onto the next narrower road.
     """
 
     destination: str | None
@@ -96,6 +102,8 @@ class ExpertConfig:
     time_headway: float = 1.0
     jam_distance: float = 10.0
     close_following: tuple[float, float] | None = None
+    approach_roads: int = 0
+    approach_lane_cost: float = 0.0
 
 
 EXPERT_CONFIGS: dict[str, ExpertConfig] = {
@@ -122,9 +130,14 @@ EXPERT_CONFIGS: dict[str, ExpertConfig] = {
     ),
     "roundabout": ExpertConfig(
         destination="nxr",
-        speeds=(24.0, 18.0, 12.0),
+        speeds=(30.0, 24.0, 18.0, 12.0),
         lane_choice=True,
-        max_acceleration=8.0,
+        max_acceleration=12.0,
+        time_headway=0.5,
+        jam_distance=4.0,
+        close_following=(0.2, 2.0),
+        approach_roads=1,
+        approach_lane_cost=4.0,
         yield_roads=(("ses", "se"),),
         horizon=20,
         perception_radius=60.0,
@@ -290,6 +303,7 @@ class _RouteFollower:
         self.roads = list(roads)
         self.config = config
         self.road_index = 0
+        self._approach: dict[tuple[int, int], int | None] = {}  # shared by copies (same route)
 
     def copy(self) -> _RouteFollower:
         clone = copy.copy(self)
@@ -320,11 +334,45 @@ class _RouteFollower:
                 break
             self.road_index += 1
 
+    def approach_lane(self, k: int, window: int | None = None) -> int | None:
+        """Lane of road ``k`` that leads to the next narrower road of the route (``None``: any).
+
+        Only a road with fewer lanes within ``window`` roads ahead (default ``config.approach_roads``;
+        the roads in between have as many lanes as road ``k``) counts, e.g. the roundabout's exit:
+        only the ring lane whose end is closest to the start of the exit lane leads on.
+        """
+        window = self.config.approach_roads if window is None else window
+        key = (k, window)
+        if key not in self._approach:
+            self._approach[key] = self._find_approach_lane(k, window)
+        return self._approach[key]
+
+    def _find_approach_lane(self, k: int, window: int) -> int | None:
+        for j in range(k + 1, min(k + 1 + window, len(self.roads))):
+            if len(self.lanes_of(j)) < len(self.lanes_of(j - 1)):
+                lanes = self.lanes_of(j - 1)
+                target = self.lanes_of(j)[0].position(0.0, 0.0)
+                ends = [np.linalg.norm(lane.position(lane.length, 0.0) - target) for lane in lanes]
+                return int(np.argmin(ends))
+            if len(self.lanes_of(j)) != len(self.lanes_of(k)):
+                return None
+        return None
+
+    def reference_lane(self, k: int) -> int:
+        """Lane of road ``k`` along which route progress is measured (the exit's approach lane if any)."""
+        if not self.config.approach_roads:
+            return 0
+        lane = self.approach_lane(k, window=len(self.roads))
+        return 0 if lane is None else lane
+
     def path_lanes(self, position: np.ndarray, lane_id: int | None, count: int = 4) -> list[Any]:
         lanes = []
         current = None
         for k in range(self.road_index, min(self.road_index + count, len(self.roads))):
-            if current is None:
+            forced = self.approach_lane(k) if lane_id is not None and self.config.approach_roads else None
+            if forced is not None:
+                current = forced
+            elif current is None:
                 current = self.lane_id_on(k, position, lane_id)
             else:
                 n = len(self.lanes_of(k))
@@ -338,8 +386,8 @@ class _RouteFollower:
 
     def progress(self, vehicle: Any) -> float:
         """Distance travelled along the route (road lengths of passed roads + longitudinal position)."""
-        passed = sum(self.lanes_of(k)[0].length for k in range(self.road_index))
-        lane = self.lanes_of(self.road_index)[0]
+        passed = sum(self.lanes_of(k)[self.reference_lane(k)].length for k in range(self.road_index))
+        lane = self.lanes_of(self.road_index)[self.reference_lane(self.road_index)]
         return passed + lane.local_coordinates(vehicle.position)[0]
 
     # --- controllers -------------------------------------------------------------------------------
@@ -569,7 +617,17 @@ class ExpertDriver:
         if min_gap < self.config.safety_margin:
             score -= 200.0 * (self.config.safety_margin - min_gap) + 100.0
         score -= self._lane_penalty(ego, route, behaviour)
+        score -= self._approach_penalty(ego, route)
         return score
+
+    def _approach_penalty(self, ego: Any, route: _RouteFollower) -> float:
+        """Cost of the lane changes still needed to reach the approach lane of a narrower road ahead."""
+        if not self.config.approach_lane_cost or ego.lane_index[:2] != route.roads[route.road_index]:
+            return 0.0
+        target = route.approach_lane(route.road_index, window=len(route.roads))
+        if target is None:
+            return 0.0
+        return self.config.approach_lane_cost * abs(ego.lane_index[2] - target)
 
     def _clearance(self, ego: Any, road: Any) -> float:
         """Approximate free distance between the ego and the nearest vehicle (outline to outline)."""
