@@ -1,0 +1,103 @@
+"""CSIRLTrainer's loop and hook points, on TorchRL's mock env (fast)."""
+from __future__ import annotations
+
+import pytest
+import torch
+from tensordict.nn import TensorDictModule
+from torchrl.collectors import Collector
+from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
+from torchrl.testing.mocking_classes import ContinuousActionVecMockEnv
+
+from torchrl_csirl.trainers import CheckpointHook, CSIRLTrainer, load_checkpoint
+
+
+def make_trainer(tmp_path=None, **kwargs) -> tuple[CSIRLTrainer, list]:
+    env = ContinuousActionVecMockEnv()
+    policy = TensorDictModule(torch.nn.LazyLinear(env.action_spec.shape[-1]), ["observation"], ["action"])
+    policy(env.reset())
+    collector = Collector(env, policy, frames_per_batch=10, total_frames=-1, auto_register_policy_transforms=False)
+    buffer = TensorDictReplayBuffer(storage=LazyTensorStorage(1000), batch_size=4)
+    calls = []
+
+    def update(trainer):
+        sample = trainer.online_buffer.sample()
+        calls.append(("update", trainer.updates))
+        return {"loss_fake": sample["observation"].sum() * 0 + trainer.updates}
+
+    options = dict(total_frames=50, utd_ratio=0.3, updates_per_round=4)
+    options.update(kwargs)
+    trainer = CSIRLTrainer(collector=collector, online_buffer=buffer, update_step=update, progress_bar=False, **options)
+    return trainer, calls
+
+
+def test_updates_follow_the_update_to_data_ratio_and_rounds_end_on_time():
+    trainer, calls = make_trainer()
+    ends, rows = [], []
+    trainer.register_op("round_end", lambda t: ends.append((t.updates, t.frames)), "spy")
+    trainer.register_op("log", lambda t, row: rows.append(row), "rows")
+    trainer.train()
+    trainer.collector.shutdown()
+    assert trainer.frames == 50 and trainer.updates == 15  # 3 updates per 10-frame batch
+    assert [u for _, u in calls] == list(range(15))
+    assert ends == [(6, 20), (12, 40)]  # a round ends at the batch where it reaches 4 updates
+    assert [r["loss_fake"] for r in rows] == [1.0, 4.0, 7.0, 10.0, 13.0]  # batch means
+
+
+def test_ops_run_in_stage_order_and_batch_process_transforms_the_batch():
+    trainer, _ = make_trainer(total_frames=20, updates_per_round=1)
+    order = []
+    trainer.register_op("batch_process", lambda b: (order.append("batch_process"), b.exclude("reward"))[1])
+    trainer.register_op("post_update", lambda t, losses: order.append("post_update"))
+    trainer.register_op("round_end", lambda t: order.append("round_end"))
+    trainer.register_op("post_round", lambda t: order.append("post_round"))
+    trainer.register_op("log", lambda t, row: order.append("log"))
+    trainer.register_op("train_end", lambda t: order.append("train_end"))
+    trainer.train()
+    trainer.collector.shutdown()
+    assert order[:7] == ["batch_process", "post_update", "post_update", "post_update", "round_end", "post_round", "log"]
+    assert order[-1] == "train_end"
+    assert "reward" not in trainer.online_buffer[:]  # removed by the op before the buffer
+
+
+def test_clear_buffer_each_round_keeps_only_the_current_round():
+    trainer, _ = make_trainer(total_frames=40, utd_ratio=1.0, updates_per_round=15, clear_buffer_each_round=True)
+    sizes = []
+    trainer.register_op("log", lambda t, row: sizes.append(len(t.online_buffer)))
+    trainer.train()
+    trainer.collector.shutdown()
+    assert sizes == [10, 20, 10, 20]  # rounds of two batches: emptied when a round starts
+
+
+def test_bad_stage_and_duplicate_state_are_refused():
+    trainer, _ = make_trainer()
+    with pytest.raises(ValueError, match="Unknown stage 'pre_batch'"):
+        trainer.register_op("pre_batch", print)
+    trainer.register_state("module", torch.nn.Linear(2, 2))
+    with pytest.raises(ValueError, match="already registered"):
+        trainer.register_state("module", torch.nn.Linear(2, 2))
+    with pytest.raises(TypeError, match="no state_dict"):
+        trainer.register_state("number", 3)
+    trainer.collector.shutdown()
+
+
+def test_checkpoint_round_trip_restores_counters_states_and_rng(tmp_path):
+    trainer, _ = make_trainer(total_frames=30)
+    net = torch.nn.Linear(2, 2)
+    trainer.register_state("net", net)
+    trainer.train()
+    hook = CheckpointHook(tmp_path, trainer.online_buffer)
+    hook.save(trainer)
+    expected_rng = torch.rand(3)
+    trainer.collector.shutdown()
+
+    other, _ = make_trainer(total_frames=30)
+    other_net = torch.nn.Linear(2, 2)
+    other.register_state("net", other_net)
+    load_checkpoint(other, hook.path, other.online_buffer)
+    other.collector.shutdown()
+    assert (other.frames, other.updates, other.rounds) == (trainer.frames, trainer.updates, trainer.rounds)
+    assert torch.equal(other_net.weight, net.weight)
+    assert len(other.online_buffer) == len(trainer.online_buffer) == 30
+    torch.testing.assert_close(torch.rand(3), expected_rng)
+    with pytest.raises(FileNotFoundError, match="No checkpoint"):
+        load_checkpoint(other, tmp_path / "nothing")
