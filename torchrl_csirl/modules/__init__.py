@@ -7,6 +7,15 @@ from torchrl_csirl.modules.actor_critic import (
     make_actor,
     make_qvalue,
 )
+from torchrl_csirl.modules.export import load_policy, save_policy
 from torchrl_csirl.modules.reward import make_reward_network
 
-__all__ = ["BoundedLogStdNormalParams", "MaskedReLU", "make_actor", "make_qvalue", "make_reward_network"]
+__all__ = [
+    "BoundedLogStdNormalParams",
+    "MaskedReLU",
+    "load_policy",
+    "make_actor",
+    "make_qvalue",
+    "make_reward_network",
+    "save_policy",
+]
