@@ -1,0 +1,15 @@
+"""Pictures of a CSIRL run: learning curve, subgoal curriculum and the scenario with its curriculum.
+
+Every function draws on its own ``matplotlib.figure.Figure`` with an Agg canvas (no pyplot
+state, the user's backend is left alone), writes a PNG and returns its :class:`pathlib.Path`.
+
+* :func:`plot_learning_curve`: evaluation accomplish / success rate vs environment frames.
+* :func:`plot_subgoal_curriculum`: subgoal index vs frames and the critics' uncertainty profiles.
+* :func:`render_curriculum`: the highway-env scene with the curriculum trajectory and subgoals.
+"""
+from __future__ import annotations
+
+from torchrl_csirl.visualization.curves import plot_learning_curve, plot_subgoal_curriculum
+from torchrl_csirl.visualization.scene import render_curriculum
+
+__all__ = ["plot_learning_curve", "plot_subgoal_curriculum", "render_curriculum"]
