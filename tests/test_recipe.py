@@ -1,0 +1,208 @@
+"""recipes/csirl_highway.py end to end on a tiny budget: artefacts, resume, CSIRL-B, bad input."""
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import torch
+
+RECIPES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "recipes")
+RECIPE = os.path.join(RECIPES, "csirl_highway.py")
+sys.path.insert(0, RECIPES)
+
+import csirl_utils  # noqa: E402
+
+from torchrl_csirl.trainers import TrainingDivergedError, load_checkpoint  # noqa: E402
+
+# a tiny budget: 100-frame batches, rounds of 20 updates, 2 evaluation episodes
+TINY = [
+    "collector.frames_per_batch=100",
+    "collector.init_random_frames=100",
+    "replay_buffer.warmup_frames=100",
+    "replay_buffer.batch_size=64",
+    "csirl.updates_per_round=20",
+    "eval.episodes=2",
+    "eval.final_episodes=2",
+    "logger.progress_bar=false",
+]
+VOLATILE = {"collect_fps", "updates_per_s"}  # timings differ between runs
+
+
+def run_recipe(*args: str, check: bool = True) -> subprocess.CompletedProcess:
+    env = {**os.environ, "WANDB_MODE": "offline", "MPLBACKEND": "Agg", "RL_WARNINGS": "0"}
+    proc = subprocess.run([sys.executable, RECIPE, *args], capture_output=True, text=True, env=env, timeout=400)
+    if check and proc.returncode != 0:
+        raise AssertionError(f"recipe failed ({proc.returncode}):\n{proc.stderr[-3000:]}")
+    return proc
+
+
+def last_json(proc: subprocess.CompletedProcess) -> dict:
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def read_rows(run_dir: str) -> list[dict]:
+    with open(os.path.join(run_dir, "metrics.jsonl")) as f:
+        return [json.loads(line) for line in f if line.strip()]
+
+
+@pytest.fixture(scope="module")
+def full_run(tmp_path_factory):
+    """600 frames in one go, W&B offline (the default backend)."""
+    out = tmp_path_factory.mktemp("runs")
+    proc = run_recipe(*TINY, "collector.total_frames=600", f"logger.output_dir={out}", "logger.exp_name=full")
+    return last_json(proc)
+
+
+def test_recipe_artefacts(full_run):
+    run_dir = full_run["run_dir"]
+    for key in ("accomplish_rate", "success_rate", "frames", "updates", "wall_s", "run_dir"):
+        assert key in full_run
+    assert 0.0 <= full_run["accomplish_rate"] <= 1.0
+    assert full_run["frames"] == 600 and full_run["updates"] == 300  # utd 0.5
+    assert full_run["frames_per_s"] > 0 and full_run["updates_per_s"] > 0
+    rows = read_rows(run_dir)
+    evals = [r["eval_accomplish_rate"] for r in rows if "eval_accomplish_rate" in r]
+    assert len(evals) == full_run["rounds"] > 0
+    assert all(0.0 <= v <= 1.0 for v in evals)
+    assert all(math.isfinite(r["loss_qvalue"]) for r in rows if "loss_qvalue" in r)
+    assert any("loss_meta" in r for r in rows)
+    with open(os.path.join(run_dir, "metrics.csv")) as f:
+        header = f.readline().strip().split(",")
+    assert {"frames", "loss_qvalue", "eval_accomplish_rate", "subgoal"} <= set(header)
+    for name in ("learning_curve.png", "subgoals.png", "curriculum.png"):
+        with open(os.path.join(run_dir, name), "rb") as f:
+            assert f.read(8) == b"\x89PNG\r\n\x1a\n"
+    assert os.path.isfile(os.path.join(run_dir, "checkpoints", "last", "state.pt"))
+    assert os.path.isdir(os.path.join(run_dir, "wandb"))  # offline W&B run
+    with open(os.path.join(run_dir, "summary.json")) as f:
+        assert json.load(f)["accomplish_rate"] == full_run["accomplish_rate"]
+
+
+def test_saved_policy_rolls_out_in_two_lines(full_run):
+    from torchrl_csirl.envs import make_env
+    from torchrl_csirl.modules import load_policy
+
+    policy = load_policy(full_run["run_dir"])
+    rollout = make_env(policy.metadata["scenario"], seed=0).rollout(10, policy)
+    assert rollout["action"].shape[-1] == 2 and policy.metadata["frames"] == 600
+
+
+def test_resume_gives_the_uninterrupted_metrics(full_run, tmp_path):
+    out = str(tmp_path)
+    run_recipe(*TINY, "collector.total_frames=400", f"logger.output_dir={out}", "logger.exp_name=part",
+               "logger.backend=csv")
+    resumed = last_json(run_recipe(f"checkpoint.resume={out}/part", "collector.total_frames=600"))
+    assert resumed["run_dir"] == os.path.join(out, "part")
+    assert resumed["accomplish_rate"] == full_run["accomplish_rate"]
+    full = {r["frames"]: r for r in read_rows(full_run["run_dir"]) if "loss_qvalue" in r}
+    part = {r["frames"]: r for r in read_rows(resumed["run_dir"]) if "loss_qvalue" in r}
+    assert sorted(full) == sorted(part) and max(full) == 600
+    for frames, row in full.items():
+        a = {k: v for k, v in row.items() if k not in VOLATILE}
+        b = {k: v for k, v in part[frames].items() if k not in VOLATILE}
+        assert a == b, f"metrics differ at {frames} frames"
+
+
+def _tiny_cfg(tmp_path, *extra):
+    return csirl_utils.load_config(TINY + ["collector.num_workers=1", "logger.backend=none",
+                                           f"logger.output_dir={tmp_path}", *extra])
+
+
+def test_csirl_b_switch_trains_without_the_reward_network(tmp_path):
+    cfg = _tiny_cfg(tmp_path, "csirl.intrinsic=false", "collector.total_frames=300")
+    run = csirl_utils.make_trainer(cfg, str(tmp_path))
+    try:
+        assert run.modules.meta is None
+        reward_before = [p.clone() for p in run.modules.reward_network.parameters()]
+        run.trainer.train()
+        sample = run.online_buffer.sample()
+        assert "intrinsic_reward" not in sample["next"].keys()
+        torch.testing.assert_close(sample["next", "reward"], sample["next", "matching_reward"])
+        rows = run.logger.rows
+        assert run.trainer.updates == 150 and not any("loss_meta" in r for r in rows)
+        assert all(torch.equal(a, b) for a, b in zip(reward_before, run.modules.reward_network.parameters()))
+    finally:
+        run.close()
+
+
+def test_nan_stops_training_and_keeps_the_last_checkpoint(tmp_path):
+    cfg = _tiny_cfg(tmp_path, "collector.total_frames=400")
+    run = csirl_utils.make_trainer(cfg, str(tmp_path))
+
+    def poison(batch):
+        if run.trainer.frames >= 200:  # after the first rounds were checkpointed
+            batch = batch.clone()
+            batch["observation"][:] = float("nan")
+        return batch
+
+    run.trainer.register_op("batch_process", poison, "poison")
+    try:
+        with pytest.raises(TrainingDivergedError, match="non-finite loss at update .*loss_qvalue=nan"):
+            run.trainer.train()
+    finally:
+        run.close()
+    saved = torch.load(os.path.join(run.checkpoint.path, "state.pt"), weights_only=False)
+    assert saved["counters"]["frames"] == 200
+    params = saved["states"]["loss"]
+    assert all(torch.isfinite(v).all() for v in params.values() if v.is_floating_point())
+    # the kept checkpoint loads into a fresh run
+    fresh = csirl_utils.make_trainer(cfg, str(tmp_path / "fresh"))
+    try:
+        load_checkpoint(fresh.trainer, run.checkpoint.path, fresh.online_buffer)
+        assert fresh.trainer.frames == saved["counters"]["frames"]
+        assert len(fresh.online_buffer) == saved["counters"]["frames"]
+    finally:
+        fresh.close()
+
+
+def test_missing_expert_file_is_a_clear_error(tmp_path):
+    proc = run_recipe(f"expert.path={tmp_path}/nope.npz", f"logger.output_dir={tmp_path}", check=False)
+    assert proc.returncode == 2
+    assert "expert.path: no such file" in proc.stderr and "nope.npz" in proc.stderr
+    assert "Traceback" not in proc.stderr
+
+
+@pytest.mark.parametrize("content", ["garbage", "npz-missing-members", "wrong-size"])
+def test_malformed_expert_file_is_a_clear_error(tmp_path, content):
+    path = tmp_path / ("demo.npz" if content != "garbage" else "demo.pkl")
+    if content == "garbage":
+        path.write_bytes(b"not a pickle at all")
+    elif content == "npz-missing-members":
+        np.savez(path, observation=np.zeros((3, 25), np.float32))
+    else:
+        from torchrl_csirl.data import ExpertDemonstrations
+
+        ep = {"observation": torch.zeros(4, 7), "action": torch.zeros(4, 2), "next_observation": torch.zeros(4, 7),
+              "terminated": torch.zeros(4, dtype=torch.bool)}
+        ExpertDemonstrations.from_episodes([ep] * 25).save(path)
+    cfg = _tiny_cfg(tmp_path, f"expert.path={path}")
+    with pytest.raises(csirl_utils.ExpertDataError, match=str(path.name)):
+        csirl_utils.load_experts(cfg, csirl_utils.SCENARIOS["merge"])
+
+
+@pytest.mark.parametrize(
+    "override, message",
+    [
+        (["env.scenario=mars"], "env.scenario must be one of"),
+        (["collector.frames_per_batch=101"], "multiple of collector.num_workers"),
+        (["no.such.key=1"], "Bad override"),
+        (["seed"], "not of the form key=value"),
+        (["preset=fastest"], "preset must be one of"),
+    ],
+)
+def test_config_errors_name_the_problem(override, message):
+    with pytest.raises(csirl_utils.ConfigError, match=message):
+        csirl_utils.load_config(override)
+
+
+def test_paper_preset_is_the_published_procedure():
+    cfg = csirl_utils.load_config(["preset=paper"])
+    assert cfg.csirl.updates_per_round == 20000 and cfg.csirl.meta_every == 1
+    assert cfg.replay_buffer.clear_each_round and cfg.optim.utd_ratio == 1.0
+    assert csirl_utils.total_frames(cfg, curriculum_length=50) == 50 * (20000 + 1280)
+    assert csirl_utils.load_config(["preset=paper", "csirl.meta_every=4"]).csirl.meta_every == 4
