@@ -143,8 +143,6 @@ def finish(run: Run) -> dict[str, object]:
     run.logger.log({"frames": trainer.frames, "updates": trainer.updates,
                     **{f"test_{k}": v for k, v in final.items()}})
     summary["plots"] = make_plots(run)
-    with open(os.path.join(run.run_dir, "summary.json"), "w") as f:
-        json.dump({k: _scalar(v) for k, v in summary.items()}, f, indent=2)
     return summary
 
 
@@ -172,14 +170,17 @@ def main(argv: list[str] | None = None) -> dict[str, object]:
         run.logger.close()
         run.eval_env.close()
     summary["wall_s"] = round(max(summary["wall_s"], 0.0), 1)
-    summary["total_wall_s"] = round(time.perf_counter() - start, 1)
+    summary["total_wall_s"] = round(time.perf_counter() - start, 1)  # with start-up, final eval and plots
+    summary = {k: _scalar(v) for k, v in summary.items()}
+    with open(os.path.join(summary["run_dir"], "summary.json"), "w") as f:
+        json.dump(summary, f, indent=2)
     print(
         f"{summary['scenario']}: accomplish rate {summary['accomplish_rate']:.3f} "
         f"(success {summary['success_rate']:.2f}) after {summary['frames']} frames / {summary['updates']} updates; "
         f"{summary['frames_per_s']:.1f} frames/s, {summary['updates_per_s']:.1f} updates/s",
         file=sys.stderr,
     )
-    print(json.dumps({k: _scalar(v) for k, v in summary.items()}))
+    print(json.dumps(summary))
     return summary
 
 

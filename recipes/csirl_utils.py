@@ -16,12 +16,12 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 from torchrl.collectors import Collector
 from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
-from torchrl.envs import Compose, EnvBase, ParallelEnv
+from torchrl.envs import Compose, EnvBase
 from torchrl.objectives import SoftUpdate
 
 from torchrl_csirl.curriculum import SubgoalCurriculum
 from torchrl_csirl.data import ExpertDemonstrations, import_published, load_expert_demonstrations
-from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, make_env as make_scenario_env
+from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, YieldingParallelEnv, make_env as make_scenario_env
 from torchrl_csirl.modules import make_actor, make_qvalue, make_reward_network
 from torchrl_csirl.objectives import EnsembleSACLoss, MetaRewardLoss
 from torchrl_csirl.trainers import (
@@ -92,6 +92,10 @@ def validate_config(cfg: DictConfig) -> None:
             raise ConfigError(f"{key} must be a positive integer, got {value!r}.")
     if cfg.collector.total_frames is not None and cfg.collector.total_frames <= 0:
         raise ConfigError(f"collector.total_frames must be positive, got {cfg.collector.total_frames}.")
+    if cfg.collector.main_threads is not None and (
+        not isinstance(cfg.collector.main_threads, int) or cfg.collector.main_threads <= 0
+    ):
+        raise ConfigError(f"collector.main_threads must be a positive integer or null, got {cfg.collector.main_threads!r}.")
     if cfg.collector.frames_per_batch % cfg.collector.num_workers:
         raise ConfigError(
             f"collector.frames_per_batch ({cfg.collector.frames_per_batch}) must be a multiple of "
@@ -152,16 +156,27 @@ def load_experts(cfg: DictConfig, spec: ScenarioSpec) -> ExpertDemonstrations:
 
 
 # ---------------------------------------------------------------------------------------- envs
-def make_train_env(scenario: str, num_workers: int) -> EnvBase:
-    """The training environments: ``num_workers`` worker processes (a plain env for 1)."""
+def make_train_env(scenario: str, num_workers: int, main_threads: int | None = None) -> EnvBase:
+    """The training environments: ``num_workers`` worker processes (a plain env for 1).
+
+    ``main_threads`` are the torch threads of this (main) process, where the updates run while the
+    workers wait for the next batch (the collector is synchronous). ``None``: every core. TorchRL's
+    ``ParallelEnv`` would otherwise leave ``cores - workers`` threads, i.e. one on 2 cores, which
+    makes the updates ~1.4x slower here (``benchmarks/bench_update.py --threads 1`` vs ``2``).
+    """
+    main_threads = main_threads or os.cpu_count() or 1
     if num_workers == 1:
+        torch.set_num_threads(main_threads)
         return make_scenario_env(scenario)
-    return ParallelEnv(num_workers, partial(make_scenario_env, scenario))
+    # YieldingParallelEnv: TorchRL's ParallelEnv spin-waits for its workers, taking a core from them
+    return YieldingParallelEnv(
+        num_workers, partial(make_scenario_env, scenario), num_threads=main_threads, num_sub_threads=1
+    )
 
 
 def make_env(cfg: DictConfig) -> EnvBase:
     """Training environments of ``env.scenario`` with ``collector.num_workers`` workers."""
-    return make_train_env(cfg.env.scenario, int(cfg.collector.num_workers))
+    return make_train_env(cfg.env.scenario, int(cfg.collector.num_workers), cfg.collector.main_threads)
 
 
 def make_eval_env(cfg: DictConfig) -> EnvBase:

@@ -2,7 +2,7 @@
 
 It composes, with stock TorchRL machinery:
 
-* a :class:`~torchrl.envs.ParallelEnv` of 2 workers stepping the ``merge`` scenario, driven by a
+* a :class:`~torchrl_csirl.envs.YieldingParallelEnv` of 2 workers stepping the ``merge`` scenario, driven by a
   :class:`~torchrl.collectors.Collector` with the current policy;
 * a replay buffer whose transform recomputes the matching reward at sampling time
   (:class:`SubgoalMatchingReward`, for the current subgoal); the meta-loss adds ``r_w(s)`` itself,
@@ -37,7 +37,7 @@ from torchrl.objectives import SoftUpdate
 
 from torchrl_csirl.curriculum import SubgoalCurriculum
 from torchrl_csirl.data import load_expert_demonstrations
-from torchrl_csirl.envs import SCENARIOS, accomplish_rate_from_rollout, make_env
+from torchrl_csirl.envs import SCENARIOS, YieldingParallelEnv, accomplish_rate_from_rollout, make_env
 from torchrl_csirl.modules import make_actor, make_qvalue, make_reward_network
 from torchrl_csirl.objectives import EnsembleSACLoss, MetaRewardLoss
 from torchrl_csirl.transforms import SubgoalMatchingReward
@@ -59,7 +59,7 @@ def parse_args() -> argparse.Namespace:
 
 def make_parallel_env(scenario: str, workers: int, seed: int) -> ParallelEnv:
     """Stateless workers: the reward transforms stay in the main process (replay buffer)."""
-    env = ParallelEnv(workers, partial(make_env, scenario))
+    env = YieldingParallelEnv(workers, partial(make_env, scenario))
     env.set_seed(seed)
     return env
 

@@ -193,6 +193,7 @@ def test_malformed_expert_file_is_a_clear_error(tmp_path, content):
         (["no.such.key=1"], "Bad override"),
         (["seed"], "not of the form key=value"),
         (["preset=fastest"], "preset must be one of"),
+        (["collector.main_threads=0"], "collector.main_threads must be a positive integer or null"),
     ],
 )
 def test_config_errors_name_the_problem(override, message):

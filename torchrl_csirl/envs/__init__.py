@@ -6,6 +6,7 @@ Importing this package registers the gymnasium ids ``csirl/highway-fast-v0``,
 * :data:`SCENARIOS` / :class:`ScenarioSpec`: what each scenario is (observation layout,
   episode limit, finish position, matching-reward scale).
 * :func:`make_gym_env` (gymnasium) and :func:`make_env` (TorchRL ``GymEnv``).
+* :class:`YieldingParallelEnv`: a ``ParallelEnv`` whose main process sleeps while the workers step.
 * :func:`accomplish_rate` and friends: the paper's evaluation metric.
 """
 from __future__ import annotations
@@ -17,6 +18,7 @@ from torchrl_csirl.envs.metrics import (
     normalized_accomplish_rate,
     success_from_rollout,
 )
+from torchrl_csirl.envs.parallel import YieldingParallelEnv
 from torchrl_csirl.envs.scenarios import (
     SCENARIOS,
     ScenarioSpec,
@@ -44,4 +46,5 @@ __all__ = [
     "resolve_scenario",
     "scenario_config_overrides",
     "success_from_rollout",
+    "YieldingParallelEnv",
 ]

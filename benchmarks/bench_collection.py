@@ -1,0 +1,228 @@
+"""Collection throughput: frames/s of a TorchRL ``Collector`` over a ``ParallelEnv`` of 1 vs 2 workers.
+
+Both runs use the same scenario, the same CSIRL actor (``make_actor``, tanh-Gaussian, sampled
+actions), the same number of frames and frames per batch, in the same process. Both collectors
+are built and first gather one warm-up batch each (worker start-up, first resets, imports in the
+spawned workers), which is excluded from the timing; then ``--frames`` frames are collected by
+each, batches alternating between the two so that both see the same machine load.
+
+The main process runs the policy and the ``ParallelEnv`` bookkeeping while the workers step
+highway-env; on a 2-core machine the main process must not compete with the workers for the
+cores, hence ``--main-threads 1`` (``torch.set_num_threads`` in the main process; the workers
+already run with one thread each, ``ParallelEnv(num_sub_threads=1)``).
+
+Usage::
+
+    python benchmarks/bench_collection.py [--scenario merge] [--frames 4000] [--frames-per-batch 1000]
+                                          [--main-threads 1] [--pipe] [--spin] [--profile]
+
+Progress goes to stderr; the last line printed is a JSON object
+``{"scenario", "frames", "fps_1_worker", "fps_2_workers", "speedup", "load_avg", ...}``.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+from functools import partial
+
+import torch
+from tensordict.nn import TensorDictModuleBase
+from torchrl.collectors import Collector
+from torchrl.envs import ParallelEnv
+
+from torchrl_csirl.envs import SCENARIOS, YieldingParallelEnv, make_env
+from torchrl_csirl.modules import make_actor
+
+
+def log(message: str) -> None:
+    print(message, file=sys.stderr, flush=True)
+
+
+class TimedPolicy(TensorDictModuleBase):
+    """Wraps a policy and accumulates the wall time spent in its forward (``--profile``)."""
+
+    def __init__(self, policy: TensorDictModuleBase) -> None:
+        super().__init__()
+        self.policy = policy
+        self.in_keys = policy.in_keys
+        self.out_keys = policy.out_keys
+        self.seconds = 0.0
+        self.calls = 0
+
+    def forward(self, tensordict):
+        start = time.perf_counter()
+        out = self.policy(tensordict)
+        self.seconds += time.perf_counter() - start
+        self.calls += 1
+        return out
+
+
+def _cpu_seconds(pids: list[int]) -> float:
+    """user + system CPU seconds of processes (Linux ``/proc``; 0 where unreadable)."""
+    tick = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
+    total = 0.0
+    for pid in pids:
+        try:
+            with open(f"/proc/{pid}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+            total += (int(fields[11]) + int(fields[12])) / tick  # utime, stime
+        except (OSError, IndexError, ValueError):
+            pass
+    return total
+
+
+def make_parallel_env(
+    scenario: str, workers: int, seed: int, main_threads: int | None, use_buffers: bool = True,
+    spin: bool = False,
+) -> ParallelEnv:
+    """``workers`` spawned copies of the scenario (``partial(make_env, ...)`` pickles).
+
+    ``num_threads`` pins the main process's torch threads (ParallelEnv otherwise sets it to
+    ``max(1, threads - workers)`` itself); each worker runs one thread (``num_sub_threads=1``).
+    ``use_buffers=True`` (torchrl's default) exchanges data through shared memory and the main
+    process *spin-polls* a shared done flag while the workers step (torchrl 0.14.1
+    ``ParallelEnv._wait_for_workers``): it burns a full core, which on a 2-core machine is taken
+    from the workers. ``use_buffers=False`` sends the data through the pipes and blocks on them.
+    By default the env is our :class:`~torchrl_csirl.envs.YieldingParallelEnv` (shared memory,
+    but the main process sleeps between polls); ``spin=True`` measures TorchRL's own.
+    """
+    cls = ParallelEnv if spin else YieldingParallelEnv
+    env = cls(
+        workers,
+        partial(make_env, scenario),
+        num_threads=main_threads,
+        num_sub_threads=1,
+        use_buffers=use_buffers,
+    )
+    env.set_seed(seed)
+    return env
+
+
+class Run:
+    """One collector (``workers`` env processes) and its timing."""
+
+    def __init__(self, scenario: str, workers: int, frames_per_batch: int, seed: int,
+                 main_threads: int | None, profile: bool, use_buffers: bool = True, spin: bool = False) -> None:
+        spec = SCENARIOS[scenario]
+        torch.manual_seed(seed)  # same actor weights for every run
+        policy = make_actor(spec.obs_dim, spec.action_dim)
+        self.timed = TimedPolicy(policy) if profile else None
+        self.name = f"{scenario} x{workers}"
+        self.env = make_parallel_env(scenario, workers, seed, main_threads, use_buffers, spin)
+        self.collector = Collector(
+            self.env,
+            self.timed if profile else policy,
+            frames_per_batch=frames_per_batch,
+            total_frames=-1,
+            auto_register_policy_transforms=False,
+        )
+        self.iterator = iter(self.collector)
+        self.seconds = 0.0
+        self.frames = 0
+        self.cpu_seconds = 0.0
+
+    def warm_up(self) -> None:
+        """First batch: worker start-up and first resets, not timed."""
+        start = time.perf_counter()
+        batch = next(self.iterator)
+        log(f"[{self.name}] warm-up batch of {batch.numel()} frames: {time.perf_counter() - start:.1f} s (not timed)")
+        if self.timed is not None:
+            self.timed.seconds, self.timed.calls = 0.0, 0
+
+    def _pids(self) -> list[int]:
+        return [os.getpid()] + [w.pid for w in self.env._workers if w.pid is not None]
+
+    def timed_batch(self) -> None:
+        pids = self._pids()
+        cpu = _cpu_seconds(pids)
+        start = time.perf_counter()
+        batch = next(self.iterator)
+        self.seconds += time.perf_counter() - start
+        self.cpu_seconds += _cpu_seconds(pids) - cpu
+        self.frames += batch.numel()
+
+    def result(self) -> dict:
+        out = {
+            "frames": self.frames,
+            "seconds": round(self.seconds, 3),
+            "fps": round(self.frames / self.seconds, 1),
+            # cores this collector (main + workers) actually got: < workers + 1 under contention
+            "cores_used": round(self.cpu_seconds / self.seconds, 2),
+        }
+        if self.timed is not None:
+            out["policy_seconds"] = round(self.timed.seconds, 3)
+            out["policy_calls"] = self.timed.calls
+            out["policy_share"] = round(self.timed.seconds / self.seconds, 3)
+        return out
+
+    def close(self) -> None:
+        self.collector.shutdown()
+        if not self.env.is_closed:
+            self.env.close()
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--scenario", default="merge", choices=sorted(SCENARIOS))
+    parser.add_argument("--frames", type=int, default=4000)
+    parser.add_argument("--frames-per-batch", type=int, default=1000)
+    parser.add_argument("--main-threads", type=int, default=1,
+                        help="torch threads of the main process (0: leave torch's default)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--profile", action="store_true", help="also report the time spent in the policy")
+    parser.add_argument("--pipe", action="store_true",
+                        help="ParallelEnv(use_buffers=False): data through the pipes, the main process blocks "
+                             "instead of spin-waiting on shared memory (torchrl's default, use_buffers=True)")
+    parser.add_argument("--spin", action="store_true",
+                        help="TorchRL's own ParallelEnv, whose main process spin-waits for the workers "
+                             "(default: torchrl_csirl's YieldingParallelEnv, which sleeps between polls)")
+    args = parser.parse_args()
+    if args.main_threads > 0:
+        torch.set_num_threads(args.main_threads)
+    main_threads = args.main_threads if args.main_threads > 0 else None
+    runs = {
+        w: Run(args.scenario, w, args.frames_per_batch, args.seed, main_threads, args.profile, not args.pipe, args.spin)
+        for w in (1, 2)
+    }
+    try:
+        for run in runs.values():
+            run.warm_up()
+        load_before = os.getloadavg()[0]
+        # batches alternate between the two collectors so that both see the same machine load
+        for b in range(math.ceil(args.frames / args.frames_per_batch)):
+            for w in ((1, 2) if b % 2 == 0 else (2, 1)):
+                runs[w].timed_batch()
+            log(f"batch {b + 1}: " + ", ".join(
+                f"{r.name} {r.frames / r.seconds:.0f} fps ({r.cpu_seconds / r.seconds:.2f} cores)" for r in runs.values())
+                + f" (load {os.getloadavg()[0]:.2f})")
+        results = {w: run.result() for w, run in runs.items()}
+    finally:
+        for run in runs.values():
+            run.close()
+    summary = {
+        "scenario": args.scenario,
+        "frames": args.frames,
+        "frames_per_batch": args.frames_per_batch,
+        "fps_1_worker": results[1]["fps"],
+        "fps_2_workers": results[2]["fps"],
+        "speedup": round(results[2]["fps"] / results[1]["fps"], 3),
+        "cores_used_1_worker": results[1]["cores_used"],
+        "cores_used_2_workers": results[2]["cores_used"],
+        "use_buffers": not args.pipe,
+        "parallel_env": "ParallelEnv" if args.spin else "YieldingParallelEnv",
+        "main_threads": args.main_threads if args.main_threads > 0 else "default",
+        "cpu_count": os.cpu_count(),
+        "load_avg_before": round(load_before, 2),
+        "load_avg": round(os.getloadavg()[0], 2),
+    }
+    if args.profile:
+        summary["profile"] = {str(k): v for k, v in results.items()}
+    print(json.dumps(summary))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,119 @@
+"""Aggregate finished runs of ``recipes/csirl_highway.py``: mean and std over seeds, per scenario.
+
+Reads ``summary.json`` of every run directory given (or found under a folder), groups the runs by
+(scenario, method, preset) and prints a Markdown table (to stderr) and, last, one JSON line with
+the per-group statistics.
+
+Usage::
+
+    python recipes/summarize_runs.py runs/                     # every run under runs/
+    python recipes/summarize_runs.py runs/merge-s0 runs/merge-s1 runs/merge-s2
+
+Examples:
+    >>> from summarize_runs import summarize  # doctest: +SKIP
+    >>> summarize([{"scenario": "merge", "method": "csirl", "preset": "default",
+    ...             "accomplish_rate": 0.9, "seed": 0}])["merge/csirl/default"]["accomplish_rate"]["mean"]
+    0.9
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+from collections import defaultdict
+
+#: summary fields reported as mean / std over seeds
+FIELDS = (
+    "accomplish_rate",
+    "normalized_accomplish_rate",
+    "success_rate",
+    "crash_rate",
+    "auc",
+    "frames",
+    "updates",
+    "wall_s",
+    "total_wall_s",
+    "updates_per_s",
+    "collect_fps",
+)
+
+
+def find_summaries(paths: list[str]) -> list[str]:
+    """``summary.json`` files of the run directories given, or of those directly under a folder."""
+    found = []
+    for path in paths:
+        if os.path.isfile(os.path.join(path, "summary.json")):
+            found.append(os.path.join(path, "summary.json"))
+        elif os.path.isdir(path):
+            found.extend(
+                os.path.join(path, name, "summary.json")
+                for name in sorted(os.listdir(path))
+                if os.path.isfile(os.path.join(path, name, "summary.json"))
+            )
+        else:
+            raise FileNotFoundError(f"{path}: neither a run directory with summary.json nor a folder of runs")
+    if not found:
+        raise FileNotFoundError(f"no summary.json under {paths} (runs not finished?)")
+    return found
+
+
+def mean_std(values: list[float]) -> dict[str, float]:
+    """Mean and sample standard deviation (0 for a single value)."""
+    mean = sum(values) / len(values)
+    var = sum((v - mean) ** 2 for v in values) / (len(values) - 1) if len(values) > 1 else 0.0
+    return {"mean": mean, "std": math.sqrt(var)}
+
+
+def summarize(summaries: list[dict]) -> dict[str, dict]:
+    """Group run summaries by ``scenario/method/preset``; mean/std of :data:`FIELDS` per group."""
+    groups: dict[str, list[dict]] = defaultdict(list)
+    for s in summaries:
+        groups[f"{s['scenario']}/{s['method']}/{s['preset']}"].append(s)
+    out = {}
+    for key, runs in sorted(groups.items()):
+        stats: dict[str, object] = {"seeds": sorted(int(r["seed"]) for r in runs)}
+        for field in FIELDS:
+            values = [float(r[field]) for r in runs if r.get(field) is not None]
+            if values:
+                stats[field] = mean_std(values)
+        out[key] = stats
+    return out
+
+
+def markdown_table(stats: dict[str, dict]) -> str:
+    """One row per group: mean ± std of the main figures."""
+    head = "| scenario / method / preset | seeds | accomplish (raw) | expert-normalised | success | AUC | frames | updates | wall [min] |"
+    rows = [head, "|---" * (head.count("|") - 1) + "|"]
+
+    def cell(s: dict, field: str, fmt: str = "{:.3f}", scale: float = 1.0) -> str:
+        if field not in s:
+            return "n/a"
+        return f"{fmt.format(s[field]['mean'] * scale)} ± {fmt.format(s[field]['std'] * scale)}"
+
+    for key, s in stats.items():
+        rows.append(
+            f"| {key} | {','.join(map(str, s['seeds']))} | {cell(s, 'accomplish_rate')} | "
+            f"{cell(s, 'normalized_accomplish_rate')} | {cell(s, 'success_rate', '{:.2f}')} | {cell(s, 'auc')} | "
+            f"{cell(s, 'frames', '{:.0f}')} | {cell(s, 'updates', '{:.0f}')} | {cell(s, 'total_wall_s', '{:.1f}', 1 / 60)} |"
+        )
+    return "\n".join(rows)
+
+
+def main(argv: list[str] | None = None) -> dict[str, dict]:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("paths", nargs="+", help="run directories, or folders holding run directories")
+    args = parser.parse_args(argv)
+    summaries = []
+    for path in find_summaries(args.paths):
+        with open(path) as f:
+            summaries.append(json.load(f))
+    stats = summarize(summaries)
+    print(markdown_table(stats), file=sys.stderr)
+    print(json.dumps(stats))
+    return stats
+
+
+if __name__ == "__main__":
+    main()
