@@ -264,7 +264,8 @@ def render_curriculum(
     ax.set_ylim(height, 0)
     ax.set_axis_off()
     if title is None:
-        title = f"{spec.name}: curriculum trajectory ({len(route)} states), {len(set(goals))} subgoals"
+        count = len(set(goals))
+        title = f"{spec.name}: curriculum trajectory ({len(route)} states), {count} subgoal{'' if count == 1 else 's'}"
     fig.text(0.5, 1.0 - 0.5 * title_px / total, title, ha="center", va="center", fontsize=11)
     handles, labels = ax.get_legend_handles_labels()
     fig.legend(handles, labels, loc="center", bbox_to_anchor=(0.5, 0.5 * legend_px / total),
