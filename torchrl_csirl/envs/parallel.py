@@ -32,7 +32,7 @@ class YieldingParallelEnv(ParallelEnv):
         >>> from torchrl_csirl.envs import make_env
         >>> from torchrl_csirl.envs.parallel import YieldingParallelEnv
         >>> env = YieldingParallelEnv(2, partial(make_env, "merge"))
-        >>> env.rollout(3).batch_size
+        >>> env.rollout(3, break_when_any_done=False).batch_size
         torch.Size([2, 3])
         >>> env.close()
     """
