@@ -22,7 +22,7 @@ from torchrl.objectives import SoftUpdate
 from torchrl_csirl.curriculum import SubgoalCurriculum
 from torchrl_csirl.data import ExpertDemonstrations, import_published, load_expert_demonstrations
 from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, YieldingParallelEnv, make_env as make_scenario_env
-from torchrl_csirl.modules import make_actor, make_qvalue, make_reward_network
+from torchrl_csirl.modules import EgoRelativeFeatures, make_actor, make_qvalue, make_reward_network
 from torchrl_csirl.objectives import EnsembleSACLoss, MetaRewardLoss
 from torchrl_csirl.trainers import (
     CheckpointHook,
@@ -210,18 +210,23 @@ class LossModules:
 
 
 def make_loss_modules(cfg: DictConfig, spec: ScenarioSpec) -> LossModules:
-    """Actor, ensemble SAC loss, target updater, reward network and meta-loss (None for CSIRL-B)."""
-    actor = make_actor(spec.obs_dim, spec.action_dim)
+    """Actor, ensemble SAC loss, target updater, reward network and meta-loss (None for CSIRL-B).
+
+    With ``model.ego_relative_features`` every network reads the observation through
+    :class:`~torchrl_csirl.modules.EgoRelativeFeatures` (a fixed map, no parameters).
+    """
+    features = EgoRelativeFeatures.from_scenario(spec) if cfg.model.ego_relative_features else None
+    actor = make_actor(spec.obs_dim, spec.action_dim, input_features=features)
     sac = EnsembleSACLoss(
         actor,
-        make_qvalue(spec.obs_dim, spec.action_dim),
+        make_qvalue(spec.obs_dim, spec.action_dim, input_features=features),
         num_qvalue_nets=int(cfg.csirl.num_qvalue_nets),
         alpha_init=float(cfg.csirl.alpha),
         gamma=float(cfg.csirl.gamma),
         dispersion=cfg.csirl.dispersion,
     )
     target_updater = SoftUpdate(sac, tau=float(cfg.optim.tau))
-    reward_network = make_reward_network(spec.obs_dim)
+    reward_network = make_reward_network(spec.obs_dim, input_features=features)
     meta = None
     if cfg.csirl.intrinsic:
         meta = MetaRewardLoss(

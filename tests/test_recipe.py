@@ -207,3 +207,16 @@ def test_paper_preset_is_the_published_procedure():
     assert cfg.replay_buffer.clear_each_round and cfg.optim.utd_ratio == 1.0
     assert csirl_utils.total_frames(cfg, curriculum_length=50) == 50 * (20000 + 1280)
     assert csirl_utils.load_config(["preset=paper", "csirl.meta_every=4"]).csirl.meta_every == 4
+
+
+@pytest.mark.parametrize("enabled", [False, True])
+def test_ego_relative_features_switch_reaches_every_network(enabled):
+    from torchrl_csirl.modules import EgoRelativeFeatures
+
+    cfg = csirl_utils.load_config([f"model.ego_relative_features={str(enabled).lower()}"])
+    assert csirl_utils.load_config(["preset=paper"]).model.ego_relative_features is False
+    spec = csirl_utils.SCENARIOS[cfg.env.scenario]
+    modules = csirl_utils.make_loss_modules(cfg, spec)
+    for net in (modules.actor, modules.sac.qvalue_network, modules.reward_network):
+        found = [m for m in net.modules() if isinstance(m, EgoRelativeFeatures)]
+        assert len(found) == (1 if enabled else 0)

@@ -8,10 +8,12 @@ from torchrl_csirl.modules.actor_critic import (
     make_qvalue,
 )
 from torchrl_csirl.modules.export import load_policy, save_policy
+from torchrl_csirl.modules.features import EgoRelativeFeatures
 from torchrl_csirl.modules.reward import make_reward_network
 
 __all__ = [
     "BoundedLogStdNormalParams",
+    "EgoRelativeFeatures",
     "MaskedReLU",
     "load_policy",
     "make_actor",

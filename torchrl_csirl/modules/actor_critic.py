@@ -58,6 +58,17 @@ def _check_dims(obs_dim: int, action_dim: int, hidden: Sequence[int]) -> tuple[i
     return hidden
 
 
+def _input_size(obs_dim: int, input_features: nn.Module | None) -> int:
+    """Width of the first layer: ``obs_dim``, or what ``input_features`` maps it to."""
+    if input_features is None:
+        return obs_dim
+    if getattr(input_features, "in_features", obs_dim) != obs_dim:
+        raise ValueError(
+            f"input_features expects observations of size {input_features.in_features}, got obs_dim={obs_dim}."
+        )
+    return int(input_features.out_features)
+
+
 def make_actor(
     obs_dim: int,
     action_dim: int,
@@ -66,6 +77,7 @@ def make_actor(
     *,
     log_std_min: float = -5.0,
     log_std_max: float = 2.0,
+    input_features: nn.Module | None = None,
 ) -> ProbabilisticActor:
     """Builds the CSIRL tanh-Gaussian actor (MLP with ReLU, actions in ``[-1, 1]``).
 
@@ -83,6 +95,9 @@ def make_actor(
     Keyword Args:
         log_std_min (float): lower log-std bound. Defaults to ``-5.0``.
         log_std_max (float): upper log-std bound. Defaults to ``2.0``.
+        input_features (nn.Module, optional): a parameter-free map applied to the observation
+            before the MLP, exposing ``in_features``/``out_features`` (e.g.
+            :class:`~torchrl_csirl.modules.EgoRelativeFeatures`). Defaults to ``None`` (raw observation).
 
     Returns:
         a :class:`~torchrl.modules.ProbabilisticActor` with a bounded action spec.
@@ -96,9 +111,11 @@ def make_actor(
         (torch.Size([4, 2]), True)
     """
     hidden = _check_dims(obs_dim, action_dim, hidden)
+    layers = [] if input_features is None else [input_features]
     net = nn.Sequential(
+        *layers,
         MLP(
-            in_features=obs_dim,
+            in_features=_input_size(obs_dim, input_features),
             out_features=2 * action_dim,
             num_cells=list(hidden),
             activation_class=MaskedReLU,
@@ -162,10 +179,14 @@ class MaskedReLU(nn.Module):
 
 
 class _ConcatMLP(nn.Module):
-    """MLP over the concatenation of its inputs along the last dimension."""
+    """MLP over the concatenation of its inputs along the last dimension.
 
-    def __init__(self, in_features: int, hidden: Sequence[int]) -> None:
+    ``input_features``, if given, maps the first input (the observation) before the concatenation.
+    """
+
+    def __init__(self, in_features: int, hidden: Sequence[int], input_features: nn.Module | None = None) -> None:
         super().__init__()
+        self.input_features = input_features
         self.mlp = MLP(
             in_features=in_features,
             out_features=1,
@@ -174,6 +195,8 @@ class _ConcatMLP(nn.Module):
         )
 
     def forward(self, *inputs: torch.Tensor) -> torch.Tensor:
+        if self.input_features is not None:
+            inputs = (self.input_features(inputs[0]), *inputs[1:])
         return self.mlp(torch.cat(inputs, dim=-1))
 
 
@@ -181,6 +204,7 @@ def make_qvalue(
     obs_dim: int,
     action_dim: int,
     hidden: Sequence[int] = (256, 256),
+    input_features: nn.Module | None = None,
 ) -> TensorDictModule:
     """Builds one state-action value network Q(s, a) (MLP with ReLU on ``[s, a]``).
 
@@ -190,6 +214,8 @@ def make_qvalue(
         obs_dim (int): observation size.
         action_dim (int): action size.
         hidden (sequence of int): hidden layer widths. Defaults to ``(256, 256)``.
+        input_features (nn.Module, optional): a parameter-free map of the observation (see
+            :func:`make_actor`). Defaults to ``None``.
 
     Returns:
         a :class:`~tensordict.nn.TensorDictModule` reading ``["observation", "action"]`` and
@@ -205,7 +231,7 @@ def make_qvalue(
     """
     hidden = _check_dims(obs_dim, action_dim, hidden)
     return TensorDictModule(
-        _ConcatMLP(obs_dim + action_dim, hidden),
+        _ConcatMLP(_input_size(obs_dim, input_features) + action_dim, hidden, input_features),
         in_keys=["observation", "action"],
         out_keys=["state_action_value"],
     )

@@ -8,6 +8,7 @@ import torch
 from torchrl.modules import ProbabilisticActor
 
 from torchrl_csirl.modules.actor_critic import make_actor
+from torchrl_csirl.modules.features import EgoRelativeFeatures
 
 __all__ = ["load_policy", "save_policy"]
 
@@ -18,6 +19,9 @@ POLICY_FILE = "policy.pt"
 def save_policy(actor: ProbabilisticActor, path: str | os.PathLike, *, obs_dim: int, action_dim: int,
                 **metadata: Any) -> str:
     """Writes the actor's weights and what is needed to rebuild it (``metadata``: e.g. the scenario).
+
+    An :class:`~torchrl_csirl.modules.EgoRelativeFeatures` input map inside the actor is saved
+    with it (its constructor arguments) and rebuilt by :func:`load_policy`.
 
     Examples:
         >>> import tempfile, os
@@ -33,12 +37,18 @@ def save_policy(actor: ProbabilisticActor, path: str | os.PathLike, *, obs_dim: 
         "obs_dim": int(obs_dim),
         "action_dim": int(action_dim),
         "metadata": dict(metadata),
+        "input_features": _input_features_config(actor),
         "state_dict": {k: v.detach().cpu() for k, v in actor.state_dict().items()},
     }
     tmp = path + ".tmp"
     torch.save(payload, tmp)
     os.replace(tmp, path)
     return path
+
+
+def _input_features_config(actor: ProbabilisticActor) -> dict[str, Any] | None:
+    found = [m for m in actor.modules() if isinstance(m, EgoRelativeFeatures)]
+    return found[0].config() if found else None
 
 
 def load_policy(path: str | os.PathLike) -> ProbabilisticActor:
@@ -63,7 +73,9 @@ def load_policy(path: str | os.PathLike) -> ProbabilisticActor:
     payload = torch.load(path, map_location="cpu", weights_only=True)
     if not isinstance(payload, dict) or payload.get("format") != POLICY_FORMAT:
         raise ValueError(f"{path!r} is not a torchrl-csirl policy file (format {POLICY_FORMAT}).")
-    actor = make_actor(payload["obs_dim"], payload["action_dim"])
+    features = payload.get("input_features")
+    actor = make_actor(payload["obs_dim"], payload["action_dim"],
+                       input_features=EgoRelativeFeatures(**features) if features else None)
     actor.load_state_dict(payload["state_dict"])
     actor.metadata = dict(payload["metadata"])
     return actor

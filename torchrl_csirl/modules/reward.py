@@ -9,6 +9,8 @@ from tensordict.utils import NestedKey
 from torch import nn
 from torchrl.modules import MLP
 
+from torchrl_csirl.modules.actor_critic import _input_size
+
 __all__ = ["RewardMLP", "make_reward_network"]
 
 
@@ -18,6 +20,8 @@ class RewardMLP(nn.Module):
     Args:
         in_features (int): total input size (sum of the inputs' last dimensions).
         hidden (sequence of int): hidden widths. Defaults to ``(256, 256)``.
+        input_features (nn.Module, optional): a parameter-free map of the first input (the
+            observation); ``in_features`` then counts its output size.
 
     Examples:
         >>> import torch
@@ -27,8 +31,10 @@ class RewardMLP(nn.Module):
         (torch.Size([5, 1]), True)
     """
 
-    def __init__(self, in_features: int, hidden: Sequence[int] = (256, 256)) -> None:
+    def __init__(self, in_features: int, hidden: Sequence[int] = (256, 256),
+                 input_features: nn.Module | None = None) -> None:
         super().__init__()
+        self.input_features = input_features
         self.mlp = MLP(
             in_features=in_features,
             out_features=1,
@@ -37,6 +43,8 @@ class RewardMLP(nn.Module):
         )
 
     def forward(self, *inputs: torch.Tensor) -> torch.Tensor:
+        if self.input_features is not None:
+            inputs = (self.input_features(inputs[0]), *inputs[1:])
         x = inputs[0] if len(inputs) == 1 else torch.cat(inputs, dim=-1)
         return torch.tanh(self.mlp(x))
 
@@ -47,6 +55,7 @@ def make_reward_network(
     hidden: Sequence[int] = (256, 256),
     in_keys: Sequence[NestedKey] | None = None,
     out_key: NestedKey = "intrinsic_reward",
+    input_features: nn.Module | None = None,
 ) -> TensorDictModule:
     """Builds the intrinsic reward network ``r_w`` (MLP, ReLU, tanh output in ``(-1, 1)``).
 
@@ -60,6 +69,8 @@ def make_reward_network(
         in_keys (sequence of NestedKey, optional): input keys. Defaults to ``["observation"]``
             (state-only) or ``["observation", "action"]``.
         out_key (NestedKey): output key. Defaults to ``"intrinsic_reward"``.
+        input_features (nn.Module, optional): a parameter-free map of the observation (see
+            :func:`~torchrl_csirl.modules.make_actor`). Defaults to ``None``.
 
     Returns:
         TensorDictModule: writes ``out_key`` with shape ``[*B, 1]``.
@@ -92,5 +103,5 @@ def make_reward_network(
             f"in_keys must name {expected} input(s) ({'state' if expected == 1 else 'state, action'}), "
             f"got {in_keys}."
         )
-    in_features = obs_dim + (action_dim or 0)
-    return TensorDictModule(RewardMLP(in_features, hidden), in_keys=in_keys, out_keys=[out_key])
+    in_features = _input_size(obs_dim, input_features) + (action_dim or 0)
+    return TensorDictModule(RewardMLP(in_features, hidden, input_features), in_keys=in_keys, out_keys=[out_key])

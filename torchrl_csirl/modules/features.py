@@ -1,0 +1,144 @@
+"""Ego-relative input features: a fixed, parameter-free first layer for the CSIRL networks.
+
+The driving observations are *absolute* Kinematics rows normalised by wide per-scenario ranges
+(merge maps x in [-500, 500] m to [-1, 1]), so a vehicle 5 m ahead of the ego and one 25 m ahead
+differ by 0.04 in the input. A network can learn the difference ``x_i - x_ego`` but, at that scale,
+only slowly; that difference is what decides a crash. :class:`EgoRelativeFeatures` appends, for
+every other observed vehicle, its offsets from the ego (positions and velocities) rescaled to a
+few metres / metres per second per unit, to the unchanged observation. It has no parameters, so
+the networks stay MLPs over a fixed feature map (the learner still sees only the observation).
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import torch
+from torch import nn
+
+__all__ = ["EgoRelativeFeatures", "RELATIVE_REFERENCE"]
+
+#: metres (positions) and metres per second (velocities) that one unit of a relative feature
+#: represents, before clipping to ``[-clip, clip]``.
+RELATIVE_REFERENCE: Mapping[str, float] = {"x": 20.0, "y": 20.0, "vx": 10.0, "vy": 10.0}
+
+
+class EgoRelativeFeatures(nn.Module):
+    """Appends the other vehicles' offsets from the ego to a flattened Kinematics observation.
+
+    The observation is ``vehicles_count`` rows of ``num_features`` features, ego first. For each
+    of the other rows and each feature index ``f`` in ``relative_indices`` the module computes
+    ``clip(gain_f * (obs[i, f] - obs[0, f]), -clip, clip)``, multiplied by the row's presence flag
+    (absent vehicles are all-zero rows), and concatenates these ``(vehicles_count - 1) *
+    len(relative_indices)`` values after the unchanged observation.
+
+    Args:
+        vehicles_count (int): observed vehicles per observation (ego included).
+        num_features (int): features per vehicle.
+        relative_indices (sequence of int): feature indices to take relative to the ego.
+        gains (sequence of float): one multiplier per relative index.
+        presence_index (int, optional): index of the presence flag; ``None`` if there is none.
+        clip (float): bound of the relative features. Defaults to ``5.0``.
+
+    Examples:
+        >>> import torch
+        >>> feats = EgoRelativeFeatures(3, 3, relative_indices=[1, 2], gains=[10.0, 1.0], presence_index=0)
+        >>> obs = torch.tensor([[1.0, 0.10, 0.5,  1.0, 0.15, 0.0,  0.0, 0.0, 0.0]])
+        >>> feats(obs)[..., 9:]
+        tensor([[ 0.5000, -0.5000,  0.0000,  0.0000]])
+        >>> feats.out_features
+        13
+    """
+
+    def __init__(
+        self,
+        vehicles_count: int,
+        num_features: int,
+        relative_indices: Sequence[int],
+        gains: Sequence[float],
+        presence_index: int | None = None,
+        clip: float = 5.0,
+    ) -> None:
+        super().__init__()
+        relative_indices = [int(i) for i in relative_indices]
+        if vehicles_count < 2:
+            raise ValueError(f"vehicles_count must be >= 2 (ego and others), got {vehicles_count}.")
+        if not relative_indices or any(not 0 <= i < num_features for i in relative_indices):
+            raise ValueError(
+                f"relative_indices must be a non-empty list of indices in [0, {num_features}), got {relative_indices}."
+            )
+        if len(gains) != len(relative_indices):
+            raise ValueError(f"one gain per relative index expected, got {len(gains)} for {len(relative_indices)}.")
+        if presence_index is not None and not 0 <= presence_index < num_features:
+            raise ValueError(f"presence_index must be in [0, {num_features}), got {presence_index}.")
+        if clip <= 0:
+            raise ValueError(f"clip must be positive, got {clip}.")
+        self.vehicles_count = int(vehicles_count)
+        self.num_features = int(num_features)
+        self.relative_indices = relative_indices
+        self.presence_index = presence_index
+        self.clip = float(clip)
+        # a plain tuple, not a buffer: the ensemble critics stack their members' tensors
+        self.gains = tuple(float(g) for g in gains)
+
+    @classmethod
+    def from_scenario(cls, spec: Any, reference: Mapping[str, float] = RELATIVE_REFERENCE,
+                      clip: float = 5.0) -> EgoRelativeFeatures:
+        """The module for a scenario's observation layout (a :class:`~torchrl_csirl.envs.ScenarioSpec`).
+
+        The gain of feature ``f`` turns its normalised unit (half its range) into units of
+        ``reference[f]``, and is never below 1.
+
+        Examples:
+            >>> from torchrl_csirl.envs import SCENARIOS
+            >>> feats = EgoRelativeFeatures.from_scenario(SCENARIOS["merge"])
+            >>> feats.gains, feats.out_features
+            ((25.0, 1.0, 8.0, 8.0), 41)
+        """
+        features = list(spec.features)
+        indices, gains = [], []
+        for name in ("x", "y", "vx", "vy"):
+            if name in features and name in reference:
+                low, high = spec.features_range[name]
+                indices.append(features.index(name))
+                gains.append(max(1.0, 0.5 * (high - low) / float(reference[name])))
+        presence = features.index("presence") if "presence" in features else None
+        return cls(int(spec.vehicles_count), len(features), indices, gains, presence, clip)
+
+    @property
+    def in_features(self) -> int:
+        return self.vehicles_count * self.num_features
+
+    @property
+    def out_features(self) -> int:
+        return self.in_features + (self.vehicles_count - 1) * len(self.relative_indices)
+
+    def config(self) -> dict[str, Any]:
+        """The constructor arguments (to rebuild the module, e.g. with a saved policy)."""
+        return {
+            "vehicles_count": self.vehicles_count,
+            "num_features": self.num_features,
+            "relative_indices": list(self.relative_indices),
+            "gains": list(self.gains),
+            "presence_index": self.presence_index,
+            "clip": self.clip,
+        }
+
+    def forward(self, observation: torch.Tensor) -> torch.Tensor:
+        if observation.shape[-1] != self.in_features:
+            raise ValueError(
+                f"EgoRelativeFeatures expects observations of size {self.in_features} "
+                f"({self.vehicles_count} vehicles x {self.num_features} features), got {observation.shape[-1]}."
+            )
+        rows = observation.unflatten(-1, (self.vehicles_count, self.num_features))
+        selected = rows[..., self.relative_indices]
+        gains = torch.as_tensor(self.gains, dtype=observation.dtype, device=observation.device)
+        relative = (selected[..., 1:, :] - selected[..., :1, :]) * gains
+        relative = relative.clamp(-self.clip, self.clip)
+        if self.presence_index is not None:
+            present = rows[..., 1:, self.presence_index : self.presence_index + 1] > 0
+            relative = torch.where(present, relative, torch.zeros_like(relative))
+        return torch.cat([observation, relative.flatten(-2)], dim=-1)
+
+    def extra_repr(self) -> str:
+        return f"vehicles={self.vehicles_count}, relative={self.relative_indices}, gains={list(self.gains)}"
