@@ -139,6 +139,30 @@ def test_roundabout_exit_approach_lane_is_the_outer_ring_lane():
     env.close()
 
 
+def test_merge_expert_nudges_past_two_slow_vehicles_side_by_side():
+    """Seed 10007: the two vehicles ahead slow to 20 m/s in different lanes ~9 m apart (both lanes
+    blocked); before nudging the expert stayed behind them and timed out."""
+    env = make_gym_env("merge")
+    env.reset(seed=10007)
+    base = env.unwrapped
+    ego_x = base.vehicle.position[0]
+    ahead = sorted((v for v in base.road.vehicles if v.position[0] > ego_x), key=lambda v: v.position[0])
+    assert {v.lane_index[2] for v in ahead[:2]} == {0, 1} and ahead[1].position[0] - ahead[0].position[0] < 15
+    expert = make_expert("merge")
+    behaviours = []
+    decide = expert.decide
+
+    def recording_decide(road, vehicle):
+        behaviours.append(decide(road, vehicle))
+        return behaviours[-1]
+
+    expert.decide = recording_decide
+    episode = rollout_expert(env, seed=10007, expert=expert, scenario="merge")
+    assert episode["success"] and not episode["crashed"]
+    assert any(b.nudge for b in behaviours)
+    env.close()
+
+
 # ---------------------------------------------------------------------------------------------- shipped data
 def test_all_shipped_datasets_available():
     assert available_expert_datasets() == {s: list(CURRICULA) for s in SCENARIO_NAMES}

@@ -78,13 +78,26 @@ class ExpertConfig:
         jam_distance: IDM desired bumper-to-bumper distance at standstill [m].
         close_following: optional ``(time_headway, jam_distance)`` of extra "close following"
             candidates (at the highest target speed, on every candidate lane): closing up on the
-            vehicle ahead opens room to cut in front of a vehicle in the next lane (merge).
+            vehicle ahead opens room to cut in front of a vehicle in the next lane (merge); also
+            used in the roundabout, where a tighter gap measured more successes (docs/EXPERTS.md).
         approach_roads: on the last ``approach_roads`` roads before a road with fewer lanes (the
             roundabout's exit), every lane-choosing behaviour drives on the one lane that leads
             onto it; with ``approach_roads > 0`` route progress is also measured along that lane
             (not along lane 0, the inner ring lane, which would favour the inner lanes).
         approach_lane_cost: score penalty [m of progress] per lane still to cross, at the end of the
             look-ahead, to reach the lane that leads onto the next narrower road.
+        nudge_offset: optional lateral offset [m] of extra "nudge" candidates (merge): the ego waits
+            straddling the line towards the next lane, this far from its lane centre, close behind the
+            vehicle ahead in its own lane; other vehicles' IDM counts a vehicle within 1 m of their lane
+            as in it, so the vehicle beside it in the next lane, which the ego now seems to be ahead
+            of, brakes and opens a gap; the ego moves over once the gap behind it is free (see
+            :meth:`_RouteFollower.nudge_control`). Two slow vehicles side by side no longer block both
+            lanes. The nudge candidates follow with the ``close_following`` gap (at the highest target
+            speed), which must be short enough for the ego to get ahead of the centre of the vehicle
+            beside it.
+        episode_end_x: the scenario ends the episode once the ego passes this x [m] (merge: 370 m);
+            the look-ahead stops there, so that a long horizon at high speed does not count driving
+            off the end of the road, which the episode never reaches, as a failure.
     """
 
     destination: str | None
@@ -104,6 +117,8 @@ class ExpertConfig:
     close_following: tuple[float, float] | None = None
     approach_roads: int = 0
     approach_lane_cost: float = 0.0
+    nudge_offset: float | None = None
+    episode_end_x: float | None = None
 
 
 EXPERT_CONFIGS: dict[str, ExpertConfig] = {
@@ -120,10 +135,12 @@ EXPERT_CONFIGS: dict[str, ExpertConfig] = {
         destination="d",
         speeds=(45.0, 35.0, 22.0),
         lane_choice=True,
-        horizon=15,
+        horizon=20,
         time_headway=0.6,
         jam_distance=8.0,
-        close_following=(0.1, 2.0),
+        close_following=(0.0, 1.6),
+        nudge_offset=1.3,
+        episode_end_x=370.0,
         perception_radius=80.0,
         max_acceleration=15.0,
         finish_position=(400.0, 4.0),
@@ -135,7 +152,7 @@ EXPERT_CONFIGS: dict[str, ExpertConfig] = {
         max_acceleration=12.0,
         time_headway=0.5,
         jam_distance=4.0,
-        close_following=(0.2, 2.0),
+        close_following=(0.15, 1.5),
         approach_roads=1,
         approach_lane_cost=4.0,
         yield_roads=(("ses", "se"),),
@@ -278,9 +295,10 @@ class _Behaviour:
     speed: float
     stop: bool = False
     gap: tuple[float, float] | None = None  # (time headway, jam distance); None: the config's
+    nudge: bool = False  # straddle the line towards ``lane_id`` until the gap behind is free
 
     def key(self) -> tuple:
-        return (self.lane_id, self.speed, self.stop, self.gap)
+        return (self.lane_id, self.speed, self.stop, self.gap, self.nudge)
 
 
 class _RouteFollower:
@@ -391,8 +409,10 @@ class _RouteFollower:
         return passed + lane.local_coordinates(vehicle.position)[0]
 
     # --- controllers -------------------------------------------------------------------------------
-    def steering(self, vehicle: Any, lane: Any) -> float:
+    def steering(self, vehicle: Any, lane: Any, offset: float = 0.0) -> float:
+        """Steering angle tracking the centre line of ``lane`` shifted laterally by ``offset`` [m]."""
         long, lat = lane.local_coordinates(vehicle.position)
+        lat -= offset
         speed = max(abs(vehicle.speed), 1e-2)
         future_heading = lane.heading_at(long + speed * self.TAU_PURSUIT)
         lateral_speed_command = -lat / self.TAU_LATERAL
@@ -460,6 +480,10 @@ class _RouteFollower:
     def control(self, vehicle: Any, others: Sequence[Any], behaviour: _Behaviour) -> tuple[float, float]:
         """Physical (acceleration, steering) for the ego under a behaviour."""
         self.update(vehicle)
+        if behaviour.nudge:
+            nudged = self.nudge_control(vehicle, others, behaviour)
+            if nudged is not None:
+                return nudged
         lanes = self.path_lanes(vehicle.position, behaviour.lane_id)
         stop_at = None
         if behaviour.stop:
@@ -474,6 +498,59 @@ class _RouteFollower:
         acceleration = self.idm(vehicle.speed, behaviour.speed, gap, front_speed, behaviour.gap)
         acceleration = max(acceleration, -max(vehicle.speed, 0.0) / self.dt)  # brake to a stop, never reverse
         return acceleration, steering
+
+    def nudge_control(
+        self, vehicle: Any, others: Sequence[Any], behaviour: _Behaviour
+    ) -> tuple[float, float] | None:
+        """Controls of a "nudge" behaviour while the ego is not yet in its target lane (else ``None``).
+
+        Longitudinal: the smaller IDM acceleration of the ego's own lane and of the target lane (as
+        highway-env's IDM vehicles do while changing lanes). Lateral: move into the target lane once
+        the gap behind in it is free (:meth:`gap_behind_is_free`); until then hold
+        ``config.nudge_offset`` from the own lane's centre towards the target lane.
+        """
+        current = self.lane_id_on(self.road_index, vehicle.position, None)
+        n = len(self.lanes_of(self.road_index))
+        target = int(min(max(behaviour.lane_id, 0), n - 1))
+        if current == target:
+            return None
+        own = self.path_lanes(vehicle.position, current)
+        lanes = self.path_lanes(vehicle.position, target)
+        accelerations = []
+        for path in (own, lanes):
+            gap, front_speed = self.front_obstacle(vehicle, others, path, None)
+            accelerations.append(self.idm(vehicle.speed, behaviour.speed, gap, front_speed, behaviour.gap))
+        acceleration = max(min(accelerations), -max(vehicle.speed, 0.0) / self.dt)
+        if self.gap_behind_is_free(vehicle, others, lanes[0]):
+            steering = self.steering(vehicle, lanes[0])
+        else:
+            # the target lane's centre beside the ego, in the own lane's frame: its sign is the side
+            s_target, _ = lanes[0].local_coordinates(vehicle.position)
+            _, side = own[0].local_coordinates(lanes[0].position(s_target, 0.0))
+            steering = self.steering(vehicle, own[0], offset=math.copysign(self.config.nudge_offset, side))
+        return acceleration, steering
+
+    def gap_behind_is_free(self, vehicle: Any, others: Sequence[Any], lane: Any) -> bool:
+        """Whether the ego can move into ``lane``: no vehicle in it alongside, none close behind.
+
+        A vehicle behind needs ``safety_margin`` plus one second of its closing speed between its
+        front and the ego's rear; one ahead needs ``safety_margin`` between the bumpers.
+        """
+        s_ego, _ = lane.local_coordinates(vehicle.position)
+        margin = self.config.safety_margin
+        for other in others:
+            if other is vehicle or np.abs(other.position - vehicle.position).max() > 40:
+                continue
+            s, lat = lane.local_coordinates(other.position)
+            if abs(lat) > lane.width_at(s) / 2:
+                continue
+            length = (vehicle.LENGTH + getattr(other, "LENGTH", vehicle.LENGTH)) / 2
+            if s >= s_ego:
+                if s - s_ego < length + margin:
+                    return False
+            elif s_ego - s < length + margin + max(0.0, other.speed - vehicle.speed) * 1.0:
+                return False
+        return True
 
     def stop_line(self, vehicle: Any, lanes: Sequence[Any]) -> float | None:
         """Path coordinate (from the start of ``lanes[0]``) of the next stop line, if any is ahead."""
@@ -576,6 +653,11 @@ class ExpertDriver:
         if self.config.close_following is not None:
             top = max(self.config.speeds)
             behaviours += [_Behaviour(lane, top, gap=tuple(self.config.close_following)) for lane in lane_ids]
+        if self.config.nudge_offset is not None and self.config.lane_choice:
+            current = route.lane_id_on(route.road_index, vehicle.position, None)
+            top = max(self.config.speeds)
+            gap = None if self.config.close_following is None else tuple(self.config.close_following)
+            behaviours += [_Behaviour(lane, top, gap=gap, nudge=True) for lane in lane_ids if lane != current]
         lanes = route.path_lanes(vehicle.position, None)
         if route.can_stop(vehicle, lanes):
             behaviours.append(_Behaviour(lane_ids[0] if len(lane_ids) == 1 else None, max(self.config.speeds), stop=True))
@@ -606,6 +688,8 @@ class ExpertDriver:
             ego.act({"acceleration": acceleration, "steering": steering})
             sim_road.act()
             sim_road.step(self.dt)
+            if not ego.crashed and self._episode_over(ego):
+                break  # the scenario would end the episode here: nothing to lose beyond it
             if ego.crashed or not ego.on_road:
                 failed_at = t
                 break
@@ -619,6 +703,11 @@ class ExpertDriver:
         score -= self._lane_penalty(ego, route, behaviour)
         score -= self._approach_penalty(ego, route)
         return score
+
+    def _episode_over(self, ego: Any) -> bool:
+        """Whether the scenario ends the episode at the ego's (simulated) position (``episode_end_x``)."""
+        end = self.config.episode_end_x
+        return end is not None and float(ego.position[0]) > end
 
     def _approach_penalty(self, ego: Any, route: _RouteFollower) -> float:
         """Cost of the lane changes still needed to reach the approach lane of a narrower road ahead."""
