@@ -28,8 +28,8 @@ class EgoRelativeFeatures(nn.Module):
 
     The observation is ``vehicles_count`` rows of ``num_features`` features, ego first. For each
     of the other rows and each feature index ``f`` in ``relative_indices`` the module computes
-    ``clip(gain_f * (obs[i, f] - obs[0, f]), -clip, clip)``, multiplied by the row's presence flag
-    (absent vehicles are all-zero rows), and concatenates these ``(vehicles_count - 1) *
+    ``clip(gain_f * (obs[i, f] - obs[0, f]), -clip, clip)``, zero where the row's presence flag is
+    not positive (absent vehicles are all-zero rows), and concatenates these ``(vehicles_count - 1) *
     len(relative_indices)`` values after the unchanged observation.
 
     Args:
