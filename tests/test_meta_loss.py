@@ -95,6 +95,28 @@ def test_meta_gradient_matches_finite_differences(kwargs):
     assert torch.isclose(out["meta_grad_norm"], total.norm())
 
 
+def test_meta_gradient_split_into_imitation_and_regulariser_parts():
+    """``meta_grad_norm_l1`` is the norm of the regulariser's own gradient; the rest is imitation."""
+    _, reward, meta, online, expert, regularizer = _setup(reward_l1_coef=0.5)
+    torch.manual_seed(123)
+    out = meta(online, expert, regularizer)
+    out["loss_meta"].backward()
+    total = [p.grad.clone() for p in reward.parameters()]
+    reward.zero_grad()
+    l1 = meta.scale * 0.5 * reward(regularizer.select("observation"))["intrinsic_reward"].abs().mean()
+    l1.backward()
+    reg = [p.grad.clone() for p in reward.parameters()]
+    flat = lambda grads: torch.cat([g.flatten() for g in grads])  # noqa: E731
+    torch.testing.assert_close(out["meta_grad_norm_l1"], flat(reg).norm())
+    torch.testing.assert_close(out["meta_grad_norm_imitation"], (flat(total) - flat(reg)).norm())
+    assert out["meta_grad_norm_imitation"] > 0
+
+    _, _, meta0, online, expert, regularizer = _setup(reward_l1_coef=0.0)
+    out0 = meta0(online, expert, regularizer)
+    assert out0["meta_grad_norm_l1"] == 0
+    torch.testing.assert_close(out0["meta_grad_norm_imitation"], out0["meta_grad_norm"])
+
+
 def test_meta_gradient_matches_unrolled_reference():
     """Independent re-derivation with explicit per-critic loops (no vmap, no SACLoss)."""
     sac, reward, meta, online, expert, regularizer = _setup(reward_l1_coef=0.0, num_critics=2)

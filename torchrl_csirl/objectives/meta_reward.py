@@ -54,6 +54,17 @@ def _sgd_lookahead_and_grads(
     return out, grads
 
 
+def _grads_or_zeros(loss: torch.Tensor, params: list[torch.Tensor], retain_graph: bool = False) -> list[torch.Tensor]:
+    """``d loss / d params``, zeros for the parameters ``loss`` does not depend on."""
+    grads = torch.autograd.grad(loss, params, allow_unused=True, retain_graph=retain_graph)
+    return [torch.zeros_like(p) if g is None else g for p, g in zip(params, grads)]
+
+
+def _norm(tensors: list[torch.Tensor]) -> torch.Tensor:
+    """Global L2 norm of a list of tensors (detached)."""
+    return torch.stack([t.detach().pow(2).sum() for t in tensors]).sum().sqrt()
+
+
 def _linear_surrogate(
     value: torch.Tensor, params: list[torch.Tensor], grads: list[torch.Tensor]
 ) -> torch.Tensor:
@@ -176,6 +187,8 @@ class MetaRewardLoss(LossModule):
         "loss_inner_actor",
         "intrinsic_reward_mean",
         "meta_grad_norm",
+        "meta_grad_norm_imitation",
+        "meta_grad_norm_l1",
     ]
 
     def __init__(
@@ -331,8 +344,11 @@ class MetaRewardLoss(LossModule):
             loss_l1 = r_w.new_zeros(())
             loss = self.scale * loss_imitation
 
-        grads = torch.autograd.grad(loss, w_params, allow_unused=True)
-        grads = [torch.zeros_like(p) if g is None else g for p, g in zip(w_params, grads)]
+        grads_l1 = None
+        if self.reward_l1_coef > 0:  # the regulariser's share of the meta-gradient (a cheap diagnostic)
+            grads_l1 = _grads_or_zeros(self.scale * self.reward_l1_coef * loss_l1, w_params, retain_graph=True)
+        grads = _grads_or_zeros(loss, w_params)
+        grads_imitation = grads if grads_l1 is None else [g - g1 for g, g1 in zip(grads, grads_l1)]
         # same value as ``loss``, gradient w.r.t. w exactly ``grads``, nothing else.
         out = {
             "loss_meta": _linear_surrogate(loss, w_params, grads),
@@ -341,7 +357,9 @@ class MetaRewardLoss(LossModule):
             "loss_inner_qvalue": loss_q.detach(),
             "loss_inner_actor": loss_pi.detach(),
             "intrinsic_reward_mean": r_w.detach().mean(),
-            "meta_grad_norm": torch.stack([g.pow(2).sum() for g in grads]).sum().sqrt(),
+            "meta_grad_norm": _norm(grads),
+            "meta_grad_norm_imitation": _norm(grads_imitation),
+            "meta_grad_norm_l1": _norm(grads_l1) if grads_l1 is not None else r_w.new_zeros(()),
         }
         if self.joint_sac_update:
             out.update(self._sac_losses(td, loss_q, grads_phi))

@@ -91,7 +91,8 @@ class MetaRewardUpdate:
         meta_every: cadence of the meta step (1 = every update, as the paper).
     """
 
-    META_KEYS = ("loss_meta", "loss_imitation", "loss_reward_l1", "intrinsic_reward_mean", "meta_grad_norm")
+    META_KEYS = ("loss_meta", "loss_imitation", "loss_reward_l1", "intrinsic_reward_mean", "meta_grad_norm",
+                 "meta_grad_norm_imitation", "meta_grad_norm_l1")
 
     def __init__(self, meta_loss: nn.Module, sac_update: SACUpdate, reward_optimizer: torch.optim.Optimizer,
                  expert_buffer: Any, meta_every: int = 1) -> None:
