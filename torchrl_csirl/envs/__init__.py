@@ -5,7 +5,8 @@ Importing this package registers the gymnasium ids ``csirl/highway-fast-v0``,
 
 * :data:`SCENARIOS` / :class:`ScenarioSpec`: what each scenario is (observation layout,
   episode limit, finish position, matching-reward scale).
-* :func:`make_gym_env` (gymnasium) and :func:`make_env` (TorchRL ``GymEnv``).
+* :func:`make_gym_env` (gymnasium), :func:`make_env` (TorchRL ``GymEnv``) and
+  :func:`make_serial_env` (several copies in one process, e.g. per ``ParallelEnv`` worker).
 * :class:`YieldingParallelEnv`: a ``ParallelEnv`` whose main process sleeps while the workers step.
 * :func:`accomplish_rate` and friends: the paper's evaluation metric.
 """
@@ -27,7 +28,7 @@ from torchrl_csirl.envs.scenarios import (
     resolve_scenario,
     scenario_config_overrides,
 )
-from torchrl_csirl.envs.torchrl_env import INFO_KEYS, info_spec, make_env
+from torchrl_csirl.envs.torchrl_env import INFO_KEYS, info_spec, make_env, make_serial_env
 
 register_scenarios()
 
@@ -41,6 +42,7 @@ __all__ = [
     "info_spec",
     "make_env",
     "make_gym_env",
+    "make_serial_env",
     "normalized_accomplish_rate",
     "register_scenarios",
     "resolve_scenario",

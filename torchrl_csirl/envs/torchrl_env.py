@@ -1,9 +1,11 @@
 """TorchRL environments for the CSIRL driving scenarios."""
 from __future__ import annotations
 
+from functools import partial
+
 import torch
 from torchrl.data import Bounded, Categorical, Composite, Unbounded
-from torchrl.envs import EnvBase
+from torchrl.envs import EnvBase, SerialEnv
 from torchrl.envs.gym_like import default_info_dict_reader
 from torchrl.envs.libs.gym import GymEnv
 
@@ -13,7 +15,7 @@ from torchrl_csirl.envs.scenarios import (
     scenario_config_overrides,
 )
 
-__all__ = ["INFO_KEYS", "ScenarioInfoReader", "info_spec", "make_env"]
+__all__ = ["INFO_KEYS", "ScenarioInfoReader", "info_spec", "make_env", "make_serial_env"]
 
 #: info entries read into the TensorDict (root at reset, under "next" after a step)
 INFO_KEYS: tuple[str, ...] = (
@@ -104,6 +106,41 @@ def make_env(
     env = GymEnv(spec.gym_id, config=config, device=device)
     reader = ScenarioInfoReader(list(info_keys), spec=info_spec(info_keys))
     env.set_info_dict_reader(reader)
+    if seed is not None:
+        env.set_seed(seed)
+    return env
+
+
+def make_serial_env(name: str, num_envs: int, seed: int | None = None, **kwargs) -> EnvBase:
+    """``num_envs`` copies of a scenario stepped one after the other in this process.
+
+    A :class:`~torchrl.envs.SerialEnv` of :func:`make_env` (batch size ``[num_envs]``); for
+    ``num_envs=1`` the plain environment. As the worker environment of a
+    :class:`~torchrl.envs.ParallelEnv` (``partial(make_serial_env, name, k)`` pickles) it gives
+    ``k`` environments per worker process: the main process then runs the policy and the
+    ``ParallelEnv`` bookkeeping once per ``workers x k`` frames instead of once per ``workers``
+    frames, which is what keeps 2 workers busy on 2 cores (``benchmarks/bench_collection.py
+    --envs-per-worker``).
+
+    Args:
+        name: scenario name or gym id.
+        num_envs: environments in the batch (positive).
+        seed: seed applied with ``env.set_seed`` (consecutive seeds for the copies).
+        **kwargs: as :func:`make_env`.
+
+    Examples:
+        >>> from torchrl_csirl.envs import make_serial_env
+        >>> env = make_serial_env("merge", 2, seed=0)
+        >>> env.rollout(3, break_when_any_done=False)["observation"].shape
+        torch.Size([2, 3, 25])
+        >>> env.close()
+    """
+    if not isinstance(num_envs, int) or num_envs < 1:
+        raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}.")
+    if num_envs == 1:
+        return make_env(name, seed=seed, **kwargs)
+    resolve_scenario(name)  # fail here, not in the sub-environments
+    env = SerialEnv(num_envs, partial(make_env, name, **kwargs))
     if seed is not None:
         env.set_seed(seed)
     return env
