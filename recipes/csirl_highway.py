@@ -24,7 +24,15 @@ from omegaconf import OmegaConf
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-from csirl_utils import ConfigError, ExpertDataError, Run, load_config, make_run_dir, make_trainer  # noqa: E402
+from csirl_utils import (  # noqa: E402
+    ConfigError,
+    ExpertDataError,
+    Run,
+    flatten_config,
+    load_config,
+    make_run_dir,
+    make_trainer,
+)
 
 from torchrl_csirl.envs import normalized_accomplish_rate  # noqa: E402
 from torchrl_csirl.modules import save_policy  # noqa: E402
@@ -58,27 +66,13 @@ def build(argv: list[str]) -> Run:
     run_dir, checkpoint = _resolve_resume(cfg.checkpoint.resume)
     # the saved configuration, updated by this command line (e.g. a larger total_frames)
     saved = OmegaConf.load(os.path.join(run_dir, "config.yaml"))
-    cfg = load_config([f"{k}={v}" for k, v in _flat(saved).items() if k != "checkpoint.resume"] + argv)
+    saved = {k: "null" if v is None else v for k, v in flatten_config(saved).items()}
+    cfg = load_config([f"{k}={v}" for k, v in saved.items() if k != "checkpoint.resume"] + argv)
     counters = torch.load(os.path.join(checkpoint, "state.pt"), weights_only=False)["counters"]
     run = make_trainer(cfg, run_dir, frames_done=counters["frames"], resume_frames=counters["frames"])
     load_checkpoint(run.trainer, checkpoint, run.online_buffer if cfg.checkpoint.save_buffer else None)
     print(f"resumed {run_dir} at {counters['frames']} frames, {counters['updates']} updates", file=sys.stderr)
     return run
-
-
-def _flat(cfg) -> dict[str, object]:
-    out = {}
-
-    def visit(node, prefix):
-        for key, value in node.items():
-            name = f"{prefix}{key}"
-            if isinstance(value, dict):
-                visit(value, name + ".")
-            else:
-                out[name] = "null" if value is None else value
-
-    visit(OmegaConf.to_container(cfg), "")
-    return out
 
 
 def make_plots(run: Run) -> list[str]:

@@ -21,7 +21,8 @@ from torchrl.objectives import SoftUpdate
 
 from torchrl_csirl.curriculum import SubgoalCurriculum
 from torchrl_csirl.data import ExpertDemonstrations, import_published, load_expert_demonstrations
-from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, YieldingParallelEnv, make_env as make_scenario_env
+from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, YieldingParallelEnv, make_serial_env
+from torchrl_csirl.envs import make_env as make_scenario_env
 from torchrl_csirl.modules import EgoRelativeFeatures, make_actor, make_qvalue, make_reward_network
 from torchrl_csirl.objectives import EnsembleSACLoss, MetaRewardLoss
 from torchrl_csirl.trainers import (
@@ -74,6 +75,27 @@ def load_config(overrides: list[str] | None = None, config_dir: str = CONFIG_DIR
     return cfg
 
 
+def flatten_config(cfg: DictConfig) -> dict[str, Any]:
+    """``{"dotted.key": value}`` for every leaf of ``cfg`` (e.g. to turn it back into overrides).
+
+    Examples:
+        >>> from omegaconf import OmegaConf
+        >>> flatten_config(OmegaConf.create({"env": {"scenario": "merge"}, "seed": 0}))
+        {'env.scenario': 'merge', 'seed': 0}
+    """
+    out: dict[str, Any] = {}
+
+    def visit(node: dict, prefix: str) -> None:
+        for key, value in node.items():
+            if isinstance(value, dict):
+                visit(value, f"{prefix}{key}.")
+            else:
+                out[f"{prefix}{key}"] = value
+
+    visit(OmegaConf.to_container(cfg), "")
+    return out
+
+
 def validate_config(cfg: DictConfig) -> None:
     """Checks values that would otherwise fail late (after workers started)."""
     if cfg.env.scenario not in SCENARIOS:
@@ -101,10 +123,21 @@ def validate_config(cfg: DictConfig) -> None:
             f"collector.frames_per_batch ({cfg.collector.frames_per_batch}) must be a multiple of "
             f"collector.num_workers ({cfg.collector.num_workers})."
         )
+    k = cfg.collector.envs_per_worker
+    if k is not None:
+        if not isinstance(k, int) or k <= 0:
+            raise ConfigError(f"collector.envs_per_worker must be a positive integer or null, got {k!r}.")
+        if cfg.collector.frames_per_batch % (cfg.collector.num_workers * k):
+            raise ConfigError(
+                f"collector.frames_per_batch ({cfg.collector.frames_per_batch}) must be a multiple of "
+                f"collector.num_workers x collector.envs_per_worker ({cfg.collector.num_workers} x {k})."
+            )
     if cfg.logger.backend not in ("wandb", "csv", "none"):
         raise ConfigError(f"logger.backend must be wandb, csv or none, got {cfg.logger.backend!r}.")
     if cfg.expert.curriculum not in ("empty", "traffic"):
         raise ConfigError(f"expert.curriculum must be empty or traffic, got {cfg.expert.curriculum!r}.")
+    if cfg.csirl.matching_features not in ("ego", "position"):
+        raise ConfigError(f"csirl.matching_features must be ego or position, got {cfg.csirl.matching_features!r}.")
     if cfg.optim.utd_ratio <= 0:
         raise ConfigError(f"optim.utd_ratio must be positive, got {cfg.optim.utd_ratio}.")
 
@@ -156,27 +189,58 @@ def load_experts(cfg: DictConfig, spec: ScenarioSpec) -> ExpertDemonstrations:
 
 
 # ---------------------------------------------------------------------------------------- envs
-def make_train_env(scenario: str, num_workers: int, main_threads: int | None = None) -> EnvBase:
-    """The training environments: ``num_workers`` worker processes (a plain env for 1).
+MAX_ENVS_PER_WORKER = 4
 
-    ``main_threads`` are the torch threads of this (main) process, where the updates run while the
-    workers wait for the next batch (the collector is synchronous). ``None``: every core. TorchRL's
-    ``ParallelEnv`` would otherwise leave ``cores - workers`` threads, i.e. one on 2 cores, which
-    makes the updates ~1.4x slower here (``benchmarks/bench_update.py --threads 1`` vs ``2``).
+
+def envs_per_worker(cfg: DictConfig, spec: ScenarioSpec) -> int:
+    """``collector.envs_per_worker``, or for ``null`` the most (up to 4) that keep whole episodes.
+
+    Collection resets every environment at each batch start (exact resume), so each of the
+    ``num_workers x k`` environments steps ``frames_per_batch / (num_workers x k)`` times per batch;
+    the automatic choice keeps that at least the scenario's episode limit. More environments per
+    worker spread the main process's per-step work (policy, ``ParallelEnv`` bookkeeping) over more
+    frames (docs/PERFORMANCE.md).
+
+    Examples:
+        >>> from omegaconf import OmegaConf
+        >>> from torchrl_csirl.envs import SCENARIOS
+        >>> cfg = OmegaConf.create({"collector": {"envs_per_worker": None, "frames_per_batch": 480, "num_workers": 2}})
+        >>> envs_per_worker(cfg, SCENARIOS["merge"]), envs_per_worker(cfg, SCENARIOS["highway-fast"])
+        (4, 1)
+    """
+    if cfg.collector.envs_per_worker is not None:
+        return int(cfg.collector.envs_per_worker)
+    fpb, workers = int(cfg.collector.frames_per_batch), int(cfg.collector.num_workers)
+    fitting = [k for k in range(1, MAX_ENVS_PER_WORKER + 1)
+               if fpb % (workers * k) == 0 and fpb // (workers * k) >= spec.max_steps]
+    return max(fitting, default=1)
+
+
+def make_train_env(scenario: str, num_workers: int, main_threads: int | None = None,
+                   envs_per_worker: int = 1) -> EnvBase:
+    """The training environments: ``num_workers`` worker processes of ``envs_per_worker`` envs each.
+
+    One worker is no process: the environments step in this process. ``main_threads`` are the
+    torch threads of this (main) process, where the updates run while the workers wait for the
+    next batch (the collector is synchronous). ``None``: every core. TorchRL's ``ParallelEnv``
+    would otherwise leave ``cores - workers`` threads, i.e. one on 2 cores, which makes the
+    updates ~1.4x slower here (``benchmarks/bench_update.py --threads 1`` vs ``2``).
     """
     main_threads = main_threads or os.cpu_count() or 1
     if num_workers == 1:
         torch.set_num_threads(main_threads)
-        return make_scenario_env(scenario)
+        return make_serial_env(scenario, envs_per_worker)
     # YieldingParallelEnv: TorchRL's ParallelEnv spin-waits for its workers, taking a core from them
     return YieldingParallelEnv(
-        num_workers, partial(make_scenario_env, scenario), num_threads=main_threads, num_sub_threads=1
+        num_workers, partial(make_serial_env, scenario, envs_per_worker), num_threads=main_threads,
+        num_sub_threads=1,
     )
 
 
 def make_env(cfg: DictConfig) -> EnvBase:
-    """Training environments of ``env.scenario`` with ``collector.num_workers`` workers."""
-    return make_train_env(cfg.env.scenario, int(cfg.collector.num_workers), cfg.collector.main_threads)
+    """Training environments of ``env.scenario``: ``collector.num_workers`` x ``envs_per_worker``."""
+    return make_train_env(cfg.env.scenario, int(cfg.collector.num_workers), cfg.collector.main_threads,
+                          envs_per_worker(cfg, SCENARIOS[cfg.env.scenario]))
 
 
 def make_eval_env(cfg: DictConfig) -> EnvBase:
@@ -249,12 +313,21 @@ def make_optimizers(cfg: DictConfig, modules: LossModules) -> dict[str, torch.op
     }
 
 
+def matching_feature_indices(cfg: DictConfig, spec: ScenarioSpec) -> tuple[int, ...]:
+    """Observation entries of the nearest-expert-state search (``csirl.matching_features``).
+
+    ``ego`` (paper and code): the whole ego row, velocities included; ``position``: the ego
+    position only, the entries the matching potential measures (docs/ALGORITHM.md).
+    """
+    return spec.ego_feature_indices if cfg.csirl.matching_features == "ego" else spec.position_feature_indices
+
+
 def make_matching(cfg: DictConfig, spec: ScenarioSpec, curriculum_obs: torch.Tensor, subgoal: int) -> SubgoalMatchingReward:
     """The matching reward toward the current subgoal of the curriculum trajectory."""
     return SubgoalMatchingReward(
         curriculum_obs,
         subgoal=subgoal,
-        ego_feature_indices=spec.ego_feature_indices,
+        ego_feature_indices=matching_feature_indices(cfg, spec),
         position_feature_indices=spec.position_feature_indices,
         scale=spec.matching_scale,
         target=cfg.csirl.matching_target,

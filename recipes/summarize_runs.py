@@ -1,8 +1,10 @@
 """Aggregate finished runs of ``recipes/csirl_highway.py``: mean and std over seeds, per scenario.
 
 Reads ``summary.json`` of every run directory given (or found under a folder), groups the runs by
-(scenario, method, preset) and prints a Markdown table (to stderr) and, last, one JSON line with
-the per-group statistics.
+(scenario, method, preset, variant) and prints a Markdown table (to stderr) and, last, one JSON
+line with the per-group statistics. The *variant* lists the run's configuration values that differ
+from its preset's defaults (read from the run's ``config.yaml``; seeds, logging, checkpointing and
+thread counts do not count), e.g. ``model.ego_relative_features=true``.
 
 Usage::
 
@@ -23,6 +25,15 @@ import math
 import os
 import sys
 from collections import defaultdict
+
+from omegaconf import OmegaConf
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+from csirl_utils import flatten_config, load_config  # noqa: E402
+
+#: configuration keys that do not change what a run learns (or are shown elsewhere in the key)
+NOT_A_VARIANT = ("seed", "preset", "env.scenario", "csirl.intrinsic", "collector.main_threads", "logger.", "checkpoint.")
 
 #: summary fields reported as mean / std over seeds
 FIELDS = (
@@ -59,6 +70,24 @@ def find_summaries(paths: list[str]) -> list[str]:
     return found
 
 
+def variant(run_dir: str, preset: str) -> str:
+    """``key=value`` of the run's configuration entries that differ from ``preset``'s defaults.
+
+    Empty for a run of the preset as it is, or when the run directory has no ``config.yaml``.
+    """
+    path = os.path.join(run_dir, "config.yaml")
+    if not os.path.isfile(path):
+        return ""
+    run = flatten_config(OmegaConf.load(path))
+    default = flatten_config(load_config([f"preset={preset}"]))
+    changed = [
+        f"{key}={'null' if value is None else str(value).lower() if isinstance(value, bool) else value}"
+        for key, value in sorted(run.items())
+        if not key.startswith(NOT_A_VARIANT) and default.get(key, object()) != value
+    ]
+    return " ".join(changed)
+
+
 def mean_std(values: list[float]) -> dict[str, float]:
     """Mean and sample standard deviation (0 for a single value)."""
     mean = sum(values) / len(values)
@@ -67,10 +96,11 @@ def mean_std(values: list[float]) -> dict[str, float]:
 
 
 def summarize(summaries: list[dict]) -> dict[str, dict]:
-    """Group run summaries by ``scenario/method/preset``; mean/std of :data:`FIELDS` per group."""
+    """Group run summaries by ``scenario/method/preset[ variant]``; mean/std of :data:`FIELDS` per group."""
     groups: dict[str, list[dict]] = defaultdict(list)
     for s in summaries:
-        groups[f"{s['scenario']}/{s['method']}/{s['preset']}"].append(s)
+        key = f"{s['scenario']}/{s['method']}/{s['preset']}"
+        groups[f"{key} {s['variant']}" if s.get("variant") else key].append(s)
     out = {}
     for key, runs in sorted(groups.items()):
         stats: dict[str, object] = {"seeds": sorted(int(r["seed"]) for r in runs)}
@@ -108,7 +138,9 @@ def main(argv: list[str] | None = None) -> dict[str, dict]:
     summaries = []
     for path in find_summaries(args.paths):
         with open(path) as f:
-            summaries.append(json.load(f))
+            summary = json.load(f)
+        summary["variant"] = variant(os.path.dirname(path), summary.get("preset", "default"))
+        summaries.append(summary)
     stats = summarize(summaries)
     print(markdown_table(stats), file=sys.stderr)
     print(json.dumps(stats))

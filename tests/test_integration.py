@@ -101,3 +101,28 @@ def test_demo_runs_end_to_end(tmp_path) -> None:
     assert result["updates"] == 6 and result["frames"] == 200
     assert 0.0 <= result["accomplish_rate"] <= 1.0
     assert all(a <= b for a, b in zip(result["subgoals"], result["subgoals"][1:]))
+
+
+def test_velocity_in_the_matching_search_penalises_forward_driving_on_merge() -> None:
+    """Why ``csirl.matching_features=position`` exists (docs/ALGORITHM.md, "matching features").
+
+    Driving straight on at the initial 30 m/s (the empty-road expert accelerates to 40 m/s), the
+    nearest expert state found on the whole ego row (velocities included) stays an early one while
+    the car moves on, so the target lies *behind* it and moving forward earns a negative matching
+    reward. Searching on the position alone, forward progress is always rewarded.
+    """
+    spec = SCENARIOS["merge"]
+    env = make_env("merge", seed=3)
+    rollout = env.rollout(40, lambda td: td.set("action", torch.zeros(2)), break_when_any_done=False)
+    env.close()
+    x, next_x = rollout["observation"][:, 1], rollout["next", "observation"][:, 1]
+    assert (next_x > x).all()  # the car moves forward at every step
+    curriculum = load_expert_demonstrations("merge", num_trajectories=1).trajectory_observations(0, include_final=True)
+    rewards = {}
+    for name, search in (("ego", spec.ego_feature_indices), ("position", spec.position_feature_indices)):
+        transform = SubgoalMatchingReward(curriculum, subgoal=1, ego_feature_indices=search,
+                                          position_feature_indices=spec.position_feature_indices,
+                                          scale=spec.matching_scale)
+        rewards[name] = transform(rollout.clone())["next", "matching_reward"].flatten()
+    assert (rewards["ego"] < 0).sum() >= 10
+    assert (rewards["position"] > 0).all()

@@ -194,6 +194,9 @@ def test_malformed_expert_file_is_a_clear_error(tmp_path, content):
         (["seed"], "not of the form key=value"),
         (["preset=fastest"], "preset must be one of"),
         (["collector.main_threads=0"], "collector.main_threads must be a positive integer or null"),
+        (["collector.envs_per_worker=0"], "collector.envs_per_worker must be a positive integer or null"),
+        (["csirl.matching_features=speed"], "csirl.matching_features must be ego or position"),
+        (["collector.envs_per_worker=3"], "multiple of collector.num_workers x collector.envs_per_worker"),
     ],
 )
 def test_config_errors_name_the_problem(override, message):
@@ -205,6 +208,10 @@ def test_paper_preset_is_the_published_procedure():
     cfg = csirl_utils.load_config(["preset=paper"])
     assert cfg.csirl.updates_per_round == 20000 and cfg.csirl.meta_every == 1
     assert cfg.replay_buffer.clear_each_round and cfg.optim.utd_ratio == 1.0
+    spec = csirl_utils.SCENARIOS["merge"]
+    assert csirl_utils.matching_feature_indices(cfg, spec) == spec.ego_feature_indices  # published search
+    position = csirl_utils.load_config(["csirl.matching_features=position"])
+    assert csirl_utils.matching_feature_indices(position, spec) == spec.position_feature_indices
     assert csirl_utils.total_frames(cfg, curriculum_length=50) == 50 * (20000 + 1280)
     assert csirl_utils.load_config(["preset=paper", "csirl.meta_every=4"]).csirl.meta_every == 4
 
@@ -220,3 +227,64 @@ def test_ego_relative_features_switch_reaches_every_network(enabled):
     for net in (modules.actor, modules.sac.qvalue_network, modules.reward_network):
         found = [m for m in net.modules() if isinstance(m, EgoRelativeFeatures)]
         assert len(found) == (1 if enabled else 0)
+
+
+@pytest.mark.parametrize(
+    "scenario, overrides, expected",
+    [
+        ("merge", [], 2),  # 500 frames, 2 workers: 125 steps per env >= 60
+        ("highway-fast", [], 1),  # 150-step episodes: 2 envs per worker would cut them at 125
+        ("merge", ["collector.frames_per_batch=480"], 4),
+        ("intersection", ["collector.frames_per_batch=480"], 3),  # 80 steps >= 65; 4 would give 60
+        ("merge", ["collector.frames_per_batch=100"], 1),
+        ("merge", ["collector.envs_per_worker=5"], 5),  # explicit: taken as given
+    ],
+)
+def test_envs_per_worker_keeps_whole_episodes_per_batch(scenario, overrides, expected):
+    cfg = csirl_utils.load_config([f"env.scenario={scenario}", *overrides])
+    assert csirl_utils.envs_per_worker(cfg, csirl_utils.SCENARIOS[scenario]) == expected
+
+
+def test_collection_with_several_envs_per_worker_is_reproducible():
+    """2 workers x 2 envs: a seeded batch is the same twice (what exact resume relies on)."""
+    cfg = csirl_utils.load_config(["collector.frames_per_batch=100", "collector.init_random_frames=0",
+                                   "collector.envs_per_worker=2"])
+    torch.manual_seed(0)
+    actor = csirl_utils.make_loss_modules(cfg, csirl_utils.SCENARIOS["merge"]).actor
+    batches = []
+    env = csirl_utils.make_env(cfg)
+    collector = csirl_utils.make_collector(cfg, env, actor)
+    try:
+        iterator = iter(collector)
+        for _ in range(2):
+            collector.set_seed(11)
+            collector.reset()
+            torch.manual_seed(1)
+            batches.append(next(iterator))
+    finally:
+        collector.shutdown()
+    assert batches[0].batch_size == torch.Size([2, 2, 25])
+    torch.testing.assert_close(batches[0]["next", "observation"], batches[1]["next", "observation"])
+    # the four environments are seeded differently
+    firsts = batches[0]["observation"][..., 0, :].reshape(4, -1)
+    assert len({tuple(row.tolist()) for row in firsts}) == 4
+
+
+def test_summarize_runs_groups_seeds_by_configuration_variant(tmp_path, capsys):
+    import summarize_runs
+    from omegaconf import OmegaConf
+
+    for name, overrides, rate in [("a", [], 0.5), ("b", [], 0.7),
+                                  ("c", ["model.ego_relative_features=true", "collector.main_threads=1"], 0.9)]:
+        run_dir = tmp_path / name
+        run_dir.mkdir()
+        cfg = csirl_utils.load_config([f"seed={ord(name)}", f"logger.output_dir={tmp_path}", *overrides])
+        OmegaConf.save(cfg, run_dir / "config.yaml")
+        (run_dir / "summary.json").write_text(json.dumps(
+            {"scenario": "merge", "method": "csirl", "preset": "default", "seed": ord(name), "accomplish_rate": rate}))
+    assert summarize_runs.variant(str(tmp_path / "c"), "default") == "model.ego_relative_features=true"
+    stats = summarize_runs.main([str(tmp_path)])
+    assert set(stats) == {"merge/csirl/default", "merge/csirl/default model.ego_relative_features=true"}
+    assert stats["merge/csirl/default"]["accomplish_rate"]["mean"] == pytest.approx(0.6)
+    assert stats["merge/csirl/default"]["seeds"] == [ord("a"), ord("b")]
+    assert "| merge/csirl/default model.ego_relative_features=true | 99 |" in capsys.readouterr().err
