@@ -119,13 +119,12 @@ def make_serial_env(name: str, num_envs: int, seed: int | None = None, **kwargs)
     :class:`~torchrl.envs.ParallelEnv` (``partial(make_serial_env, name, k)`` pickles) it gives
     ``k`` environments per worker process: the main process then runs the policy and the
     ``ParallelEnv`` bookkeeping once per ``workers x k`` frames instead of once per ``workers``
-    frames, which is what keeps 2 workers busy on 2 cores (``benchmarks/bench_collection.py
-    --envs-per-worker``).
+    frames (``benchmarks/bench_collection.py --envs-per-worker``, docs/PERFORMANCE.md).
 
     Args:
         name: scenario name or gym id.
         num_envs: environments in the batch (positive).
-        seed: seed applied with ``env.set_seed`` (consecutive seeds for the copies).
+        seed: seed applied with ``env.set_seed`` (each copy gets its own seed derived from it).
         **kwargs: as :func:`make_env`.
 
     Examples:

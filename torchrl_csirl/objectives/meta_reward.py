@@ -41,23 +41,24 @@ def sgd_lookahead(
     return _sgd_lookahead_and_grads(loss, params, lr, create_graph=create_graph)[0]
 
 
+def _grads_or_zeros(
+    loss: torch.Tensor, params: list[torch.Tensor], *, create_graph: bool = False, retain_graph: bool | None = None
+) -> list[torch.Tensor]:
+    """``d loss / d params``, zeros for the parameters ``loss`` does not depend on."""
+    grads = torch.autograd.grad(loss, params, create_graph=create_graph, retain_graph=retain_graph, allow_unused=True)
+    return [torch.zeros_like(p) if g is None else g for p, g in zip(params, grads)]
+
+
 def _sgd_lookahead_and_grads(
     loss: torch.Tensor, params: TensorDictBase, lr: float, *, create_graph: bool = True
 ) -> tuple[TensorDictBase, list[torch.Tensor]]:
     keys = list(params.keys(True, True))
     tensors = [params.get(k) for k in keys]
-    grads = torch.autograd.grad(loss, tensors, create_graph=create_graph, allow_unused=True)
-    grads = [torch.zeros_like(t) if g is None else g for t, g in zip(tensors, grads)]
+    grads = _grads_or_zeros(loss, tensors, create_graph=create_graph)
     out = params.empty()
     for key, tensor, grad in zip(keys, tensors, grads):
         out.set(key, tensor - lr * grad)
     return out, grads
-
-
-def _grads_or_zeros(loss: torch.Tensor, params: list[torch.Tensor], retain_graph: bool = False) -> list[torch.Tensor]:
-    """``d loss / d params``, zeros for the parameters ``loss`` does not depend on."""
-    grads = torch.autograd.grad(loss, params, allow_unused=True, retain_graph=retain_graph)
-    return [torch.zeros_like(p) if g is None else g for p, g in zip(params, grads)]
 
 
 def _norm(tensors: list[torch.Tensor]) -> torch.Tensor:
