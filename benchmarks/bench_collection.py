@@ -14,8 +14,7 @@ already run with one thread each, ``ParallelEnv(num_sub_threads=1)``).
 Usage::
 
     python benchmarks/bench_collection.py [--scenario merge] [--frames 4000] [--frames-per-batch 1000]
-                                          [--envs-per-worker 1] [--presleep 0.5] [--main-threads 1]
-                                          [--pipe] [--spin] [--profile]
+                                          [--envs-per-worker 1] [--main-threads 1] [--pipe] [--spin] [--profile]
 
 ``--envs-per-worker k`` gives every worker process ``k`` environments (``make_serial_env``), for
 both collectors alike: the main process then does its per-step work once per ``workers x k`` frames.
@@ -81,7 +80,7 @@ def _cpu_seconds(pids: list[int]) -> float:
 
 def make_parallel_env(
     scenario: str, workers: int, seed: int, main_threads: int | None, use_buffers: bool = True,
-    spin: bool = False, envs_per_worker: int = 1, presleep: float = 0.5,
+    spin: bool = False, envs_per_worker: int = 1,
 ) -> ParallelEnv:
     """``workers`` spawned processes of ``envs_per_worker`` scenario copies each.
 
@@ -96,14 +95,13 @@ def make_parallel_env(
     By default the env is our :class:`~torchrl_csirl.envs.YieldingParallelEnv` (shared memory,
     but the main process sleeps between polls); ``spin=True`` measures TorchRL's own.
     """
-    extra = {} if spin else {"presleep": presleep}
-    env = (ParallelEnv if spin else YieldingParallelEnv)(
+    cls = ParallelEnv if spin else YieldingParallelEnv
+    env = cls(
         workers,
         partial(make_serial_env, scenario, envs_per_worker),
         num_threads=main_threads,
         num_sub_threads=1,
         use_buffers=use_buffers,
-        **extra,
     )
     env.set_seed(seed)
     return env
@@ -114,14 +112,13 @@ class Run:
 
     def __init__(self, scenario: str, workers: int, frames_per_batch: int, seed: int,
                  main_threads: int | None, profile: bool, use_buffers: bool = True, spin: bool = False,
-                 envs_per_worker: int = 1, presleep: float = 0.5) -> None:
+                 envs_per_worker: int = 1) -> None:
         spec = SCENARIOS[scenario]
         torch.manual_seed(seed)  # same actor weights for every run
         policy = make_actor(spec.obs_dim, spec.action_dim)
         self.timed = TimedPolicy(policy) if profile else None
         self.name = f"{scenario} {workers}x{envs_per_worker}"
-        self.env = make_parallel_env(scenario, workers, seed, main_threads, use_buffers, spin, envs_per_worker,
-                                     presleep)
+        self.env = make_parallel_env(scenario, workers, seed, main_threads, use_buffers, spin, envs_per_worker)
         self.collector = Collector(
             self.env,
             self.timed if profile else policy,
@@ -181,8 +178,6 @@ def main() -> None:
     parser.add_argument("--frames-per-batch", type=int, default=1000)
     parser.add_argument("--envs-per-worker", type=int, default=1,
                         help="environments stepped by each worker process (both collectors)")
-    parser.add_argument("--presleep", type=float, default=0.5,
-                        help="YieldingParallelEnv(presleep=...): share of the expected wait slept before polling")
     parser.add_argument("--main-threads", type=int, default=1,
                         help="torch threads of the main process (0: leave torch's default)")
     parser.add_argument("--seed", type=int, default=0)
@@ -199,7 +194,7 @@ def main() -> None:
     main_threads = args.main_threads if args.main_threads > 0 else None
     runs = {
         w: Run(args.scenario, w, args.frames_per_batch, args.seed, main_threads, args.profile, not args.pipe, args.spin,
-               args.envs_per_worker, args.presleep)
+               args.envs_per_worker)
         for w in (1, 2)
     }
     try:
@@ -222,7 +217,6 @@ def main() -> None:
         "frames": args.frames,
         "frames_per_batch": args.frames_per_batch,
         "envs_per_worker": args.envs_per_worker,
-        "presleep": None if args.spin else args.presleep,
         "fps_1_worker": results[1]["fps"],
         "fps_2_workers": results[2]["fps"],
         "speedup": round(results[2]["fps"] / results[1]["fps"], 3),

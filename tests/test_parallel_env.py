@@ -38,21 +38,3 @@ def test_yielding_parallel_env_matches_serial_env():
 def test_yielding_parallel_env_rejects_negative_poll_interval():
     with pytest.raises(ValueError, match="poll_interval"):
         YieldingParallelEnv(2, partial(make_env, "merge"), poll_interval=-1.0)
-
-
-@pytest.mark.parametrize("presleep", [-0.1, 1.0])
-def test_yielding_parallel_env_rejects_presleep_outside_unit_interval(presleep):
-    with pytest.raises(ValueError, match="presleep"):
-        YieldingParallelEnv(2, partial(make_env, "merge"), presleep=presleep)
-
-
-def test_presleep_learns_the_workers_step_time_and_keeps_the_data():
-    """Same data with and without the pre-sleep; the wait estimate tracks the steps."""
-    serial = SerialEnv(2, partial(make_env, "merge"))
-    parallel = YieldingParallelEnv(2, partial(make_env, "merge"), presleep=0.9)
-    try:
-        torch.testing.assert_close(_rollout(parallel), _rollout(serial), rtol=0, atol=0)
-        assert 0 < parallel._wait_estimate < 1.0  # seconds: a merge step takes milliseconds
-    finally:
-        serial.close()
-        parallel.close()

@@ -20,18 +20,11 @@ __all__ = ["YieldingParallelEnv"]
 class YieldingParallelEnv(ParallelEnv):
     """``ParallelEnv`` that sleeps instead of spinning while waiting for its workers.
 
-    Each wait starts with one sleep of ``presleep`` times a running estimate of how long the
-    workers take (an exponential average of past waits), then polls every ``poll_interval``
-    seconds. With every core busy stepping, each wake-up of the main process preempts a worker;
-    sleeping through most of the expected step in one go keeps those wake-ups to a few per step.
-
     Args:
         *args: as :class:`~torchrl.envs.ParallelEnv` (``num_workers``, ``create_env_fn``, ...).
         poll_interval: seconds slept between two polls of the workers' done flags. A step of a
             driving scenario takes 1.5-8 ms; the default 50 us adds at most the sleep overshoot
             (~0.1 ms on Linux) per step. ``0`` yields the CPU (``time.sleep(0)``) between polls.
-        presleep: fraction (in ``[0, 1)``) of the estimated wait slept before polling starts;
-            ``0`` polls from the start.
         **kwargs: as :class:`~torchrl.envs.ParallelEnv`.
 
     Examples:
@@ -44,18 +37,11 @@ class YieldingParallelEnv(ParallelEnv):
         >>> env.close()
     """
 
-    #: weight of the newest wait in the running estimate
-    WAIT_AVERAGING = 0.1
-
-    def __init__(self, *args: Any, poll_interval: float = 5e-5, presleep: float = 0.5, **kwargs: Any) -> None:
+    def __init__(self, *args: Any, poll_interval: float = 5e-5, **kwargs: Any) -> None:
         if poll_interval < 0:
             raise ValueError(f"poll_interval must be >= 0 seconds, got {poll_interval}.")
-        if not 0 <= presleep < 1:
-            raise ValueError(f"presleep must be in [0, 1), got {presleep}.")
         super().__init__(*args, **kwargs)
         self.poll_interval = float(poll_interval)
-        self.presleep = float(presleep)
-        self._wait_estimate = 0.0
 
     def _wait_for_workers(self, workers_range) -> None:
         if not self._use_buffers:  # the pipe mode already blocks in the OS
@@ -64,8 +50,6 @@ class YieldingParallelEnv(ParallelEnv):
         flags, index = self._shm_done_flags, self._worker_indices
         workers = list(workers_range)
         start = time.monotonic()
-        if self.presleep and self._wait_estimate > self.poll_interval:
-            time.sleep(self.presleep * self._wait_estimate)
         polls = 0
         while not all(flags[index[i]] for i in workers):
             time.sleep(self.poll_interval)
@@ -74,8 +58,6 @@ class YieldingParallelEnv(ParallelEnv):
                 self._check_workers(workers, start, timeout)
         for i in workers:
             flags[index[i]] = 0
-        waited = time.monotonic() - start
-        self._wait_estimate += self.WAIT_AVERAGING * (waited - self._wait_estimate)
 
     def _check_workers(self, workers: list[int], start: float, timeout: float) -> None:
         if time.monotonic() - start > timeout:
