@@ -288,3 +288,16 @@ def test_summarize_runs_groups_seeds_by_configuration_variant(tmp_path, capsys):
     assert stats["merge/csirl/default"]["accomplish_rate"]["mean"] == pytest.approx(0.6)
     assert stats["merge/csirl/default"]["seeds"] == [ord("a"), ord("b")]
     assert "| merge/csirl/default model.ego_relative_features=true | 99 |" in capsys.readouterr().err
+
+
+def test_meta_gradient_balance_reports_both_parts(capsys):
+    """recipes/meta_gradient_balance.py: with the published L1 weight the regulariser's part dominates."""
+    import meta_gradient_balance
+
+    out = meta_gradient_balance.main(["--frames", "60", "--steps", "2", "replay_buffer.batch_size=32"])
+    assert json.loads(capsys.readouterr().out.strip().splitlines()[-1]) == out
+    assert out["meta_grad_norm_imitation"] > 0 and out["meta_grad_norm_l1"] > 0
+    assert out["l1_to_imitation_ratio"] > 100  # published constants: the L1 term swamps imitation
+    off = meta_gradient_balance.main(["--frames", "60", "--steps", "2", "replay_buffer.batch_size=32",
+                                      "csirl.reward_l1_coef=0"])
+    assert off["meta_grad_norm_l1"] == 0 and off["meta_grad_norm_imitation"] > 0
