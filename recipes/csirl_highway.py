@@ -28,8 +28,8 @@ from csirl_utils import (  # noqa: E402
     ConfigError,
     ExpertDataError,
     Run,
-    flatten_config,
     load_config,
+    load_run_config,
     make_run_dir,
     make_trainer,
 )
@@ -65,9 +65,7 @@ def build(argv: list[str]) -> Run:
         return make_trainer(cfg, run_dir)
     run_dir, checkpoint = _resolve_resume(cfg.checkpoint.resume)
     # the saved configuration, updated by this command line (e.g. a larger total_frames)
-    saved = OmegaConf.load(os.path.join(run_dir, "config.yaml"))
-    saved = {k: "null" if v is None else v for k, v in flatten_config(saved).items()}
-    cfg = load_config([f"{k}={v}" for k, v in saved.items() if k != "checkpoint.resume"] + argv)
+    cfg = load_run_config(run_dir, argv)
     counters = torch.load(os.path.join(checkpoint, "state.pt"), weights_only=False)["counters"]
     run = make_trainer(cfg, run_dir, frames_done=counters["frames"], resume_frames=counters["frames"])
     load_checkpoint(run.trainer, checkpoint, run.online_buffer if cfg.checkpoint.save_buffer else None)

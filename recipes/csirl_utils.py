@@ -96,6 +96,16 @@ def flatten_config(cfg: DictConfig) -> dict[str, Any]:
     return out
 
 
+def load_run_config(run_dir: str, overrides: list[str] | None = None) -> DictConfig:
+    """The configuration saved in ``run_dir/config.yaml``, updated by ``overrides``.
+
+    ``checkpoint.resume`` of the saved configuration is dropped (the caller decides).
+    """
+    saved = flatten_config(OmegaConf.load(os.path.join(run_dir, "config.yaml")))
+    saved_overrides = [f"{k}={'null' if v is None else v}" for k, v in saved.items() if k != "checkpoint.resume"]
+    return load_config(saved_overrides + list(overrides or []))
+
+
 def validate_config(cfg: DictConfig) -> None:
     """Checks values that would otherwise fail late (after workers started)."""
     if cfg.env.scenario not in SCENARIOS:

@@ -2,7 +2,7 @@
 
 ``python recipes/meta_gradient_balance.py [key=value ...]`` (the recipe's configuration keys, e.g.
 ``env.scenario=roundabout csirl.reward_l1_coef=1e-5``; ``checkpoint.resume=<run dir>`` loads a
-trained run's actor, critics and reward network instead of fresh ones).
+trained run's configuration and its actor, critics and reward network instead of fresh ones).
 
 CSIRL's meta-objective is ``scale * (BC(theta') + reward_l1_coef * mean |r_w|)``. The imitation
 part reaches ``w`` only through two inner SGD steps of size ``lr_inner`` (``w -> phi' -> theta'``),
@@ -25,7 +25,7 @@ import torch
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-from csirl_utils import load_config, load_experts, make_loss_modules, make_matching  # noqa: E402
+from csirl_utils import load_config, load_experts, load_run_config, make_loss_modules, make_matching  # noqa: E402
 
 from torchrl_csirl.envs import SCENARIOS, make_env  # noqa: E402
 from torchrl_csirl.objectives import MetaRewardLoss  # noqa: E402
@@ -43,8 +43,10 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     parser.add_argument("--frames", type=int, default=600, help="frames rolled out with the actor")
     parser.add_argument("--steps", type=int, default=10, help="meta-losses averaged")
     args, overrides = parser.parse_known_args(argv)
-    cfg = load_config([o for o in overrides if not o.startswith("checkpoint.resume=")])
     resume = next((o.split("=", 1)[1] for o in overrides if o.startswith("checkpoint.resume=")), None)
+    overrides = [o for o in overrides if not o.startswith("checkpoint.resume=")]
+    # a trained run: its own configuration (networks, scenario), updated by the command line
+    cfg = load_run_config(resume, overrides) if resume else load_config(overrides)
     torch.manual_seed(int(cfg.seed))
     spec = SCENARIOS[cfg.env.scenario]
     demos = load_experts(cfg, spec)

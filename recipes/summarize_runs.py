@@ -20,6 +20,7 @@ Examples:
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import os
@@ -70,6 +71,11 @@ def find_summaries(paths: list[str]) -> list[str]:
     return found
 
 
+@functools.lru_cache(maxsize=None)
+def _preset_defaults(preset: str) -> dict[str, object]:
+    return flatten_config(load_config([f"preset={preset}"]))
+
+
 def variant(run_dir: str, preset: str) -> str:
     """``key=value`` of the run's configuration entries that differ from ``preset``'s defaults.
 
@@ -79,7 +85,7 @@ def variant(run_dir: str, preset: str) -> str:
     if not os.path.isfile(path):
         return ""
     run = flatten_config(OmegaConf.load(path))
-    default = flatten_config(load_config([f"preset={preset}"]))
+    default = _preset_defaults(preset)
     changed = [
         f"{key}={'null' if value is None else str(value).lower() if isinstance(value, bool) else value}"
         for key, value in sorted(run.items())

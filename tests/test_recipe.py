@@ -301,3 +301,12 @@ def test_meta_gradient_balance_reports_both_parts(capsys):
     off = meta_gradient_balance.main(["--frames", "60", "--steps", "2", "replay_buffer.batch_size=32",
                                       "csirl.reward_l1_coef=0"])
     assert off["meta_grad_norm_l1"] == 0 and off["meta_grad_norm_imitation"] > 0
+
+
+def test_meta_gradient_balance_of_a_trained_run(full_run):
+    """``checkpoint.resume=<run>`` reads the run's configuration and networks."""
+    import meta_gradient_balance
+
+    out = meta_gradient_balance.main(["--frames", "60", "--steps", "1", f"checkpoint.resume={full_run['run_dir']}"])
+    assert out["checkpoint"] == full_run["run_dir"] and out["scenario"] == full_run["scenario"]
+    assert out["meta_grad_norm_l1"] > 0
