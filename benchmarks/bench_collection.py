@@ -1,4 +1,4 @@
-"""Collection throughput: frames/s of a TorchRL ``Collector`` over a ``ParallelEnv`` of 1 vs 2 workers.
+"""Collection throughput: frames/s of a collector with 1 vs 2 worker processes.
 
 Both runs use the same scenario, the same CSIRL actor (``make_actor``, tanh-Gaussian, sampled
 actions), the same number of frames and frames per batch, in the same process. Both collectors
@@ -6,18 +6,28 @@ are built and first gather one warm-up batch each (worker start-up, first resets
 spawned workers), which is excluded from the timing; then ``--frames`` frames are collected by
 each, batches alternating between the two so that both see the same machine load.
 
-The main process runs the policy and the ``ParallelEnv`` bookkeeping while the workers step
-highway-env; on a 2-core machine the main process must not compete with the workers for the
-cores, hence ``--main-threads 1`` (``torch.set_num_threads`` in the main process; the workers
-already run with one thread each, ``ParallelEnv(num_sub_threads=1)``).
+Two ways to use worker processes:
+
+* default, what the recipe does (``recipes/csirl_utils.make_collector``): TorchRL's
+  multi-process synchronous collector, ``Collector([env_fn] * W, policy, num_collectors=W,
+  sync=True)``. Every worker holds its environments *and a copy of the policy* (weights in
+  shared memory) and collects its share of the batch on its own; the main process only
+  gathers the batches.
+* ``--parallel-env``: one ``Collector`` over a ``ParallelEnv`` of W workers. The policy runs in
+  the main process on the whole batch at every step, the workers only step the environments,
+  and the two alternate (docs/PERFORMANCE.md explains why this scales worse). By default the
+  env is our ``YieldingParallelEnv``; ``--spin`` measures TorchRL's own ``ParallelEnv``, whose
+  main process spin-waits, ``--pipe`` its pipe mode. The main process runs with
+  ``--main-threads`` torch threads (1: it must not compete with the workers for the cores).
 
 Usage::
 
     python benchmarks/bench_collection.py [--scenario merge] [--frames 4000] [--frames-per-batch 1000]
-                                          [--envs-per-worker 1] [--main-threads 1] [--pipe] [--spin] [--profile]
+                                          [--envs-per-worker 1] [--parallel-env [--main-threads 1]
+                                          [--pipe] [--spin]] [--profile]
 
 ``--envs-per-worker k`` gives every worker process ``k`` environments (``make_serial_env``), for
-both collectors alike: the main process then does its per-step work once per ``workers x k`` frames.
+both collectors alike. ``--profile`` (``--parallel-env`` only) also reports the policy's time.
 
 Progress goes to stderr; the last line printed is a JSON object
 ``{"scenario", "frames", "fps_1_worker", "fps_2_workers", "speedup", "load_avg", ...}``.
@@ -39,6 +49,7 @@ from torchrl.envs import ParallelEnv
 
 from torchrl_csirl.envs import SCENARIOS, YieldingParallelEnv, make_serial_env
 from torchrl_csirl.modules import make_actor
+from torchrl_csirl.trainers import shutdown_collector
 
 
 def log(message: str) -> None:
@@ -108,24 +119,38 @@ def make_parallel_env(
 
 
 class Run:
-    """One collector (``workers`` env processes) and its timing."""
+    """One collector (``workers`` worker processes) and its timing."""
 
     def __init__(self, scenario: str, workers: int, frames_per_batch: int, seed: int,
                  main_threads: int | None, profile: bool, use_buffers: bool = True, spin: bool = False,
-                 envs_per_worker: int = 1) -> None:
+                 envs_per_worker: int = 1, parallel_env: bool = False) -> None:
         spec = SCENARIOS[scenario]
         torch.manual_seed(seed)  # same actor weights for every run
         policy = make_actor(spec.obs_dim, spec.action_dim)
         self.timed = TimedPolicy(policy) if profile else None
         self.name = f"{scenario} {workers}x{envs_per_worker}"
-        self.env = make_parallel_env(scenario, workers, seed, main_threads, use_buffers, spin, envs_per_worker)
-        self.collector = Collector(
-            self.env,
-            self.timed if profile else policy,
-            frames_per_batch=frames_per_batch,
-            total_frames=-1,
-            auto_register_policy_transforms=False,
-        )
+        if parallel_env:
+            self.env = make_parallel_env(scenario, workers, seed, main_threads, use_buffers, spin, envs_per_worker)
+            self.collector = Collector(
+                self.env,
+                self.timed if profile else policy,
+                frames_per_batch=frames_per_batch,
+                total_frames=-1,
+                auto_register_policy_transforms=False,
+            )
+        else:
+            self.env = None
+            self.collector = Collector(
+                [partial(make_serial_env, scenario, envs_per_worker)] * workers,
+                policy,
+                num_collectors=workers,
+                sync=True,
+                frames_per_batch=frames_per_batch,
+                total_frames=-1,
+                num_sub_threads=1,
+                auto_register_policy_transforms=False,
+            )
+            self.collector.set_seed(seed)
         self.iterator = iter(self.collector)
         self.seconds = 0.0
         self.frames = 0
@@ -140,7 +165,8 @@ class Run:
             self.timed.seconds, self.timed.calls = 0.0, 0
 
     def _pids(self) -> list[int]:
-        return [os.getpid()] + [w.pid for w in self.env._workers if w.pid is not None]
+        procs = self.env._workers if self.env is not None else self.collector.procs
+        return [os.getpid()] + [w.pid for w in procs if w.pid is not None]
 
     def timed_batch(self) -> None:
         pids = self._pids()
@@ -166,8 +192,8 @@ class Run:
         return out
 
     def close(self) -> None:
-        self.collector.shutdown()
-        if not self.env.is_closed:
+        shutdown_collector(self.collector)
+        if self.env is not None and not self.env.is_closed:
             self.env.close()
 
 
@@ -178,6 +204,9 @@ def main() -> None:
     parser.add_argument("--frames-per-batch", type=int, default=1000)
     parser.add_argument("--envs-per-worker", type=int, default=1,
                         help="environments stepped by each worker process (both collectors)")
+    parser.add_argument("--parallel-env", action="store_true",
+                        help="a Collector over a ParallelEnv (policy in the main process) instead of the "
+                             "multi-process collector (policy in every worker) the recipe uses")
     parser.add_argument("--main-threads", type=int, default=1,
                         help="torch threads of the main process (0: leave torch's default)")
     parser.add_argument("--seed", type=int, default=0)
@@ -189,12 +218,14 @@ def main() -> None:
                         help="TorchRL's own ParallelEnv, whose main process spin-waits for the workers "
                              "(default: torchrl_csirl's YieldingParallelEnv, which sleeps between polls)")
     args = parser.parse_args()
+    if not args.parallel_env and (args.profile or args.pipe or args.spin):
+        parser.error("--profile, --pipe and --spin measure the ParallelEnv collector: add --parallel-env")
     if args.main_threads > 0:
         torch.set_num_threads(args.main_threads)
     main_threads = args.main_threads if args.main_threads > 0 else None
     runs = {
         w: Run(args.scenario, w, args.frames_per_batch, args.seed, main_threads, args.profile, not args.pipe, args.spin,
-               args.envs_per_worker)
+               args.envs_per_worker, args.parallel_env)
         for w in (1, 2)
     }
     try:
@@ -222,8 +253,9 @@ def main() -> None:
         "speedup": round(results[2]["fps"] / results[1]["fps"], 3),
         "cores_used_1_worker": results[1]["cores_used"],
         "cores_used_2_workers": results[2]["cores_used"],
+        "collector": ("Collector over " + ("ParallelEnv" if args.spin else "YieldingParallelEnv")
+                      if args.parallel_env else "Collector(num_collectors=W, sync=True)"),
         "use_buffers": not args.pipe,
-        "parallel_env": "ParallelEnv" if args.spin else "YieldingParallelEnv",
         "main_threads": args.main_threads if args.main_threads > 0 else "default",
         "cpu_count": os.cpu_count(),
         "load_avg_before": round(load_before, 2),

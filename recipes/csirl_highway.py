@@ -36,7 +36,7 @@ from csirl_utils import (  # noqa: E402
 
 from torchrl_csirl.envs import normalized_accomplish_rate  # noqa: E402
 from torchrl_csirl.modules import save_policy  # noqa: E402
-from torchrl_csirl.trainers import TrainingDivergedError, load_checkpoint  # noqa: E402
+from torchrl_csirl.trainers import TrainingDivergedError, load_checkpoint, shutdown_collector  # noqa: E402
 from torchrl_csirl.trainers.metrics_logger import _scalar  # noqa: E402
 
 
@@ -68,7 +68,11 @@ def build(argv: list[str]) -> Run:
     cfg = load_run_config(run_dir, argv)
     counters = torch.load(os.path.join(checkpoint, "state.pt"), weights_only=False)["counters"]
     run = make_trainer(cfg, run_dir, frames_done=counters["frames"], resume_frames=counters["frames"])
-    load_checkpoint(run.trainer, checkpoint, run.online_buffer if cfg.checkpoint.save_buffer else None)
+    try:
+        load_checkpoint(run.trainer, checkpoint, run.online_buffer if cfg.checkpoint.save_buffer else None)
+    except BaseException:
+        run.close()
+        raise
     print(f"resumed {run_dir} at {counters['frames']} frames, {counters['updates']} updates", file=sys.stderr)
     return run
 
@@ -155,7 +159,7 @@ def main(argv: list[str] | None = None) -> dict[str, object]:
         run.logger.close()
         raise
     finally:
-        run.collector.shutdown()
+        shutdown_collector(run.collector)
     try:
         summary = finish(run)
     finally:

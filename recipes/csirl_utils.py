@@ -5,12 +5,13 @@ Every ``make_*`` function takes the run configuration (an OmegaConf ``DictConfig
 """
 from __future__ import annotations
 
+import atexit
 import os
 import sys
 import time
 from dataclasses import dataclass
 from functools import partial
-from typing import Any
+from typing import Any, Callable
 
 import torch
 from omegaconf import DictConfig, OmegaConf
@@ -21,7 +22,7 @@ from torchrl.objectives import SoftUpdate
 
 from torchrl_csirl.curriculum import SubgoalCurriculum
 from torchrl_csirl.data import ExpertDemonstrations, import_published, load_expert_demonstrations
-from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, YieldingParallelEnv, make_serial_env
+from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, make_serial_env
 from torchrl_csirl.envs import make_env as make_scenario_env
 from torchrl_csirl.modules import EgoRelativeFeatures, make_actor, make_qvalue, make_reward_network
 from torchrl_csirl.objectives import EnsembleSACLoss, MetaRewardLoss
@@ -34,6 +35,7 @@ from torchrl_csirl.trainers import (
     SACUpdate,
     SubgoalSelectionHook,
     evaluate_policy,
+    shutdown_collector,
 )
 from torchrl_csirl.transforms import CombineRewards, IntrinsicReward, SubgoalMatchingReward
 
@@ -208,8 +210,8 @@ def envs_per_worker(cfg: DictConfig, spec: ScenarioSpec) -> int:
     Collection resets every environment at each batch start (exact resume), so each of the
     ``num_workers x k`` environments steps ``frames_per_batch / (num_workers x k)`` times per batch;
     the automatic choice keeps that at least the scenario's episode limit. More environments per
-    worker spread the main process's per-step work (policy, ``ParallelEnv`` bookkeeping) over more
-    frames (docs/PERFORMANCE.md).
+    worker spread each worker's per-step work (the policy forward, the collector's bookkeeping)
+    over more frames (docs/PERFORMANCE.md).
 
     Examples:
         >>> from omegaconf import OmegaConf
@@ -226,31 +228,14 @@ def envs_per_worker(cfg: DictConfig, spec: ScenarioSpec) -> int:
     return max(fitting, default=1)
 
 
-def make_train_env(scenario: str, num_workers: int, main_threads: int | None = None,
-                   envs_per_worker: int = 1) -> EnvBase:
-    """The training environments: ``num_workers`` worker processes of ``envs_per_worker`` envs each.
-
-    One worker is no process: the environments step in this process. ``main_threads`` are the
-    torch threads of this (main) process, where the updates run while the workers wait for the
-    next batch (the collector is synchronous). ``None``: every core. TorchRL's ``ParallelEnv``
-    would otherwise leave ``cores - workers`` threads, i.e. one on 2 cores, which makes the
-    updates ~1.4x slower here (``benchmarks/bench_update.py --threads 1`` vs ``2``).
-    """
-    main_threads = main_threads or os.cpu_count() or 1
-    if num_workers == 1:
-        torch.set_num_threads(main_threads)
-        return make_serial_env(scenario, envs_per_worker)
-    # YieldingParallelEnv: TorchRL's ParallelEnv spin-waits for its workers, taking a core from them
-    return YieldingParallelEnv(
-        num_workers, partial(make_serial_env, scenario, envs_per_worker), num_threads=main_threads,
-        num_sub_threads=1,
-    )
+def make_worker_env_fn(scenario: str, envs: int) -> Callable[[], EnvBase]:
+    """A picklable factory of one collector worker's environments (``envs`` copies, one process)."""
+    return partial(make_serial_env, scenario, envs)
 
 
 def make_env(cfg: DictConfig) -> EnvBase:
-    """Training environments of ``env.scenario``: ``collector.num_workers`` x ``envs_per_worker``."""
-    return make_train_env(cfg.env.scenario, int(cfg.collector.num_workers), cfg.collector.main_threads,
-                          envs_per_worker(cfg, SCENARIOS[cfg.env.scenario]))
+    """The environments of one collector worker: ``envs_per_worker`` copies of ``env.scenario``."""
+    return make_worker_env_fn(cfg.env.scenario, envs_per_worker(cfg, SCENARIOS[cfg.env.scenario]))()
 
 
 def make_eval_env(cfg: DictConfig) -> EnvBase:
@@ -258,19 +243,36 @@ def make_eval_env(cfg: DictConfig) -> EnvBase:
     return make_scenario_env(cfg.env.scenario)
 
 
-def make_collector(cfg: DictConfig, env: EnvBase, policy: Any, frames_done: int = 0) -> Collector:
-    """A synchronous :class:`~torchrl.collectors.Collector` over ``env`` (unbounded; the trainer stops it)."""
+def make_collector(cfg: DictConfig, policy: Any, frames_done: int = 0) -> Collector:
+    """A synchronous collector of ``collector.num_workers`` worker processes (unbounded; the trainer stops it).
+
+    Each worker process holds ``envs_per_worker`` environments *and a copy of the policy*, and
+    collects its share of every batch on its own: TorchRL's multi-process synchronous collector
+    (``Collector(..., num_collectors=W, sync=True)``). The policy's weights live in shared
+    memory, so the workers act with the weights the main process has just trained; the workers
+    wait while the main process updates (every core goes to the updates, ``collector.main_threads``).
+    The reward transforms are replay-buffer transforms and stay in the main process.
+    Collection with the policy in the main process and only the environments in the workers
+    (a ``ParallelEnv``) scales worse: 1.37-1.54x from 1 to 2 workers instead of 1.8x
+    (``benchmarks/bench_collection.py``, docs/PERFORMANCE.md).
+
+    ``num_workers=1``: no process, the environments step in this one.
+    """
     fpb = int(cfg.collector.frames_per_batch)
     random_frames = max(0, int(cfg.collector.init_random_frames) - frames_done)
     random_frames = -(-random_frames // fpb) * fpb
-    return Collector(
-        env,
-        policy=policy,
-        frames_per_batch=fpb,
-        total_frames=-1,
-        init_random_frames=random_frames or None,
-        auto_register_policy_transforms=False,
-    )
+    workers = int(cfg.collector.num_workers)
+    main_threads = cfg.collector.main_threads or os.cpu_count() or 1
+    common = dict(frames_per_batch=fpb, total_frames=-1, init_random_frames=random_frames or None,
+                  auto_register_policy_transforms=False)
+    if workers == 1:
+        torch.set_num_threads(main_threads)
+        return Collector(make_env(cfg), policy=policy, **common)
+    env_fn = make_worker_env_fn(cfg.env.scenario, envs_per_worker(cfg, SCENARIOS[cfg.env.scenario]))
+    collector = Collector([env_fn] * workers, policy, num_collectors=workers, sync=True,
+                          num_threads=main_threads, num_sub_threads=1, **common)
+    atexit.register(shutdown_collector, collector)  # whatever path the process leaves by (see shutdown_collector)
+    return collector
 
 
 # ---------------------------------------------------------------------------------------- models
@@ -409,7 +411,7 @@ class Run:
                                max_steps=self.spec.max_steps, seed=int(self.cfg.eval.seed))
 
     def close(self) -> None:
-        self.collector.shutdown()
+        shutdown_collector(self.collector)
         self.eval_env.close()
 
 
@@ -431,7 +433,7 @@ def make_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume_fra
     logger = make_logger(cfg, run_dir, resume_frames)
     eval_env = make_eval_env(cfg)
     # last: the worker processes start here
-    collector = make_collector(cfg, make_env(cfg), modules.actor, frames_done)
+    collector = make_collector(cfg, modules.actor, frames_done)
 
     sac_update = SACUpdate(modules.sac, optimizers["optim_sac"], modules.target_updater, cfg.optim.max_grad_norm)
     update = sac_update

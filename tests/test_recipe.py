@@ -1,6 +1,7 @@
 """recipes/csirl_highway.py end to end on a tiny budget: artefacts, resume, CSIRL-B, bad input."""
 from __future__ import annotations
 
+import copy
 import json
 import math
 import os
@@ -17,7 +18,7 @@ sys.path.insert(0, RECIPES)
 
 import csirl_utils  # noqa: E402
 
-from torchrl_csirl.trainers import TrainingDivergedError, load_checkpoint  # noqa: E402
+from torchrl_csirl.trainers import TrainingDivergedError, load_checkpoint, shutdown_collector  # noqa: E402
 
 # a tiny budget: 100-frame batches, rounds of 20 updates, 2 evaluation episodes
 TINY = [
@@ -252,8 +253,7 @@ def test_collection_with_several_envs_per_worker_is_reproducible():
     torch.manual_seed(0)
     actor = csirl_utils.make_loss_modules(cfg, csirl_utils.SCENARIOS["merge"]).actor
     batches = []
-    env = csirl_utils.make_env(cfg)
-    collector = csirl_utils.make_collector(cfg, env, actor)
+    collector = csirl_utils.make_collector(cfg, actor)
     try:
         iterator = iter(collector)
         for _ in range(2):
@@ -262,12 +262,40 @@ def test_collection_with_several_envs_per_worker_is_reproducible():
             torch.manual_seed(1)
             batches.append(next(iterator))
     finally:
-        collector.shutdown()
+        shutdown_collector(collector)
     assert batches[0].batch_size == torch.Size([2, 2, 25])
     torch.testing.assert_close(batches[0]["next", "observation"], batches[1]["next", "observation"])
     # the four environments are seeded differently
     firsts = batches[0]["observation"][..., 0, :].reshape(4, -1)
     assert len({tuple(row.tolist()) for row in firsts}) == 4
+
+
+def test_worker_processes_act_with_the_weights_the_main_process_trains():
+    """The policy copies in the 2 worker processes follow in-place updates of the loss's actor
+    parameters (what the optimiser does), with no explicit weight sync."""
+    cfg = csirl_utils.load_config(["collector.frames_per_batch=40", "collector.init_random_frames=0",
+                                   "collector.envs_per_worker=2"])
+    torch.manual_seed(0)
+    modules = csirl_utils.make_loss_modules(cfg, csirl_utils.SCENARIOS["merge"])
+    collector = csirl_utils.make_collector(cfg, modules.actor)
+
+    try:
+        iterator = iter(collector)
+        batch = next(iterator)
+        with torch.no_grad():
+            torch.testing.assert_close(batch["loc"], modules.actor(batch.select("observation").clone())["loc"])
+        old_actor = copy.deepcopy(modules.actor)
+        with torch.no_grad():  # an optimiser step on the loss's copy of the actor parameters
+            for param in modules.sac.actor_network_params.values(True, True):
+                param.add_(0.05 * torch.randn_like(param))
+        batch = next(iterator)
+        with torch.no_grad():
+            new_loc = modules.actor(batch.select("observation").clone())["loc"]
+            old_loc = old_actor(batch.select("observation").clone())["loc"]
+        torch.testing.assert_close(batch["loc"], new_loc)
+        assert not torch.allclose(batch["loc"], old_loc)
+    finally:
+        shutdown_collector(collector)
 
 
 def test_summarize_runs_groups_seeds_by_configuration_variant(tmp_path, capsys):

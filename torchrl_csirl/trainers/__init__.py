@@ -1,6 +1,7 @@
 """Training loop pieces: :class:`CSIRLTrainer`, its CSIRL hooks, evaluation, checkpoints, metrics."""
 from __future__ import annotations
 
+from torchrl_csirl.trainers.collection import shutdown_collector
 from torchrl_csirl.trainers.evaluation import evaluate_policy
 from torchrl_csirl.trainers.hooks import (
     CheckpointHook,
@@ -25,4 +26,5 @@ __all__ = [
     "check_finite_losses",
     "evaluate_policy",
     "load_checkpoint",
+    "shutdown_collector",
 ]
