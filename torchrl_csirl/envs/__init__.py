@@ -6,7 +6,7 @@ Importing this package registers the gymnasium ids ``csirl/highway-fast-v0``,
 * :data:`SCENARIOS` / :class:`ScenarioSpec`: what each scenario is (observation layout,
   episode limit, finish position, matching-reward scale).
 * :func:`make_gym_env` (gymnasium), :func:`make_env` (TorchRL ``GymEnv``) and
-  :func:`make_serial_env` (several copies in one process, e.g. per ``ParallelEnv`` worker).
+  :func:`make_serial_env` (several copies in one process, e.g. per collector worker).
 * :class:`YieldingParallelEnv`: a ``ParallelEnv`` whose main process sleeps while the workers step.
 * :func:`accomplish_rate` and friends: the paper's evaluation metric.
 """

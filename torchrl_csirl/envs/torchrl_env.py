@@ -115,11 +115,11 @@ def make_serial_env(name: str, num_envs: int, seed: int | None = None, **kwargs)
     """``num_envs`` copies of a scenario stepped one after the other in this process.
 
     A :class:`~torchrl.envs.SerialEnv` of :func:`make_env` (batch size ``[num_envs]``); for
-    ``num_envs=1`` the plain environment. As the worker environment of a
-    :class:`~torchrl.envs.ParallelEnv` (``partial(make_serial_env, name, k)`` pickles) it gives
-    ``k`` environments per worker process: the main process then runs the policy and the
-    ``ParallelEnv`` bookkeeping once per ``workers x k`` frames instead of once per ``workers``
-    frames (``benchmarks/bench_collection.py --envs-per-worker``, docs/PERFORMANCE.md).
+    ``num_envs=1`` the plain environment. ``partial(make_serial_env, name, k)`` pickles: as the
+    environment factory of a multi-process collector's workers (the recipe) or of a
+    :class:`~torchrl.envs.ParallelEnv` it gives ``k`` environments per worker process, and the
+    policy forward and the per-step bookkeeping run once per ``k`` frames
+    (``benchmarks/bench_collection.py --envs-per-worker``, docs/PERFORMANCE.md).
 
     Args:
         name: scenario name or gym id.
