@@ -253,7 +253,7 @@ def make_collector(cfg: DictConfig, policy: Any, frames_done: int = 0) -> Collec
     wait while the main process updates (every core goes to the updates, ``collector.main_threads``).
     The reward transforms are replay-buffer transforms and stay in the main process.
     Collection with the policy in the main process and only the environments in the workers
-    (a ``ParallelEnv``) scales worse: 1.37-1.54x from 1 to 2 workers instead of 1.8x
+    (a ``ParallelEnv``) scales worse: 1.37-1.54x from 1 to 2 workers instead of 1.76-1.99x
     (``benchmarks/bench_collection.py``, docs/PERFORMANCE.md).
 
     ``num_workers=1``: no process, the environments step in this one.
