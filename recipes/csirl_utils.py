@@ -9,13 +9,14 @@ import atexit
 import os
 import sys
 import time
+import weakref
 from dataclasses import dataclass
 from functools import partial
 from typing import Any, Callable
 
 import torch
 from omegaconf import DictConfig, OmegaConf
-from torchrl.collectors import Collector
+from torchrl.collectors import BaseCollector, Collector
 from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
 from torchrl.envs import Compose, EnvBase
 from torchrl.objectives import SoftUpdate
@@ -209,9 +210,7 @@ def envs_per_worker(cfg: DictConfig, spec: ScenarioSpec) -> int:
 
     Collection resets every environment at each batch start (exact resume), so each of the
     ``num_workers x k`` environments steps ``frames_per_batch / (num_workers x k)`` times per batch;
-    the automatic choice keeps that at least the scenario's episode limit. More environments per
-    worker spread each worker's per-step work (the policy forward, the collector's bookkeeping)
-    over more frames (docs/PERFORMANCE.md).
+    the automatic choice keeps that at least the scenario's episode limit.
 
     Examples:
         >>> from omegaconf import OmegaConf
@@ -229,7 +228,19 @@ def envs_per_worker(cfg: DictConfig, spec: ScenarioSpec) -> int:
 
 
 def make_worker_env_fn(scenario: str, envs: int) -> Callable[[], EnvBase]:
-    """A picklable factory of one collector worker's environments (``envs`` copies, one process)."""
+    """A picklable factory of one collector worker's environments.
+
+    Args:
+        scenario: scenario name (``env.scenario``).
+        envs: environments stepped one after the other in the worker process.
+
+    Returns:
+        ``partial(make_serial_env, scenario, envs)``: it pickles, as spawned workers need.
+
+    Examples:
+        >>> make_worker_env_fn("merge", 2)().batch_size
+        torch.Size([2])
+    """
     return partial(make_serial_env, scenario, envs)
 
 
@@ -243,36 +254,66 @@ def make_eval_env(cfg: DictConfig) -> EnvBase:
     return make_scenario_env(cfg.env.scenario)
 
 
-def make_collector(cfg: DictConfig, policy: Any, frames_done: int = 0) -> Collector:
+def make_collector(cfg: DictConfig, policy: Any, frames_done: int = 0) -> BaseCollector:
     """A synchronous collector of ``collector.num_workers`` worker processes (unbounded; the trainer stops it).
 
     Each worker process holds ``envs_per_worker`` environments *and a copy of the policy*, and
     collects its share of every batch on its own: TorchRL's multi-process synchronous collector
-    (``Collector(..., num_collectors=W, sync=True)``). The policy's weights live in shared
-    memory, so the workers act with the weights the main process has just trained; the workers
-    wait while the main process updates (every core goes to the updates, ``collector.main_threads``).
-    The reward transforms are replay-buffer transforms and stay in the main process.
-    Collection with the policy in the main process and only the environments in the workers
-    (a ``ParallelEnv``) scales worse: 1.37-1.54x from 1 to 2 workers instead of 1.76-1.99x
-    (``benchmarks/bench_collection.py``, docs/PERFORMANCE.md).
+    (``Collector(..., num_collectors=W, sync=True)``). The workers wait while the main process
+    updates (every core goes to the updates, ``collector.main_threads``). The reward transforms
+    are replay-buffer transforms and stay in the main process. Collection with the policy in the
+    main process and only the environments in the workers (a ``ParallelEnv``) scales worse:
+    1.37-1.54x from 1 to 2 workers instead of 1.76-1.99x (``benchmarks/bench_collection.py``,
+    docs/PERFORMANCE.md).
 
-    ``num_workers=1``: no process, the environments step in this one.
+    The workers act with the weights the main process trains because TorchRL moves the policy's
+    parameter storage into shared memory *in place*: optimiser steps and ``load_state_dict``
+    (which copy into the existing tensors) reach them with no explicit sync; replacing a
+    parameter tensor (``p.data = ...``, ``load_state_dict(assign=True)``, ``.to(device)``) would
+    not (tested: ``test_worker_processes_act_with_the_weights_the_main_process_trains``).
+
+    Args:
+        cfg: the recipe configuration (``collector.*``, ``env.scenario``).
+        policy: the actor; with one worker it runs in this process.
+        frames_done: frames collected before (resume): the uniform-random frames
+            (``collector.init_random_frames``) already collected are not collected again.
+
+    Returns:
+        With ``collector.num_workers=1`` a single-process ``Collector`` (the environments step
+        here), otherwise a ``MultiSyncCollector``. Shut it down with
+        :func:`~torchrl_csirl.trainers.shutdown_collector`.
+
+    Examples:
+        >>> cfg = load_config(["collector.num_workers=1", "collector.frames_per_batch=20", "collector.init_random_frames=0"])
+        >>> spec = SCENARIOS[cfg.env.scenario]
+        >>> collector = make_collector(cfg, make_actor(spec.obs_dim, spec.action_dim))
+        >>> next(iter(collector)).numel()
+        20
+        >>> shutdown_collector(collector)
     """
     fpb = int(cfg.collector.frames_per_batch)
     random_frames = max(0, int(cfg.collector.init_random_frames) - frames_done)
     random_frames = -(-random_frames // fpb) * fpb
     workers = int(cfg.collector.num_workers)
     main_threads = cfg.collector.main_threads or os.cpu_count() or 1
-    common = dict(frames_per_batch=fpb, total_frames=-1, init_random_frames=random_frames or None,
-                  auto_register_policy_transforms=False)
+    common: dict[str, Any] = dict(frames_per_batch=fpb, total_frames=-1, init_random_frames=random_frames or None,
+                                  auto_register_policy_transforms=False)
     if workers == 1:
         torch.set_num_threads(main_threads)
         return Collector(make_env(cfg), policy=policy, **common)
     env_fn = make_worker_env_fn(cfg.env.scenario, envs_per_worker(cfg, SCENARIOS[cfg.env.scenario]))
     collector = Collector([env_fn] * workers, policy, num_collectors=workers, sync=True,
                           num_threads=main_threads, num_sub_threads=1, **common)
-    atexit.register(shutdown_collector, collector)  # whatever path the process leaves by (see shutdown_collector)
+    # whatever path the process leaves by (see shutdown_collector); a weak reference, so that
+    # collectors dropped earlier (tests) are not kept alive
+    atexit.register(_shutdown_if_alive, weakref.ref(collector))
     return collector
+
+
+def _shutdown_if_alive(collector_ref: weakref.ref) -> None:
+    collector = collector_ref()
+    if collector is not None:
+        shutdown_collector(collector)
 
 
 # ---------------------------------------------------------------------------------------- models
@@ -398,7 +439,7 @@ class Run:
     matching: SubgoalMatchingReward
     online_buffer: TensorDictReplayBuffer
     expert_buffer: TensorDictReplayBuffer
-    collector: Collector
+    collector: BaseCollector
     eval_env: EnvBase
     logger: MetricsLogger
     trainer: CSIRLTrainer

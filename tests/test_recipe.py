@@ -256,10 +256,10 @@ def test_collection_with_several_envs_per_worker_is_reproducible():
     collector = csirl_utils.make_collector(cfg, actor)
     try:
         iterator = iter(collector)
-        for _ in range(2):
+        for main_seed in range(2):  # the workers draw the actions: only set_seed matters
             collector.set_seed(11)
             collector.reset()
-            torch.manual_seed(1)
+            torch.manual_seed(main_seed)
             batches.append(next(iterator))
     finally:
         shutdown_collector(collector)
@@ -272,7 +272,8 @@ def test_collection_with_several_envs_per_worker_is_reproducible():
 
 def test_worker_processes_act_with_the_weights_the_main_process_trains():
     """The policy copies in the 2 worker processes follow in-place updates of the loss's actor
-    parameters (what the optimiser does), with no explicit weight sync."""
+    parameters (what the optimiser does) and a ``load_state_dict`` (what a resume does), with no
+    explicit weight sync."""
     cfg = csirl_utils.load_config(["collector.frames_per_batch=40", "collector.init_random_frames=0",
                                    "collector.envs_per_worker=2"])
     torch.manual_seed(0)
@@ -285,6 +286,7 @@ def test_worker_processes_act_with_the_weights_the_main_process_trains():
         with torch.no_grad():
             torch.testing.assert_close(batch["loc"], modules.actor(batch.select("observation").clone())["loc"])
         old_actor = copy.deepcopy(modules.actor)
+        old_state = copy.deepcopy(modules.sac.state_dict())
         with torch.no_grad():  # an optimiser step on the loss's copy of the actor parameters
             for param in modules.sac.actor_network_params.values(True, True):
                 param.add_(0.05 * torch.randn_like(param))
@@ -294,6 +296,10 @@ def test_worker_processes_act_with_the_weights_the_main_process_trains():
             old_loc = old_actor(batch.select("observation").clone())["loc"]
         torch.testing.assert_close(batch["loc"], new_loc)
         assert not torch.allclose(batch["loc"], old_loc)
+        modules.sac.load_state_dict(old_state)  # as a resume does: the workers follow too
+        batch = next(iterator)
+        with torch.no_grad():
+            torch.testing.assert_close(batch["loc"], old_actor(batch.select("observation").clone())["loc"])
     finally:
         shutdown_collector(collector)
 

@@ -1,36 +1,44 @@
 """Collector life cycle helpers."""
 from __future__ import annotations
 
-from typing import Any
+import warnings
+
+from torchrl.collectors import BaseCollector
 
 __all__ = ["shutdown_collector"]
 
 
-def shutdown_collector(collector: Any) -> None:
+def shutdown_collector(collector: BaseCollector) -> None:
     """Shut a TorchRL collector down, its weight-sync schemes included.
 
     TorchRL 0.14.1's multi-process collectors (``Collector(..., num_collectors=W)``) leave their
-    weight-sync schemes (shared-memory policy weights) running after ``shutdown()``; the
+    weight-sync schemes (the shared-memory policy weights) running after ``shutdown()``; the
     schemes shut themselves down in ``__del__``, which at interpreter exit starts a queue thread
     and hangs the process forever after the work is done. Shutting them down here, while the
-    interpreter is alive, lets the process exit. For single-process collectors this is just
-    ``collector.shutdown()``.
+    interpreter is alive, lets the process exit. For a single-process collector this is just
+    ``collector.shutdown()``. Calling it twice is harmless.
+
+    Args:
+        collector: any TorchRL collector.
 
     Examples:
-        >>> from functools import partial
         >>> from torchrl.collectors import Collector
-        >>> from torchrl_csirl.envs import SCENARIOS, make_serial_env
+        >>> from torchrl_csirl.envs import SCENARIOS, make_env
         >>> from torchrl_csirl.modules import make_actor
         >>> spec = SCENARIOS["merge"]
-        >>> collector = Collector([partial(make_serial_env, "merge", 1)] * 2, make_actor(spec.obs_dim, spec.action_dim),
-        ...                       num_collectors=2, sync=True, frames_per_batch=20, total_frames=20)
+        >>> collector = Collector(make_env("merge"), make_actor(spec.obs_dim, spec.action_dim),
+        ...                       frames_per_batch=10, total_frames=10)
         >>> next(iter(collector)).numel()
-        20
+        10
         >>> shutdown_collector(collector)
     """
     try:
         collector.shutdown()
     finally:
+        # private in TorchRL 0.14.1: where the multi-process collectors keep their schemes
         schemes = getattr(collector, "_weight_sync_schemes", None) or {}
-        for scheme in schemes.values():
-            scheme.shutdown()
+        for name, scheme in schemes.items():
+            try:
+                scheme.shutdown()
+            except Exception as error:  # keep shutting the others down
+                warnings.warn(f"weight-sync scheme {name!r} failed to shut down: {error}", stacklevel=2)
