@@ -99,13 +99,24 @@ def flatten_config(cfg: DictConfig) -> dict[str, Any]:
     return out
 
 
+def format_override(key: str, value: Any) -> str:
+    """``key=value`` as the command line writes it (``null``, lower-case booleans).
+
+    Examples:
+        >>> format_override("expert.path", None), format_override("csirl.intrinsic", False)
+        ('expert.path=null', 'csirl.intrinsic=false')
+    """
+    text = "null" if value is None else str(value).lower() if isinstance(value, bool) else value
+    return f"{key}={text}"
+
+
 def load_run_config(run_dir: str, overrides: list[str] | None = None) -> DictConfig:
     """The configuration saved in ``run_dir/config.yaml``, updated by ``overrides``.
 
     ``checkpoint.resume`` of the saved configuration is dropped (the caller decides).
     """
     saved = flatten_config(OmegaConf.load(os.path.join(run_dir, "config.yaml")))
-    saved_overrides = [f"{k}={'null' if v is None else v}" for k, v in saved.items() if k != "checkpoint.resume"]
+    saved_overrides = [format_override(k, v) for k, v in saved.items() if k != "checkpoint.resume"]
     return load_config(saved_overrides + list(overrides or []))
 
 
@@ -227,26 +238,26 @@ def envs_per_worker(cfg: DictConfig, spec: ScenarioSpec) -> int:
     return max(fitting, default=1)
 
 
-def make_worker_env_fn(scenario: str, envs: int) -> Callable[[], EnvBase]:
-    """A picklable factory of one collector worker's environments.
+def make_worker_env_fn(cfg: DictConfig) -> Callable[[], EnvBase]:
+    """A picklable factory of one collector worker's environments: ``envs_per_worker`` copies of ``env.scenario``.
 
     Args:
-        scenario: scenario name (``env.scenario``).
-        envs: environments stepped one after the other in the worker process.
+        cfg: the recipe configuration (``env.scenario``, ``collector.*``).
 
     Returns:
-        ``partial(make_serial_env, scenario, envs)``: it pickles, as spawned workers need.
+        ``partial(make_serial_env, scenario, envs_per_worker)``: it pickles, as spawned workers need.
 
     Examples:
-        >>> make_worker_env_fn("merge", 2)().batch_size
+        >>> cfg = load_config(["collector.envs_per_worker=2"])
+        >>> make_worker_env_fn(cfg)().batch_size
         torch.Size([2])
     """
-    return partial(make_serial_env, scenario, envs)
+    return partial(make_serial_env, cfg.env.scenario, envs_per_worker(cfg, SCENARIOS[cfg.env.scenario]))
 
 
 def make_env(cfg: DictConfig) -> EnvBase:
     """The environments of one collector worker: ``envs_per_worker`` copies of ``env.scenario``."""
-    return make_worker_env_fn(cfg.env.scenario, envs_per_worker(cfg, SCENARIOS[cfg.env.scenario]))()
+    return make_worker_env_fn(cfg)()
 
 
 def make_eval_env(cfg: DictConfig) -> EnvBase:
@@ -301,8 +312,7 @@ def make_collector(cfg: DictConfig, policy: Any, frames_done: int = 0) -> BaseCo
     if workers == 1:
         torch.set_num_threads(main_threads)
         return Collector(make_env(cfg), policy=policy, **common)
-    env_fn = make_worker_env_fn(cfg.env.scenario, envs_per_worker(cfg, SCENARIOS[cfg.env.scenario]))
-    collector = Collector([env_fn] * workers, policy, num_collectors=workers, sync=True,
+    collector = Collector([make_worker_env_fn(cfg)] * workers, policy, num_collectors=workers, sync=True,
                           num_threads=main_threads, num_sub_threads=1, **common)
     # whatever path the process leaves by (see shutdown_collector); a weak reference, so that
     # collectors dropped earlier (tests) are not kept alive

@@ -31,7 +31,7 @@ from omegaconf import OmegaConf
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-from csirl_utils import flatten_config, load_config  # noqa: E402
+from csirl_utils import flatten_config, format_override, load_config  # noqa: E402
 
 #: configuration keys that do not change what a run learns (or are shown elsewhere in the key)
 NOT_A_VARIANT = ("seed", "preset", "env.scenario", "csirl.intrinsic", "collector.main_threads", "logger.", "checkpoint.")
@@ -87,7 +87,7 @@ def variant(run_dir: str, preset: str) -> str:
     run = flatten_config(OmegaConf.load(path))
     default = _preset_defaults(preset)
     changed = [
-        f"{key}={'null' if value is None else str(value).lower() if isinstance(value, bool) else value}"
+        format_override(key, value)
         for key, value in sorted(run.items())
         if not key.startswith(NOT_A_VARIANT) and default.get(key, object()) != value
     ]
