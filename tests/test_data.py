@@ -291,3 +291,57 @@ class TestImportPublished:
         np.save(tmp_path / "plain.npy", np.zeros((2, 3)))
         with pytest.raises(ValueError, match="expected a pickled dict"):
             import_published(tmp_path / "plain.npy")
+
+
+class TestDemonstrationMixer:
+    @staticmethod
+    def _online(n: int = 40):
+        from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
+        from torchrl.envs import Compose
+
+        from torchrl_csirl.transforms import CombineRewards, SubgoalMatchingReward
+
+        expert_path = torch.linspace(0, 1, 6).unsqueeze(-1).expand(6, 4).contiguous()
+        matching = SubgoalMatchingReward(expert_path, subgoal=3, scale=10.0, position_feature_indices=[0])
+        online = TensorDictReplayBuffer(storage=LazyTensorStorage(100), batch_size=16,
+                                        transform=Compose(matching, CombineRewards(["matching_reward"])))
+        rollout = ExpertDemonstrations.from_episodes([_episode(n, seed=5)]).transitions()
+        rollout.set("extra_online_entry", torch.zeros(n))  # an entry the demonstrations lack
+        online.extend(rollout)
+        return online, matching
+
+    def test_share_and_rewards_of_the_expert_part(self, demos):
+        from torchrl_csirl.data import DemonstrationMixer
+
+        online, matching = self._online()
+        mixer = DemonstrationMixer(online, demos.as_replay_buffer(batch_size=8), expert_fraction=0.25)
+        batch = mixer.sample()
+        assert batch.batch_size == (16,) and mixer.num_expert == 4
+        assert "extra_online_entry" not in batch.keys()
+        expert_obs = demos.transitions()["observation"]
+        is_expert = torch.cdist(batch["observation"], expert_obs, compute_mode="donot_use_mm_for_euclid_dist").min(-1).values < 1e-6
+        assert is_expert.tolist() == [False] * 12 + [True] * 4
+        # the expert part carries the reward the online transforms give, for the current subgoal
+        expected = matching(batch[12:].exclude(("next", "matching_reward")).clone())["next", "matching_reward"]
+        torch.testing.assert_close(batch[12:]["next", "reward"], expected)
+        matching.set_subgoal(0)
+        later = mixer.sample()
+        torch.testing.assert_close(
+            later[12:]["next", "reward"],
+            matching(later[12:].exclude(("next", "matching_reward")).clone())["next", "matching_reward"],
+        )
+
+    def test_zero_fraction_is_the_online_buffer(self, demos):
+        from torchrl_csirl.data import DemonstrationMixer
+
+        online, _ = self._online()
+        batch = DemonstrationMixer(online, demos.as_replay_buffer(batch_size=8), expert_fraction=0.0).sample()
+        assert batch.batch_size == (16,) and "extra_online_entry" in batch.keys()
+
+    @pytest.mark.parametrize("fraction", [-0.1, 1.0, 1.5])
+    def test_bad_fraction(self, demos, fraction):
+        from torchrl_csirl.data import DemonstrationMixer
+
+        online, _ = self._online()
+        with pytest.raises(ValueError, match="expert_fraction must be in"):
+            DemonstrationMixer(online, demos.as_replay_buffer(batch_size=8), expert_fraction=fraction)

@@ -101,3 +101,41 @@ def test_checkpoint_round_trip_restores_counters_states_and_rng(tmp_path):
     torch.testing.assert_close(torch.rand(3), expected_rng)
     with pytest.raises(FileNotFoundError, match="No checkpoint"):
         load_checkpoint(other, tmp_path / "nothing")
+
+
+def test_actor_behaviour_cloning_pulls_the_deterministic_action_to_the_expert_and_scales_with_the_actor_loss():
+    from torchrl.envs.utils import ExplorationType, set_exploration_type
+    from torchrl.objectives import BCLoss
+
+    from torchrl_csirl.data import ExpertDemonstrations
+    from torchrl_csirl.modules import make_actor
+    from torchrl_csirl.trainers import ActorBehaviourCloning
+
+    torch.manual_seed(0)
+    obs = torch.randn(20, 4)
+    episode = {"observation": obs, "action": torch.tanh(obs[:, :2]), "next_observation": obs.roll(1, 0),
+               "terminated": torch.zeros(20, dtype=torch.bool)}
+    expert = ExpertDemonstrations.from_episodes([episode])
+    actor = make_actor(4, 2, hidden=(32,))
+    term = ActorBehaviourCloning(BCLoss(actor, loss_function="l2"), expert.as_replay_buffer(batch_size=20), coef=0.5)
+    optim = torch.optim.Adam(actor.parameters(), lr=1e-2)
+    mses = []
+    for _ in range(100):
+        losses, logs = term(torch.tensor(-2.0))  # |L_actor| = 2: weight 0.5 * 2 = 1
+        torch.testing.assert_close(losses["loss_actor_bc"], logs["actor_bc_mse"] * 1.0, atol=1e-6, rtol=1e-6)
+        optim.zero_grad()
+        losses["loss_actor_bc"].backward()
+        optim.step()
+        mses.append(logs["actor_bc_mse"].item())
+    assert mses[-1] < 0.1 * mses[0]
+    with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
+        action = actor(expert.transitions().select("observation"))["action"]
+    assert (action - episode["action"]).pow(2).mean() == pytest.approx(mses[-1], rel=0.5, abs=1e-3)
+    # the weight follows |L_actor| (detached) and nothing flows into it
+    loss_actor = torch.tensor(-40.0, requires_grad=True)
+    losses, logs = term(loss_actor)
+    torch.testing.assert_close(losses["loss_actor_bc"], 20.0 * logs["actor_bc_mse"], rtol=1e-5, atol=1e-6)
+    losses["loss_actor_bc"].backward()
+    assert loss_actor.grad is None
+    with pytest.raises(ValueError, match="coef must be positive"):
+        ActorBehaviourCloning(term.bc_loss, expert.as_replay_buffer(batch_size=4), coef=0.0)

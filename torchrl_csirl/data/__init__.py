@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from torchrl_csirl.data.expert import FORMAT_VERSION, ExpertDemonstrations
+from torchrl_csirl.data.mixing import DemonstrationMixer
 from torchrl_csirl.data.published import RestrictedUnpickler, import_published, load_published_dict
 from torchrl_csirl.data.shipped import (
     available_expert_datasets,
@@ -11,6 +12,7 @@ from torchrl_csirl.data.shipped import (
 )
 
 __all__ = [
+    "DemonstrationMixer",
     "ExpertDemonstrations",
     "FORMAT_VERSION",
     "RestrictedUnpickler",

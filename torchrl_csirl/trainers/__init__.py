@@ -4,6 +4,7 @@ from __future__ import annotations
 from torchrl_csirl.trainers.collection import shutdown_collector
 from torchrl_csirl.trainers.evaluation import evaluate_policy
 from torchrl_csirl.trainers.hooks import (
+    ActorBehaviourCloning,
     CheckpointHook,
     EvaluationHook,
     MetaRewardUpdate,
@@ -15,6 +16,7 @@ from torchrl_csirl.trainers.metrics_logger import MetricsLogger
 from torchrl_csirl.trainers.trainer import CSIRLTrainer, TrainingDivergedError, check_finite_losses
 
 __all__ = [
+    "ActorBehaviourCloning",
     "CSIRLTrainer",
     "CheckpointHook",
     "EvaluationHook",

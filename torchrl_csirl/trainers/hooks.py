@@ -16,10 +16,12 @@ from typing import Any
 import torch
 from tensordict import TensorDictBase
 from torch import nn
+from torchrl.envs.utils import ExplorationType, set_exploration_type
 
 from torchrl_csirl.trainers.trainer import CSIRLTrainer, check_finite_losses
 
 __all__ = [
+    "ActorBehaviourCloning",
     "CheckpointHook",
     "EvaluationHook",
     "MetaRewardUpdate",
@@ -34,7 +36,11 @@ def _detached(out: TensorDictBase, keys: tuple[str, ...]) -> dict[str, torch.Ten
 
 
 class SACUpdate:
-    """One ensemble-SAC step: sample the online buffer, critic + actor losses, Adam, Polyak.
+    """One ensemble-SAC step: sample a batch, critic + actor losses, Adam, Polyak.
+
+    The batch comes from the trainer's online buffer, or from ``sample`` (e.g. online transitions
+    mixed with expert ones, :class:`~torchrl_csirl.data.DemonstrationMixer`); ``actor_bc`` adds
+    a behavioural-cloning term to the actor loss.
 
     The reward is whatever the buffer's transform writes to ``("next", "reward")`` (e.g.
     :class:`~torchrl_csirl.transforms.SubgoalMatchingReward` + :class:`IntrinsicReward` +
@@ -45,16 +51,36 @@ class SACUpdate:
         optimizer: optimiser over the actor and critic parameters.
         target_updater: e.g. :class:`~torchrl.objectives.SoftUpdate`.
         max_grad_norm: clip the gradient norm (None: no clipping).
+        sample: ``callable() -> TensorDict`` giving a training batch (e.g.
+            :meth:`~torchrl_csirl.data.DemonstrationMixer.sample`). Defaults to sampling the
+            trainer's online buffer.
+        actor_bc: an :class:`ActorBehaviourCloning` term added to the actor loss (None: plain SAC).
     """
 
     LOSS_KEYS = ("loss_qvalue", "loss_actor", "loss_alpha")
+    LOG_KEYS = ("alpha", "entropy")
 
     def __init__(self, loss: nn.Module, optimizer: torch.optim.Optimizer, target_updater: Any,
-                 max_grad_norm: float | None = None) -> None:
+                 max_grad_norm: float | None = None,
+                 sample: Callable[[], TensorDictBase] | None = None,
+                 actor_bc: ActorBehaviourCloning | None = None) -> None:
         self.loss = loss
         self.optimizer = optimizer
         self.target_updater = target_updater
         self.max_grad_norm = max_grad_norm
+        self._sample = sample
+        self.actor_bc = actor_bc
+
+    def sample(self, trainer: CSIRLTrainer) -> TensorDictBase:
+        """A training batch: ``sample()`` if given, else one of the trainer's online buffer."""
+        return self._sample() if self._sample is not None else trainer.online_buffer.sample()
+
+    def with_actor_bc(self, losses: dict[str, torch.Tensor]) -> tuple[dict[str, torch.Tensor], dict[str, torch.Tensor]]:
+        """``losses`` with the behavioural-cloning term (if any), and its diagnostics."""
+        if self.actor_bc is None:
+            return losses, {}
+        bc_losses, logs = self.actor_bc(losses["loss_actor"])
+        return {**losses, **bc_losses}, logs
 
     def step(self, losses: dict[str, torch.Tensor], trainer: CSIRLTrainer) -> None:
         """Checks, backpropagates and applies ``losses`` (sum) with the SAC optimiser."""
@@ -68,10 +94,55 @@ class SACUpdate:
         self.target_updater.step()
 
     def __call__(self, trainer: CSIRLTrainer) -> dict[str, torch.Tensor]:
-        out = self.loss(trainer.online_buffer.sample())
-        losses = {key: out.get(key) for key in self.LOSS_KEYS if key in out.keys()}
+        out = self.loss(self.sample(trainer))
+        losses, logs = self.with_actor_bc({key: out.get(key) for key in self.LOSS_KEYS if key in out.keys()})
         self.step(losses, trainer)
-        return {key: value.detach() for key, value in losses.items()}
+        return {**{key: value.detach() for key, value in losses.items()}, **_detached(out, self.LOG_KEYS), **logs}
+
+
+class ActorBehaviourCloning:
+    """A behavioural-cloning term for the actor, scaled like TD3+BC: ``coef * |L_actor| * BC``.
+
+    ``BC`` is the mean squared error between the deterministic action of the policy and the
+    expert's action on an expert batch (TorchRL's :class:`~torchrl.objectives.BCLoss` with
+    ``loss_function="l2"``). Its weight follows the size of the actor's Q objective (``|L_actor|``
+    = ``|mean(alpha log pi - min_k Q_k)|``, detached), as TD3+BC divides the Q term by
+    ``mean |Q|``, so ``coef`` does not depend on the reward scale of a scenario (TD3+BC's offline
+    setting corresponds to ``coef = 0.4``). Not in the CSIRL paper nor in its code: it is the
+    learned reward's outer objective (Eq. 11) applied to the actor directly, so that the policy
+    imitates the expert where the demonstrations cover the state space (``csirl.actor_bc_coef``).
+
+    Args:
+        bc_loss: a :class:`~torchrl.objectives.BCLoss` over the actor.
+        expert_buffer: replay buffer of expert ``(observation, action)`` pairs.
+        coef: the weight relative to ``|L_actor|``.
+
+    Examples:
+        >>> import torch
+        >>> from torchrl.objectives import BCLoss
+        >>> from torchrl_csirl.data import ExpertDemonstrations
+        >>> from torchrl_csirl.modules import make_actor
+        >>> ep = {"observation": torch.zeros(5, 4), "action": torch.full((5, 2), 0.5),
+        ...       "next_observation": torch.ones(5, 4), "terminated": torch.zeros(5, dtype=torch.bool)}
+        >>> expert = ExpertDemonstrations.from_episodes([ep]).as_replay_buffer(batch_size=4)
+        >>> term = ActorBehaviourCloning(BCLoss(make_actor(4, 2), loss_function="l2"), expert, coef=0.1)
+        >>> losses, logs = term(torch.tensor(-200.0))
+        >>> sorted(losses), sorted(logs)
+        (['loss_actor_bc'], ['actor_bc_mse'])
+    """
+
+    def __init__(self, bc_loss: nn.Module, expert_buffer: Any, coef: float) -> None:
+        if not coef > 0:
+            raise ValueError(f"coef must be positive, got {coef!r}.")
+        self.bc_loss = bc_loss
+        self.expert_buffer = expert_buffer
+        self.coef = float(coef)
+
+    def __call__(self, loss_actor: torch.Tensor) -> tuple[dict[str, torch.Tensor], dict[str, torch.Tensor]]:
+        with set_exploration_type(ExplorationType.DETERMINISTIC):
+            mse = self.bc_loss(self.expert_buffer.sample())["loss_bc"]
+        weight = self.coef * loss_actor.detach().abs()
+        return {"loss_actor_bc": weight * mse}, {"actor_bc_mse": mse.detach()}
 
 
 class MetaRewardUpdate:
@@ -109,16 +180,18 @@ class MetaRewardUpdate:
     def __call__(self, trainer: CSIRLTrainer) -> dict[str, torch.Tensor]:
         if trainer.updates % self.meta_every:
             return self.sac_update(trainer)
-        online = trainer.online_buffer.sample()
+        online = self.sac_update.sample(trainer)
         out = self.meta_loss(online, self.expert_buffer.sample(), regularizer=trainer.online_buffer.sample())
-        sac_losses = {key: out.get(key) for key in SACUpdate.LOSS_KEYS if key in out.keys()}
+        sac_losses, logs = self.sac_update.with_actor_bc(
+            {key: out.get(key) for key in SACUpdate.LOSS_KEYS if key in out.keys()})
         meta = out.get("loss_meta")
         check_finite_losses({**sac_losses, "loss_meta": meta}, f"update {trainer.updates + 1} (frames {trainer.frames})")
         self.reward_optimizer.zero_grad(set_to_none=True)
         # one backward: the SAC losses reach the actor/critics, the meta-loss the reward net only
         self.sac_update.step({**sac_losses, "loss_meta": meta}, trainer)
         self.reward_optimizer.step()
-        return {**{k: v.detach() for k, v in sac_losses.items()}, **_detached(out, self.META_KEYS)}
+        return {**{k: v.detach() for k, v in sac_losses.items()}, **_detached(out, SACUpdate.LOG_KEYS + self.META_KEYS),
+                **logs}
 
 
 class SubgoalSelectionHook:
