@@ -19,15 +19,16 @@ from omegaconf import DictConfig, OmegaConf
 from torchrl.collectors import BaseCollector, Collector
 from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
 from torchrl.envs import Compose, EnvBase
-from torchrl.objectives import SoftUpdate
+from torchrl.objectives import BCLoss, SoftUpdate
 
 from torchrl_csirl.curriculum import SubgoalCurriculum
-from torchrl_csirl.data import ExpertDemonstrations, import_published, load_expert_demonstrations
+from torchrl_csirl.data import DemonstrationMixer, ExpertDemonstrations, import_published, load_expert_demonstrations
 from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, make_serial_env
 from torchrl_csirl.envs import make_env as make_scenario_env
 from torchrl_csirl.modules import EgoRelativeFeatures, make_actor, make_qvalue, make_reward_network
 from torchrl_csirl.objectives import EnsembleSACLoss, MetaRewardLoss
 from torchrl_csirl.trainers import (
+    ActorBehaviourCloning,
     CheckpointHook,
     CSIRLTrainer,
     EvaluationHook,
@@ -162,6 +163,10 @@ def validate_config(cfg: DictConfig) -> None:
         raise ConfigError(f"expert.curriculum must be empty or traffic, got {cfg.expert.curriculum!r}.")
     if cfg.csirl.matching_features not in ("ego", "position"):
         raise ConfigError(f"csirl.matching_features must be ego or position, got {cfg.csirl.matching_features!r}.")
+    if not 0 <= cfg.replay_buffer.expert_fraction < 1:
+        raise ConfigError(f"replay_buffer.expert_fraction must be in [0, 1), got {cfg.replay_buffer.expert_fraction}.")
+    if cfg.csirl.actor_bc_coef < 0:
+        raise ConfigError(f"csirl.actor_bc_coef must be >= 0, got {cfg.csirl.actor_bc_coef}.")
     if cfg.optim.utd_ratio <= 0:
         raise ConfigError(f"optim.utd_ratio must be positive, got {cfg.optim.utd_ratio}.")
 
@@ -349,6 +354,7 @@ def make_loss_modules(cfg: DictConfig, spec: ScenarioSpec) -> LossModules:
         make_qvalue(spec.obs_dim, spec.action_dim, input_features=features),
         num_qvalue_nets=int(cfg.csirl.num_qvalue_nets),
         alpha_init=float(cfg.csirl.alpha),
+        fixed_alpha=bool(cfg.csirl.fixed_alpha),
         gamma=float(cfg.csirl.gamma),
         dispersion=cfg.csirl.dispersion,
     )
@@ -421,6 +427,22 @@ def make_replay_buffers(
     return online, expert
 
 
+def make_sampler(cfg: DictConfig, online: TensorDictReplayBuffer, expert: TensorDictReplayBuffer) -> Callable[[], Any] | None:
+    """The SAC batch sampler: online transitions plus ``replay_buffer.expert_fraction`` of expert ones (None: online only)."""
+    fraction = float(cfg.replay_buffer.expert_fraction)
+    if fraction == 0:
+        return None
+    return DemonstrationMixer(online, expert, fraction).sample
+
+
+def make_actor_bc(cfg: DictConfig, modules: LossModules, expert: TensorDictReplayBuffer) -> ActorBehaviourCloning | None:
+    """The actor's behavioural-cloning term on ``expert.batch_size`` pairs (``csirl.actor_bc_coef`` > 0), else None."""
+    coef = float(cfg.csirl.actor_bc_coef)
+    if coef == 0:
+        return None
+    return ActorBehaviourCloning(BCLoss(modules.actor, loss_function="l2"), expert, coef)
+
+
 def make_logger(cfg: DictConfig, run_dir: str, resume_frames: int | None = None) -> MetricsLogger:
     """metrics.jsonl / metrics.csv in the run directory, plus W&B (offline by default) or TorchRL CSV."""
     return MetricsLogger(
@@ -486,7 +508,8 @@ def make_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume_fra
     # last: the worker processes start here
     collector = make_collector(cfg, modules.actor, frames_done)
 
-    sac_update = SACUpdate(modules.sac, optimizers["optim_sac"], modules.target_updater, cfg.optim.max_grad_norm)
+    sac_update = SACUpdate(modules.sac, optimizers["optim_sac"], modules.target_updater, cfg.optim.max_grad_norm,
+                           sample=make_sampler(cfg, online, expert), actor_bc=make_actor_bc(cfg, modules, expert))
     update = sac_update
     if modules.meta is not None:
         update = MetaRewardUpdate(modules.meta, sac_update, optimizers["optim_reward"], expert,

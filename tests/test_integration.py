@@ -126,3 +126,36 @@ def test_velocity_in_the_matching_search_penalises_forward_driving_on_merge() ->
         rewards[name] = transform(rollout.clone())["next", "matching_reward"].flatten()
     assert (rewards["ego"] < 0).sum() >= 10
     assert (rewards["position"] > 0).all()
+
+
+def _constant_speed_matching_reward(speed: float, search: str, target: str, steps: int = 40) -> float:
+    """Mean matching reward per step on merge for an ego driving straight on at ``speed`` [m/s]."""
+    spec = SCENARIOS["merge"]
+    curriculum = load_expert_demonstrations("merge", num_trajectories=1).trajectory_observations(0, include_final=True)
+    obs = curriculum[0].repeat(steps + 1, 1)
+    x_range = spec.features_range["x"]
+    x = 30.0 + speed * spec.dt * torch.arange(steps + 1, dtype=obs.dtype)
+    obs[:, 1] = -1.0 + (x - x_range[0]) * 2.0 / (x_range[1] - x_range[0])
+    obs[:, 3] = speed / spec.features_range["vx"][1]
+    indices = spec.ego_feature_indices if search == "ego" else spec.position_feature_indices
+    r = matching_reward(obs[:-1], obs[1:], curriculum, 1, ego_feature_indices=indices,
+                        position_feature_indices=spec.position_feature_indices,
+                        scale=spec.matching_scale, target=target)
+    return r.mean().item()
+
+
+def test_matching_reward_per_step_against_speed_on_merge() -> None:
+    """What each search / target pair pays for driving at a constant speed (docs/ALGORITHM.md, section 3).
+
+    With the search on the position and the paper's target (the final state past the subgoal) the
+    reward is the progress itself (1 per metre on merge); with the published ``next`` target it
+    grows much less than the speed; with the search on the whole ego row, following traffic at
+    20 m/s is paid negatively, so ending the episode (a crash) is worth more than following.
+    """
+    progress_per_step = {v: v * SCENARIOS["merge"].dt for v in (20.0, 39.0)}  # 1 reward per metre
+    for v, metres in progress_per_step.items():
+        assert _constant_speed_matching_reward(v, "position", "final") == pytest.approx(metres, rel=0.02)
+    slow, fast = (_constant_speed_matching_reward(v, "position", "next") for v in (20.0, 39.0))
+    assert 0 < slow and fast / slow < 0.8 * 39.0 / 20.0
+    slow, fast = (_constant_speed_matching_reward(v, "ego", "next") for v in (20.0, 39.0))
+    assert slow < 0 < fast

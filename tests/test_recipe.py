@@ -131,6 +131,42 @@ def test_csirl_b_switch_trains_without_the_reward_network(tmp_path):
         run.close()
 
 
+def test_automatic_temperature_is_trained_and_logged(tmp_path):
+    cfg = _tiny_cfg(tmp_path, "csirl.fixed_alpha=false", "collector.total_frames=300")
+    run = csirl_utils.make_trainer(cfg, str(tmp_path))
+    try:
+        log_alpha = run.modules.sac.log_alpha
+        assert log_alpha.requires_grad
+        assert any(p is log_alpha for g in run.optimizers["optim_sac"].param_groups for p in g["params"])
+        before = log_alpha.detach().clone()
+        run.trainer.train()
+        assert not torch.equal(before, log_alpha.detach())
+        rows = [r for r in run.logger.rows if "alpha" in r]
+        assert rows and rows[-1]["alpha"] == pytest.approx(log_alpha.exp().item(), rel=0.1)
+    finally:
+        run.close()
+
+
+def test_demonstrations_in_the_batch_and_actor_cloning_are_wired_and_logged(tmp_path):
+    cfg = _tiny_cfg(tmp_path, "replay_buffer.expert_fraction=0.25", "csirl.actor_bc_coef=0.4",
+                    "collector.total_frames=300")
+    run = csirl_utils.make_trainer(cfg, str(tmp_path))
+    try:
+        update = run.trainer.update_step.sac_update
+        assert update.actor_bc.coef == 0.4 and update.actor_bc.bc_loss.actor_network is run.modules.actor
+        run.trainer.train()
+        batch = update.sample(run.trainer)
+        assert batch.batch_size == (64,)
+        expert_obs = run.demos.transitions()["observation"]
+        from_expert = torch.cdist(batch["observation"], expert_obs, compute_mode="donot_use_mm_for_euclid_dist").min(-1).values < 1e-6
+        assert from_expert[48:].all() and from_expert.sum() >= 16
+        assert ("next", "matching_reward") in batch.keys(True) and ("next", "intrinsic_reward") in batch.keys(True)
+        rows = [r for r in run.logger.rows if "loss_actor_bc" in r]
+        assert rows and all(r["actor_bc_mse"] > 0 and r["loss_actor_bc"] > 0 for r in rows)
+    finally:
+        run.close()
+
+
 def test_nan_stops_training_and_keeps_the_last_checkpoint(tmp_path):
     cfg = _tiny_cfg(tmp_path, "collector.total_frames=400")
     run = csirl_utils.make_trainer(cfg, str(tmp_path))
@@ -309,19 +345,19 @@ def test_summarize_runs_groups_seeds_by_configuration_variant(tmp_path, capsys):
     from omegaconf import OmegaConf
 
     for name, overrides, rate in [("a", [], 0.5), ("b", [], 0.7),
-                                  ("c", ["model.ego_relative_features=true", "collector.main_threads=1"], 0.9)]:
+                                  ("c", ["model.ego_relative_features=false", "collector.main_threads=1"], 0.9)]:
         run_dir = tmp_path / name
         run_dir.mkdir()
         cfg = csirl_utils.load_config([f"seed={ord(name)}", f"logger.output_dir={tmp_path}", *overrides])
         OmegaConf.save(cfg, run_dir / "config.yaml")
         (run_dir / "summary.json").write_text(json.dumps(
             {"scenario": "merge", "method": "csirl", "preset": "default", "seed": ord(name), "accomplish_rate": rate}))
-    assert summarize_runs.variant(str(tmp_path / "c"), "default") == "model.ego_relative_features=true"
+    assert summarize_runs.variant(str(tmp_path / "c"), "default") == "model.ego_relative_features=false"
     stats = summarize_runs.main([str(tmp_path)])
-    assert set(stats) == {"merge/csirl/default", "merge/csirl/default model.ego_relative_features=true"}
+    assert set(stats) == {"merge/csirl/default", "merge/csirl/default model.ego_relative_features=false"}
     assert stats["merge/csirl/default"]["accomplish_rate"]["mean"] == pytest.approx(0.6)
     assert stats["merge/csirl/default"]["seeds"] == [ord("a"), ord("b")]
-    assert "| merge/csirl/default model.ego_relative_features=true | 99 |" in capsys.readouterr().err
+    assert "| merge/csirl/default model.ego_relative_features=false | 99 |" in capsys.readouterr().err
 
 
 def test_meta_gradient_balance_reports_both_parts(capsys):
@@ -344,3 +380,24 @@ def test_meta_gradient_balance_of_a_trained_run(full_run):
     out = meta_gradient_balance.main(["--frames", "60", "--steps", "1", f"checkpoint.resume={full_run['run_dir']}"])
     assert out["checkpoint"] == full_run["run_dir"] and out["scenario"] == full_run["scenario"]
     assert out["meta_grad_norm_l1"] > 0
+
+
+def test_merge_outcomes_splits_test_episodes_by_the_traffic_ahead(tmp_path, capsys):
+    import merge_outcomes
+
+    from torchrl_csirl.envs import SCENARIOS
+    from torchrl_csirl.modules import make_actor, save_policy
+
+    spec = SCENARIOS["merge"]
+    path = save_policy(make_actor(spec.obs_dim, spec.action_dim), tmp_path / "policy.pt", obs_dim=spec.obs_dim,
+                       action_dim=spec.action_dim, scenario="merge", frames=0)
+    stats = merge_outcomes.main([str(path), "--episodes", "4"])
+    assert json.loads(capsys.readouterr().out.strip().splitlines()[-1])["all"] == stats["all"]
+    assert stats["free"]["episodes"] + stats["blocked"]["episodes"] == stats["all"]["episodes"] == 4
+    for group in stats.values():
+        assert sum(group[o] for o in merge_outcomes.OUTCOMES) == group["episodes"]
+    assert 0.0 <= stats["all"]["accomplish_rate"] <= 1.0
+    other = save_policy(make_actor(35, 2), tmp_path / "roundabout.pt", obs_dim=35, action_dim=2,
+                        scenario="roundabout", frames=0)
+    with pytest.raises(SystemExit):
+        merge_outcomes.main([str(other)])
