@@ -4,7 +4,7 @@ Reads ``summary.json`` of every run directory given (or found under a folder), g
 (scenario, method, preset, variant) and prints a Markdown table (to stderr) and, last, one JSON
 line with the per-group statistics. The *variant* lists the run's configuration values that differ
 from its preset's defaults (read from the run's ``config.yaml``; seeds, logging, checkpointing and
-thread counts do not count), e.g. ``model.ego_relative_features=true``.
+thread counts do not count), e.g. ``replay_buffer.expert_fraction=0``.
 
 Usage::
 
