@@ -22,7 +22,7 @@ class DemonstrationMixer:
     This is "RL from demonstrations" in the style of DDPGfD / RLPD: the critic sees the expert's
     transitions (in merge, the manoeuvre past the slow vehicles) from the first update on,
     instead of waiting for the policy to stumble on them. It is not in the CSIRL paper nor in its
-    published code (``csirl.expert_fraction=0``, the paper preset, turns it off).
+    published code (the recipe key ``replay_buffer.expert_fraction=0``, as in ``preset=paper``, turns it off).
 
     Args:
         online: the online replay buffer (its ``sample(batch_size)`` applies its own transform).
