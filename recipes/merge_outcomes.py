@@ -21,7 +21,7 @@ from collections import Counter, defaultdict
 import torch
 from torchrl.envs import EnvBase, ExplorationType, set_exploration_type
 
-from torchrl_csirl.envs import accomplish_rate_from_rollout, make_env
+from torchrl_csirl.envs import accomplish_rate_from_rollout, make_env, success_from_rollout
 from torchrl_csirl.modules import load_policy
 
 OUTCOMES = ("success", "crash", "offroad", "timeout")
@@ -37,10 +37,11 @@ def traffic_ahead(env: EnvBase) -> str:
 
 
 def outcome(rollout) -> str:
-    """How an episode ended: success, crash, off-road or time-out."""
-    nxt = rollout["next"]
-    for name, key in (("success", "success"), ("crash", "crashed"), ("offroad", "offroad")):
-        if bool(nxt[key].any()):
+    """How an episode ended: success (as the recipe's evaluation counts it), crash, off-road or time-out."""
+    if bool(success_from_rollout(rollout)):
+        return "success"
+    for name, key in (("crash", "crashed"), ("offroad", "offroad")):
+        if bool(rollout["next", key].any()):
             return name
     return "timeout"
 
@@ -52,11 +53,10 @@ def classify_episodes(policy, episodes: int, seed: int, max_steps: int = 60) -> 
     try:
         with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
             for i in range(episodes):
-                env.set_seed(seed + i)
-                env.reset()
+                env.set_seed(seed + i)  # the reset below is the one of evaluate_policy's rollout
+                start = env.reset()
                 traffic = traffic_ahead(env)
-                env.set_seed(seed + i)
-                rollout = env.rollout(max_steps, policy, break_when_any_done=True)
+                rollout = env.rollout(max_steps, policy, auto_reset=False, tensordict=start, break_when_any_done=True)
                 records.append({"episode": i, "traffic": traffic, "outcome": outcome(rollout),
                                 "accomplish_rate": float(accomplish_rate_from_rollout(rollout)),
                                 "steps": rollout.shape[-1]})
