@@ -25,7 +25,8 @@ import torch
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-from csirl_utils import load_config, load_experts, load_run_config, make_loss_modules, make_matching  # noqa: E402
+from common.builders import load_experts  # noqa: E402
+from csirl_utils import load_config, load_run_config, make_loss_modules, make_matching  # noqa: E402
 
 from torchrl_csirl.envs import SCENARIOS, make_env  # noqa: E402
 from torchrl_csirl.objectives import MetaRewardLoss  # noqa: E402
@@ -47,23 +48,23 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     overrides = [o for o in overrides if not o.startswith("checkpoint.resume=")]
     # a trained run: its own configuration (networks, scenario), updated by the command line
     cfg = load_run_config(resume, overrides) if resume else load_config(overrides)
-    torch.manual_seed(int(cfg.seed))
+    torch.manual_seed(cfg.seed)
     spec = SCENARIOS[cfg.env.scenario]
-    demos = load_experts(cfg, spec)
+    demos = load_experts(cfg.expert, spec)
     modules = make_loss_modules(cfg, spec)
     if resume:
         load_trained(modules, resume)
     curriculum_obs = demos.trajectory_observations(0, include_final=True)
     matching = make_matching(cfg, spec, curriculum_obs, subgoal=min(5, len(curriculum_obs) - 1))
-    env = make_env(spec.name, seed=int(cfg.seed))
+    env = make_env(spec.name, seed=cfg.seed)
     online = matching(env.rollout(args.frames, modules.actor, break_when_any_done=False).reshape(-1))
     env.close()
-    expert = demos.as_replay_buffer(batch_size=int(cfg.expert.batch_size))
-    meta = MetaRewardLoss(modules.sac, modules.reward_network, lr_inner=float(cfg.csirl.lr_inner),
-                          scale=float(cfg.csirl.meta_scale), reward_l1_coef=float(cfg.csirl.reward_l1_coef))
+    expert = demos.as_replay_buffer(batch_size=cfg.expert.batch_size)
+    meta = MetaRewardLoss(modules.sac, modules.reward_network, lr_inner=cfg.csirl.lr_inner,
+                          scale=cfg.csirl.meta_scale, reward_l1_coef=cfg.csirl.reward_l1_coef)
     keys = ("meta_grad_norm_imitation", "meta_grad_norm_l1", "intrinsic_reward_mean", "loss_imitation")
     sums = dict.fromkeys(keys, 0.0)
-    batch = int(cfg.replay_buffer.batch_size)
+    batch = cfg.replay_buffer.batch_size
     for _ in range(args.steps):
         out = meta(online[torch.randint(len(online), (batch,))], expert.sample(),
                    regularizer=online[torch.randint(len(online), (batch,))])
@@ -72,8 +73,8 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     summary = {
         "scenario": spec.name,
         "checkpoint": resume,
-        "reward_l1_coef": float(cfg.csirl.reward_l1_coef),
-        "lr_inner": float(cfg.csirl.lr_inner),
+        "reward_l1_coef": cfg.csirl.reward_l1_coef,
+        "lr_inner": cfg.csirl.lr_inner,
         **{k: float(f"{v:.4g}") for k, v in sums.items()},
         "l1_to_imitation_ratio": float(f"{sums['meta_grad_norm_l1'] / max(sums['meta_grad_norm_imitation'], 1e-30):.4g}"),
         "matching_reward_mean": float(f"{float(online['next', 'matching_reward'].mean()):.4g}"),

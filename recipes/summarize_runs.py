@@ -31,10 +31,11 @@ from omegaconf import OmegaConf
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-from csirl_utils import flatten_config, format_override, load_config  # noqa: E402
+from common.config import flatten_config, format_override  # noqa: E402
+from common.registry import load_config_for  # noqa: E402
 
 #: configuration keys that do not change what a run learns (or are shown elsewhere in the key)
-NOT_A_VARIANT = ("seed", "preset", "env.scenario", "csirl.intrinsic", "collector.main_threads", "logger.", "checkpoint.")
+NOT_A_VARIANT = ("seed", "device", "preset", "env.scenario", "csirl.intrinsic", "collector.main_threads", "logger.", "checkpoint.")
 
 #: summary fields reported as mean / std over seeds
 FIELDS = (
@@ -72,12 +73,13 @@ def find_summaries(paths: list[str]) -> list[str]:
 
 
 @functools.lru_cache(maxsize=None)
-def _preset_defaults(preset: str) -> dict[str, object]:
-    return flatten_config(load_config([f"preset={preset}"]))
+def _preset_defaults(method: str, preset: str) -> dict[str, object]:
+    return flatten_config(load_config_for(method)([f"preset={preset}"]))
 
 
-def variant(run_dir: str, preset: str) -> str:
-    """``key=value`` of the run's configuration entries that differ from ``preset``'s defaults.
+def variant(run_dir: str, preset: str, method: str = "csirl") -> str:
+    """``key=value`` of the run's configuration entries that differ from ``preset``'s defaults
+    (those of the recipe that trains ``method``).
 
     Empty for a run of the preset as it is, or when the run directory has no ``config.yaml``.
     """
@@ -85,7 +87,7 @@ def variant(run_dir: str, preset: str) -> str:
     if not os.path.isfile(path):
         return ""
     run = flatten_config(OmegaConf.load(path))
-    default = _preset_defaults(preset)
+    default = _preset_defaults(method, preset)
     changed = [
         format_override(key, value)
         for key, value in sorted(run.items())
@@ -145,7 +147,8 @@ def main(argv: list[str] | None = None) -> dict[str, dict]:
     for path in find_summaries(args.paths):
         with open(path) as f:
             summary = json.load(f)
-        summary["variant"] = variant(os.path.dirname(path), summary.get("preset", "default"))
+        summary["variant"] = variant(os.path.dirname(path), summary.get("preset", "default"),
+                                     summary.get("method", "csirl"))
         summaries.append(summary)
     stats = summarize(summaries)
     print(markdown_table(stats), file=sys.stderr)

@@ -17,6 +17,7 @@ RECIPE = os.path.join(RECIPES, "csirl_highway.py")
 sys.path.insert(0, RECIPES)
 
 import csirl_utils  # noqa: E402
+from common import builders, config, run  # noqa: E402
 
 from torchrl_csirl.trainers import TrainingDivergedError, load_checkpoint, shutdown_collector  # noqa: E402
 
@@ -219,21 +220,28 @@ def test_malformed_expert_file_is_a_clear_error(tmp_path, content):
         ExpertDemonstrations.from_episodes([ep] * 25).save(path)
     cfg = _tiny_cfg(tmp_path, f"expert.path={path}")
     with pytest.raises(csirl_utils.ExpertDataError, match=str(path.name)):
-        csirl_utils.load_experts(cfg, csirl_utils.SCENARIOS["merge"])
+        builders.load_experts(cfg.expert, csirl_utils.SCENARIOS["merge"])
 
 
 @pytest.mark.parametrize(
     "override, message",
     [
-        (["env.scenario=mars"], "env.scenario must be one of"),
-        (["collector.frames_per_batch=101"], "multiple of collector.num_workers"),
-        (["no.such.key=1"], "Bad override"),
-        (["seed"], "not of the form key=value"),
-        (["preset=fastest"], "preset must be one of"),
-        (["collector.main_threads=0"], "collector.main_threads must be a positive integer or null"),
-        (["collector.envs_per_worker=0"], "collector.envs_per_worker must be a positive integer or null"),
-        (["csirl.matching_features=speed"], "csirl.matching_features must be ego or position"),
+        (["env.scenario=mars"], "env.scenario=mars: must be one of highway-fast, intersection, merge, roundabout"),
+        (["collector.total_frames=abc"], "collector.total_frames=abc: must be an integer > 0 or null"),
+        (["collector.total_frames=1.5"], "collector.total_frames=1.5: must be an integer > 0 or null"),
+        (["csirl.intrinsic=maybe"], "csirl.intrinsic=maybe: must be true or false"),
+        (["optim.lr=-1"], "optim.lr=-1.0: must be a number > 0.0"),
+        (["replay_buffer.expert_fraction=1"], "replay_buffer.expert_fraction=1.0: must be a number >= 0.0 and < 1.0"),
+        (["collector.frames_per_batch=101"], r"collector.frames_per_batch=101: must be a multiple of collector.num_workers \(2\)"),
+        (["no.such.key=1"], "no.such.key: unknown configuration key"),
+        (["csirl.metta_every=1"], "csirl.metta_every: unknown configuration key; did you mean csirl.meta_every"),
+        (["seed"], "seed: not of the form key=value"),
+        (["preset=fastest"], "preset=fastest: must be one of default, paper"),
+        (["collector.main_threads=0"], "collector.main_threads=0: must be an integer > 0 or null"),
+        (["collector.envs_per_worker=0"], "collector.envs_per_worker=0: must be an integer > 0 or null"),
+        (["csirl.matching_features=speed"], "csirl.matching_features=speed: must be one of ego, position"),
         (["collector.envs_per_worker=3"], "multiple of collector.num_workers x collector.envs_per_worker"),
+        (["device=tpu"], "device=tpu: must be one of cpu, cuda, auto"),
     ],
 )
 def test_config_errors_name_the_problem(override, message):
@@ -279,7 +287,7 @@ def test_ego_relative_features_switch_reaches_every_network(enabled):
 )
 def test_envs_per_worker_keeps_whole_episodes_per_batch(scenario, overrides, expected):
     cfg = csirl_utils.load_config([f"env.scenario={scenario}", *overrides])
-    assert csirl_utils.envs_per_worker(cfg, csirl_utils.SCENARIOS[scenario]) == expected
+    assert builders.envs_per_worker(cfg.collector, csirl_utils.SCENARIOS[scenario]) == expected
 
 
 def test_collection_with_several_envs_per_worker_is_reproducible():
@@ -289,7 +297,7 @@ def test_collection_with_several_envs_per_worker_is_reproducible():
     torch.manual_seed(0)
     actor = csirl_utils.make_loss_modules(cfg, csirl_utils.SCENARIOS["merge"]).actor
     batches = []
-    collector = csirl_utils.make_collector(cfg, actor)
+    collector = builders.make_collector("merge", cfg.collector, actor)
     try:
         iterator = iter(collector)
         for main_seed in range(2):  # the workers draw the actions: only set_seed matters
@@ -314,7 +322,7 @@ def test_worker_processes_act_with_the_weights_the_main_process_trains():
                                    "collector.envs_per_worker=2"])
     torch.manual_seed(0)
     modules = csirl_utils.make_loss_modules(cfg, csirl_utils.SCENARIOS["merge"])
-    collector = csirl_utils.make_collector(cfg, modules.actor)
+    collector = builders.make_collector("merge", cfg.collector, modules.actor)
 
     try:
         iterator = iter(collector)
@@ -401,3 +409,95 @@ def test_merge_outcomes_splits_test_episodes_by_the_traffic_ahead(tmp_path, caps
                         scenario="roundabout", frames=0)
     with pytest.raises(SystemExit):
         merge_outcomes.main([str(other)])
+
+
+def test_a_wrong_type_on_the_command_line_is_one_line_and_exit_2(tmp_path):
+    proc = run_recipe("collector.total_frames=abc", f"logger.output_dir={tmp_path}", check=False)
+    assert proc.returncode == 2
+    assert proc.stderr.strip() == "error: collector.total_frames=abc: must be an integer > 0 or null"
+    assert not os.listdir(tmp_path)  # refused before a run directory (or a worker) existed
+
+
+def test_a_run_is_never_overwritten_unless_asked(full_run, tmp_path):
+    out, name = os.path.split(full_run["run_dir"])
+    before = os.path.getmtime(os.path.join(full_run["run_dir"], "summary.json"))
+    proc = run_recipe(*TINY, f"logger.output_dir={out}", f"logger.exp_name={name}", check=False)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert f"logger.exp_name={name}: {full_run['run_dir']} already holds a run" in proc.stderr
+    assert f"checkpoint.resume={full_run['run_dir']}" in proc.stderr and "logger.overwrite=true" in proc.stderr
+    assert os.path.getmtime(os.path.join(full_run["run_dir"], "summary.json")) == before
+    # asked for explicitly: the old directory is replaced as a whole
+    (tmp_path / "old").mkdir()
+    (tmp_path / "old" / "config.yaml").write_text("seed: 0\n")
+    (tmp_path / "old" / "stale.txt").write_text("from the old run")
+    assert run.make_run_dir(str(tmp_path), "old", "", overwrite=True) == str(tmp_path / "old")
+    assert not os.listdir(tmp_path / "old")
+
+
+def test_unnamed_runs_get_a_fresh_directory(tmp_path):
+    first = run.make_run_dir(str(tmp_path), None, "merge-csirl-s0-x")
+    open(os.path.join(first, "metrics.jsonl"), "w").close()
+    second = run.make_run_dir(str(tmp_path), None, "merge-csirl-s0-x")
+    assert second == first + "-2" and os.path.isdir(second)
+
+
+def test_resume_merges_schema_saved_config_and_command_line(tmp_path):
+    from omegaconf import OmegaConf
+
+    cfg = csirl_utils.load_config(["preset=paper", "seed=4", "csirl.meta_every=3"])
+    saved = OmegaConf.to_container(cfg)
+    del saved["logger"]["overwrite"]  # a key added after the run was made takes the schema default
+    saved["checkpoint"]["resume"] = "/somewhere/else"
+    OmegaConf.save(OmegaConf.create(saved), tmp_path / "config.yaml")
+    resumed = csirl_utils.load_run_config(str(tmp_path), ["collector.total_frames=9000"])
+    assert resumed.seed == 4 and resumed.csirl.meta_every == 3 and resumed.csirl.updates_per_round == 20000
+    assert resumed.collector.total_frames == 9000 and resumed.logger.overwrite is False
+    assert resumed.checkpoint.resume is None and resumed.preset == "paper"
+    with pytest.raises(config.ConfigError, match="a resumed run keeps its preset"):
+        csirl_utils.load_run_config(str(tmp_path), ["preset=default"])
+    with pytest.raises(config.ConfigError, match="csirl.meta_every=0: must be an integer > 0"):
+        csirl_utils.load_run_config(str(tmp_path), ["csirl.meta_every=0"])
+    saved["csirl"]["meta_every"] = "often"  # a hand-edited config.yaml is checked too, and named
+    OmegaConf.save(OmegaConf.create(saved), tmp_path / "config.yaml")
+    with pytest.raises(config.ConfigError, match=r"csirl.meta_every=often: must be an integer > 0 \(in .*config.yaml\)"):
+        csirl_utils.load_run_config(str(tmp_path))
+
+
+def test_device_is_read_and_a_missing_gpu_is_a_config_error():
+    assert run.resolve_device("cpu").type == "cpu"
+    assert run.resolve_device("auto").type == ("cuda" if torch.cuda.is_available() else "cpu")
+    if not torch.cuda.is_available():
+        with pytest.raises(config.ConfigError, match="device=cuda: CUDA is not available"):
+            csirl_utils.load_config(["device=cuda"])
+
+
+def test_policy_mirror_copies_the_learner_weights_in_place():
+    """With the learner on another device the workers act through a CPU copy that follows it."""
+    from torchrl_csirl.modules import make_actor
+
+    learner = make_actor(4, 2, hidden=(8,))
+    mirror = builders.PolicyMirror(learner, torch.device("meta"))  # any non-CPU device: a separate copy
+    assert mirror.mirrored and mirror.policy is not learner
+    storages = [p.data_ptr() for p in mirror.policy.parameters()]
+    with torch.no_grad():
+        for p in learner.parameters():
+            p.add_(1.0)
+    mirror.sync()
+    for a, b in zip(learner.parameters(), mirror.policy.parameters()):
+        torch.testing.assert_close(a, b)
+    assert [p.data_ptr() for p in mirror.policy.parameters()] == storages  # in place: shared memory follows
+
+
+def test_help_lists_every_key_with_what_it_accepts():
+    proc = run_recipe("--help")
+    assert "csirl.meta_every = 2  # an integer > 0;" in proc.stdout
+    assert "device = cpu  # one of cpu, cuda, auto" in proc.stdout
+    assert len([line for line in proc.stdout.splitlines() if " = " in line]) == len(config.flatten_config(
+        csirl_utils.load_config([])))
+
+
+def test_method_registry_reads_each_method_with_its_recipe_schema():
+    from common import registry
+
+    assert {"csirl", "csirl-b"} <= set(registry.known_methods())
+    assert registry.load_config_for("csirl-b")(["preset=paper"]).csirl.updates_per_round == 20000

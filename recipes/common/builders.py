@@ -1,0 +1,433 @@
+"""Builders every recipe shares: demonstrations, environments, collector, buffers, logging,
+evaluation, checkpoints, the learner device, the plots and the run itself.
+
+Each ``make_*`` takes sections of the typed configuration (:mod:`common.config`) and returns one
+TorchRL / torchrl-csirl piece; a method's recipe builds its losses and update step and hands them
+to :func:`assemble_trainer`, which wires the shared hooks. Library code below takes plain arguments
+(configuration stops here).
+"""
+from __future__ import annotations
+
+import atexit
+import copy
+import os
+import sys
+import weakref
+from dataclasses import dataclass, field
+from functools import partial
+from typing import Any, Callable
+
+import torch
+from omegaconf import DictConfig, OmegaConf
+from tensordict import TensorDict
+from torch import nn
+from torchrl.collectors import BaseCollector, Collector
+from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
+from torchrl.envs import Compose, EnvBase, Transform
+
+from common.config import ConfigError
+from common.run import ExpertDataError
+from torchrl_csirl.data import ExpertDemonstrations, import_published, load_expert_demonstrations
+from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, make_serial_env
+from torchrl_csirl.envs import make_env as make_scenario_env
+from torchrl_csirl.trainers import (
+    CheckpointHook,
+    CSIRLTrainer,
+    EvaluationHook,
+    MetricsLogger,
+    evaluate_policy,
+    shutdown_collector,
+)
+
+__all__ = [
+    "PolicyMirror",
+    "Run",
+    "assemble_trainer",
+    "check_collector",
+    "envs_per_worker",
+    "load_experts",
+    "make_collector",
+    "make_eval_env",
+    "make_logger",
+    "make_online_buffer",
+    "make_worker_env_fn",
+]
+
+MAX_ENVS_PER_WORKER = 4
+
+
+# ---------------------------------------------------------------------------------------- data
+def load_experts(expert: DictConfig, spec: ScenarioSpec) -> ExpertDemonstrations:
+    """The demonstrations: the shipped ones, or ``expert.path`` (checked against the scenario).
+
+    Raises:
+        ExpertDataError: a missing, malformed or mismatched file, naming it.
+    """
+    n = expert.num_trajectories
+    if expert.path is None:
+        return load_expert_demonstrations(spec.name, n, curriculum=expert.curriculum)
+    path = os.path.abspath(os.path.expanduser(str(expert.path)))
+    if not os.path.isfile(path):
+        raise ExpertDataError(f"expert.path: no such file {path!r}.")
+    try:
+        demos = ExpertDemonstrations.load(path) if path.endswith(".npz") else import_published(path)
+    except Exception as err:
+        raise ExpertDataError(f"expert.path: {path!r} is not a valid expert file ({type(err).__name__}: {err}).") from None
+    if demos.observation_dim != spec.obs_dim or demos.action_dim != spec.action_dim:
+        raise ExpertDataError(
+            f"expert.path: {path!r} has observations of size {demos.observation_dim} and actions of size "
+            f"{demos.action_dim}, but {spec.name!r} has {spec.obs_dim} and {spec.action_dim}.")
+    if demos.num_trajectories < n:
+        raise ExpertDataError(
+            f"expert.path: {path!r} holds {demos.num_trajectories} trajectories, "
+            f"expert.num_trajectories asks for {n}.")
+    return demos.subset(n) if n < demos.num_trajectories else demos
+
+
+# ---------------------------------------------------------------------------------------- envs
+def check_collector(collector: DictConfig) -> None:
+    """The checks that involve several ``collector.*`` keys (before any worker starts)."""
+    fpb, workers, k = collector.frames_per_batch, collector.num_workers, collector.envs_per_worker
+    if fpb % workers:
+        raise ConfigError(f"collector.frames_per_batch={fpb}: must be a multiple of collector.num_workers ({workers})")
+    if k is not None and fpb % (workers * k):
+        raise ConfigError(f"collector.frames_per_batch={fpb}: must be a multiple of "
+                          f"collector.num_workers x collector.envs_per_worker ({workers} x {k})")
+
+
+def envs_per_worker(collector: DictConfig, spec: ScenarioSpec) -> int:
+    """``collector.envs_per_worker``, or for ``null`` the most (up to 4) that keep whole episodes.
+
+    Collection resets every environment at each batch start (exact resume), so each of the
+    ``num_workers x k`` environments steps ``frames_per_batch / (num_workers x k)`` times per batch;
+    the automatic choice keeps that at least the scenario's episode limit.
+
+    Examples:
+        >>> from omegaconf import OmegaConf
+        >>> c = OmegaConf.create({"envs_per_worker": None, "frames_per_batch": 480, "num_workers": 2})
+        >>> envs_per_worker(c, SCENARIOS["merge"]), envs_per_worker(c, SCENARIOS["highway-fast"])
+        (4, 1)
+    """
+    if collector.envs_per_worker is not None:
+        return collector.envs_per_worker
+    fpb, workers = collector.frames_per_batch, collector.num_workers
+    fitting = [k for k in range(1, MAX_ENVS_PER_WORKER + 1)
+               if fpb % (workers * k) == 0 and fpb // (workers * k) >= spec.max_steps]
+    return max(fitting, default=1)
+
+
+def make_worker_env_fn(scenario: str, collector: DictConfig) -> Callable[[], EnvBase]:
+    """A picklable factory of one collector worker's environments (``envs_per_worker`` copies).
+
+    Examples:
+        >>> from omegaconf import OmegaConf
+        >>> c = OmegaConf.create({"envs_per_worker": 2, "frames_per_batch": 500, "num_workers": 2})
+        >>> make_worker_env_fn("merge", c)().batch_size
+        torch.Size([2])
+    """
+    return partial(make_serial_env, scenario, envs_per_worker(collector, SCENARIOS[scenario]))
+
+
+def make_eval_env(scenario: str) -> EnvBase:
+    """One evaluation environment (main process, seeded per episode by the evaluator)."""
+    return make_scenario_env(scenario)
+
+
+def make_collector(scenario: str, collector: DictConfig, policy: nn.Module, frames_done: int = 0) -> BaseCollector:
+    """A synchronous collector of ``collector.num_workers`` worker processes (unbounded; the trainer stops it).
+
+    Each worker process holds ``envs_per_worker`` environments *and a copy of the policy* (TorchRL's
+    multi-process synchronous collector, ``Collector(..., num_collectors=W, sync=True)``); the
+    workers wait while the main process updates, which gets every core (``collector.main_threads``).
+    Why this scales better than a ``ParallelEnv`` driven from the main process: docs/PERFORMANCE.md.
+
+    The workers act with the weights the main process trains because TorchRL moves the policy's
+    parameter storage into shared memory *in place*: optimiser steps and ``load_state_dict`` reach
+    them with no explicit sync; replacing a parameter tensor (``.to(device)``) would not, so a
+    learner on another device acts through a CPU :class:`PolicyMirror`.
+
+    Args:
+        scenario: the scenario name.
+        collector: the ``collector`` section.
+        policy: the acting policy (CPU); with one worker it runs in this process.
+        frames_done: frames collected before (resume): uniform-random frames are not collected again.
+
+    Examples:
+        >>> from omegaconf import OmegaConf
+        >>> from torchrl_csirl.modules import make_actor
+        >>> c = OmegaConf.create({"envs_per_worker": None, "frames_per_batch": 20, "num_workers": 1,
+        ...                       "main_threads": None, "init_random_frames": 0})
+        >>> spec = SCENARIOS["merge"]
+        >>> collector = make_collector("merge", c, make_actor(spec.obs_dim, spec.action_dim))
+        >>> next(iter(collector)).numel()
+        20
+        >>> shutdown_collector(collector)
+    """
+    fpb = collector.frames_per_batch
+    random_frames = max(0, collector.init_random_frames - frames_done)
+    random_frames = -(-random_frames // fpb) * fpb
+    workers = collector.num_workers
+    main_threads = collector.main_threads or os.cpu_count() or 1
+    common: dict[str, Any] = dict(frames_per_batch=fpb, total_frames=-1, init_random_frames=random_frames or None,
+                                  auto_register_policy_transforms=False)
+    env_fn = make_worker_env_fn(scenario, collector)
+    if workers == 1:
+        torch.set_num_threads(main_threads)
+        return Collector(env_fn(), policy=policy, **common)
+    made = Collector([env_fn] * workers, policy, num_collectors=workers, sync=True,
+                     num_threads=main_threads, num_sub_threads=1, **common)
+    # whatever path the process leaves by (see shutdown_collector); a weak reference, so that
+    # collectors dropped earlier (tests) are not kept alive
+    atexit.register(_shutdown_if_alive, weakref.ref(made))
+    return made
+
+
+def _shutdown_if_alive(collector_ref: weakref.ref) -> None:
+    collector = collector_ref()
+    if collector is not None:
+        shutdown_collector(collector)
+
+
+# ---------------------------------------------------------------------------------------- device
+class PolicyMirror:
+    """A CPU copy of a learner's policy, for the collector workers and the evaluation env.
+
+    On the CPU the learner's own policy acts (its parameters are the ones the workers share).
+    On another device (``device=cuda``) the workers and the evaluation act with a CPU copy, and
+    :meth:`sync` copies the learner's weights into it *in place* (so the workers' shared memory
+    follows); the recipe calls it after each batch's updates and before each round's evaluation.
+
+    Args:
+        policy: the learner's policy (on ``device``).
+        device: the learner's device.
+
+    Examples:
+        >>> from torchrl_csirl.modules import make_actor
+        >>> actor = make_actor(4, 2, hidden=(8,))
+        >>> PolicyMirror(actor, torch.device("cpu")).policy is actor
+        True
+    """
+
+    def __init__(self, policy: nn.Module, device: torch.device) -> None:
+        self.learner = policy
+        self.mirrored = device.type != "cpu"
+        self.policy = copy.deepcopy(policy).to("cpu") if self.mirrored else policy
+        self._target = TensorDict.from_module(self.policy) if self.mirrored else None
+
+    def sync(self, *_: Any) -> None:
+        """Copies the learner's weights into the CPU policy (a no-op on the CPU)."""
+        if self.mirrored:
+            with torch.no_grad():
+                self._target.update_(TensorDict.from_module(self.learner))
+
+
+# ---------------------------------------------------------------------------------------- buffers, logging
+def make_online_buffer(size: int, batch_size: int, transforms: list[Transform], device: torch.device) -> TensorDictReplayBuffer:
+    """The online buffer, stored on the learner's device; ``transforms`` run at sampling time."""
+    return TensorDictReplayBuffer(
+        storage=LazyTensorStorage(size, device=device),
+        batch_size=batch_size,
+        transform=Compose(*transforms) if transforms else None,
+    )
+
+
+def make_logger(cfg: DictConfig, run_dir: str, resume_frames: int | None = None) -> MetricsLogger:
+    """metrics.jsonl / metrics.csv in the run directory, plus W&B (offline by default) or TorchRL CSV."""
+    return MetricsLogger(
+        run_dir,
+        backend=cfg.logger.backend,
+        exp_name=os.path.basename(run_dir),
+        config=OmegaConf.to_container(cfg, resolve=True),
+        wandb_mode=cfg.logger.mode,
+        project=cfg.logger.project,
+        resume_frames=resume_frames,
+    )
+
+
+# ---------------------------------------------------------------------------------------- the run
+@dataclass
+class Run:
+    """What every recipe's run holds; a method's recipe keeps its own pieces in ``parts``."""
+
+    cfg: DictConfig
+    spec: ScenarioSpec
+    run_dir: str
+    device: torch.device
+    demos: ExpertDemonstrations
+    online_buffer: TensorDictReplayBuffer
+    mirror: PolicyMirror
+    collector: BaseCollector
+    eval_env: EnvBase
+    logger: MetricsLogger
+    trainer: CSIRLTrainer
+    evaluation: EvaluationHook
+    checkpoint: CheckpointHook
+    parts: dict[str, Any] = field(default_factory=dict)
+
+    def __getattr__(self, name: str) -> Any:
+        parts = self.__dict__.get("parts", {})
+        if name in parts:
+            return parts[name]
+        raise AttributeError(f"{type(self).__name__} has no attribute {name!r}")
+
+    def evaluate(self, episodes: int) -> dict[str, float]:
+        """The deterministic policy on ``episodes`` seeded test episodes."""
+        self.mirror.sync()
+        return evaluate_policy(self.eval_env, self.mirror.policy, episodes=episodes,
+                               max_steps=self.spec.max_steps, seed=self.cfg.eval.seed)
+
+    def close(self) -> None:
+        shutdown_collector(self.collector)
+        self.eval_env.close()
+
+
+def assemble_trainer(
+    cfg: DictConfig,
+    spec: ScenarioSpec,
+    run_dir: str,
+    *,
+    device: torch.device,
+    demos: ExpertDemonstrations,
+    policy: nn.Module,
+    online_buffer: TensorDictReplayBuffer,
+    update_step: Callable[[CSIRLTrainer], dict[str, torch.Tensor]],
+    total_frames: int,
+    updates_per_round: int,
+    states: dict[str, Any],
+    round_hooks: list[tuple[str, Any]] = (),
+    frames_done: int = 0,
+    resume_frames: int | None = None,
+    parts: dict[str, Any] | None = None,
+) -> Run:
+    """The trainer with the shared hooks: evaluation and any ``round_hooks`` at each round end,
+    checkpoints, metrics logging, and the CPU policy mirror for a learner on another device.
+
+    Args:
+        cfg: the recipe configuration (shared sections).
+        spec: the scenario.
+        run_dir: the run directory.
+        device: the learner's device.
+        demos: the demonstrations.
+        policy: the learner's policy (what acts and is evaluated).
+        online_buffer: the online replay buffer.
+        update_step: one update (``callable(trainer) -> dict of losses``).
+        total_frames: environment frames to collect.
+        updates_per_round: updates between two round ends.
+        states: ``name -> object with state_dict/load_state_dict`` saved in checkpoints.
+        round_hooks: ``(name, hook)`` called at each round end before the evaluation.
+        frames_done: frames already collected (resume).
+        resume_frames: the resumed run's frames (the logger drops rows past them).
+        parts: the method's own pieces, reachable as attributes of the :class:`Run`.
+    """
+    mirror = PolicyMirror(policy, device)
+    logger = make_logger(cfg, run_dir, resume_frames)
+    eval_env = make_eval_env(spec.name)
+    # last: the worker processes start here
+    collector = make_collector(spec.name, cfg.collector, mirror.policy, frames_done)
+    trainer = CSIRLTrainer(
+        collector=collector,
+        online_buffer=online_buffer,
+        update_step=update_step,
+        total_frames=total_frames,
+        utd_ratio=cfg.optim.utd_ratio,
+        updates_per_round=updates_per_round,
+        warmup_frames=cfg.replay_buffer.warmup_frames,
+        clear_buffer_each_round=cfg.replay_buffer.clear_each_round,
+        seed=cfg.seed,
+        progress_bar=cfg.logger.progress_bar and sys.stderr.isatty(),
+    )
+
+    def run_eval() -> dict[str, float]:
+        return evaluate_policy(eval_env, mirror.policy, episodes=cfg.eval.episodes,
+                               max_steps=spec.max_steps, seed=cfg.eval.seed)
+
+    evaluation = EvaluationHook(run_eval, every_rounds=cfg.eval.every_rounds)
+    checkpoint = CheckpointHook(os.path.join(run_dir, "checkpoints"),
+                                online_buffer if cfg.checkpoint.save_buffer else None,
+                                every_rounds=cfg.checkpoint.every_rounds)
+    if mirror.mirrored:
+        trainer.register_op("round_end", mirror.sync, "policy_mirror")
+    for name, hook in round_hooks:
+        trainer.register_op("round_end", hook, name)
+    trainer.register_op("round_end", evaluation, "evaluation")
+    trainer.register_op("post_round", checkpoint, "checkpoint")
+    if mirror.mirrored:  # after each batch's updates, before the next collection
+        trainer.register_op("log", mirror.sync, "policy_mirror")
+    trainer.register_op("log", lambda t, row: logger.log(row), "metrics_logger")
+    for name, obj in states.items():
+        trainer.register_state(name, obj)
+    trainer.register_state("evaluation", evaluation)
+    return Run(cfg, spec, run_dir, device, demos, online_buffer, mirror, collector, eval_env, logger, trainer,
+               evaluation, checkpoint, dict(parts or {}))
+
+
+# ---------------------------------------------------------------------------------------- training and summary
+def train(run: Run) -> None:
+    """``run.trainer.train()``; on any exit the collector is shut down and the logs are kept.
+
+    Raises:
+        TrainingDivergedError: with where the last good checkpoint is and how to resume.
+    """
+    from torchrl_csirl.trainers import TrainingDivergedError
+
+    try:
+        run.trainer.train()
+    except TrainingDivergedError as err:
+        run.logger.close()
+        last = run.checkpoint.path if os.path.exists(run.checkpoint.path) else "none yet"
+        raise TrainingDivergedError(
+            f"{err}. Training stopped; the last good checkpoint is kept at {last} "
+            f"(resume with checkpoint.resume={run.run_dir}, e.g. with a smaller optim.lr)."
+        ) from None
+    except BaseException:  # Ctrl-C, SIGTERM, errors: keep the logs (checkpoints are already on disk)
+        run.logger.close()
+        raise
+    finally:
+        shutdown_collector(run.collector)
+
+
+def final_summary(run: Run, method: str, title: str) -> dict[str, Any]:
+    """Final checkpoint and test evaluation, ``policy.pt``, the learning curve, and the summary
+    fields every recipe reports (the method adds its own)."""
+    from torchrl_csirl.envs import normalized_accomplish_rate
+    from torchrl_csirl.modules import save_policy
+    from torchrl_csirl.visualization import plot_learning_curve
+
+    from common.run import expert_accomplish_rate
+
+    trainer, cfg = run.trainer, run.cfg
+    run.checkpoint.save(trainer)
+    final = run.evaluate(cfg.eval.final_episodes)
+    expert_rate = expert_accomplish_rate(run.demos.metadata)
+    save_policy(run.mirror.policy, os.path.join(run.run_dir, "policy.pt"), obs_dim=run.spec.obs_dim,
+                action_dim=run.spec.action_dim, scenario=run.spec.name, frames=trainer.frames)
+    throughput = trainer.throughput
+    history = run.evaluation.history
+    summary = {
+        "scenario": run.spec.name,
+        "method": method,
+        "preset": cfg.get("preset", "default"),
+        "seed": cfg.seed,
+        "device": str(run.device),
+        "accomplish_rate": final["accomplish_rate"],
+        "accomplish_rate_std": final["accomplish_rate_std"],
+        "success_rate": final["success_rate"],
+        "crash_rate": final["crash_rate"],
+        "normalized_accomplish_rate": (
+            float(normalized_accomplish_rate(final["accomplish_rate"], expert_rate)) if expert_rate else None),
+        "auc": sum(h["accomplish_rate"] for h in history) / len(history) if history else None,
+        "eval_episodes": cfg.eval.final_episodes,
+        "frames": trainer.frames,
+        "updates": trainer.updates,
+        "rounds": trainer.rounds,
+        "frames_per_s": throughput["frames_per_s"],
+        "collect_fps": throughput["collect_fps"],
+        "updates_per_s": throughput["updates_per_s"],
+        "wall_s": round(max(trainer.wall_time, 0.0), 1),
+        "run_dir": run.run_dir,
+    }
+    run.logger.log({"frames": trainer.frames, "updates": trainer.updates,
+                    **{f"test_{k}": v for k, v in final.items()}})
+    curve = plot_learning_curve(history, os.path.join(run.run_dir, "learning_curve.png"), title=title)
+    summary["plots"] = [os.fspath(curve)]
+    return summary

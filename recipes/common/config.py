@@ -1,0 +1,414 @@
+"""Typed recipe configuration: dataclass schemas read with ``OmegaConf.structured``.
+
+A recipe declares its configuration as nested dataclasses (the sections below are shared by every
+recipe; a method adds its own section). Each leaf is declared with :func:`option`, which records
+what values are allowed (choices, a lower bound, null or not) and a one-line help. Loading is::
+
+    schema defaults  <-  preset (a config group: config/<recipe>/preset/<name>.yaml)  <-  command line
+
+and resuming a run is ``schema <- the run's saved config.yaml <- command line``. OmegaConf checks
+the types (``collector.total_frames=abc`` is rejected), :func:`validate` the values; every problem
+is one :class:`ConfigError` line naming the key, the value and what is allowed, raised before any
+worker process starts.
+
+Examples:
+    >>> from dataclasses import dataclass, field
+    >>> @dataclass
+    ... class Demo:
+    ...     seed: int = option(0, minimum=0, help="random seed")
+    ...     env: EnvConfig = field(default_factory=EnvConfig)
+    >>> cfg = load_config(Demo, ["seed=3", "env.scenario=roundabout"])
+    >>> cfg.seed, cfg.env.scenario
+    (3, 'roundabout')
+    >>> load_config(Demo, ["seed=abc"])
+    Traceback (most recent call last):
+    ...
+    common.config.ConfigError: seed=abc: must be an integer >= 0
+"""
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import os
+import typing
+from dataclasses import dataclass, field
+from typing import Any, Optional, Union
+
+from omegaconf import DictConfig, OmegaConf
+from omegaconf.errors import OmegaConfBaseException
+
+__all__ = [
+    "CheckpointConfig",
+    "CollectorConfig",
+    "ConfigError",
+    "EnvConfig",
+    "EvalConfig",
+    "ExpertConfig",
+    "LoggerConfig",
+    "ModelConfig",
+    "OptimConfig",
+    "ReplayBufferConfig",
+    "describe",
+    "flatten_config",
+    "format_override",
+    "load_config",
+    "load_run_config",
+    "option",
+    "preset_names",
+    "validate",
+]
+
+SCENARIO_NAMES = ("highway-fast", "intersection", "merge", "roundabout")
+DEVICES = ("cpu", "cuda", "auto")
+
+
+class ConfigError(ValueError):
+    """A bad configuration key or value (one line: the key, the value, what is allowed)."""
+
+
+# ---------------------------------------------------------------------------------------- declaring
+def option(default: Any, *, choices: tuple | None = None, minimum: float | None = None,
+           above: float | None = None, below: float | None = None, help: str = "") -> Any:
+    """A schema leaf: its default and what values :func:`validate` accepts.
+
+    Args:
+        default: the default value (its type comes from the field's annotation).
+        choices: the allowed values.
+        minimum: the smallest allowed value (inclusive).
+        above: values must be strictly greater.
+        below: values must be strictly smaller.
+        help: one line shown by :func:`describe` (``--help``).
+
+    Examples:
+        >>> from dataclasses import fields
+        >>> @dataclass
+        ... class C:
+        ...     k: int = option(2, minimum=1, help="environments")
+        >>> fields(C)[0].metadata["minimum"], C().k
+        (1, 2)
+    """
+    metadata = {"choices": choices, "minimum": minimum, "above": above, "below": below, "help": help}
+    return field(default=default, metadata=metadata)
+
+
+# ---------------------------------------------------------------------------------------- shared sections
+@dataclass
+class EnvConfig:
+    scenario: str = option("merge", choices=SCENARIO_NAMES, help="the driving scenario")
+
+
+@dataclass
+class CollectorConfig:
+    total_frames: Optional[int] = option(60000, above=0, help="environment frames (null: the preset's budget)")
+    frames_per_batch: int = option(500, above=0, help="frames per collected batch")
+    num_workers: int = option(2, above=0, help="worker processes, each with its envs and a policy copy")
+    envs_per_worker: Optional[int] = option(
+        None, above=0, help="envs stepped by each worker (null: up to 4 that still fit a whole episode per batch)")
+    main_threads: Optional[int] = option(None, above=0, help="torch threads of the main process (null: all cores)")
+    init_random_frames: int = option(1000, minimum=0, help="uniform random actions first")
+
+
+@dataclass
+class ExpertConfig:
+    num_trajectories: int = option(25, above=0, help="demonstrations used (1, 5, 10, 15, 20, 25 shipped)")
+    curriculum: str = option("empty", choices=("empty", "traffic"),
+                             help="how the curriculum trajectory was recorded (shipped data)")
+    path: Optional[str] = option(None, help="your own demonstrations (.npz, or a published pickle)")
+    batch_size: int = option(32, above=0, help="expert pairs per meta / cloning step")
+
+
+@dataclass
+class ReplayBufferConfig:
+    size: int = option(1_000_000, above=0, help="online buffer capacity")
+    batch_size: int = option(256, above=0, help="transitions per update")
+    clear_each_round: bool = option(False, help="empty the buffer at each round start (the paper's code)")
+    warmup_frames: int = option(1000, minimum=0, help="transitions in the buffer before the first update of a round")
+    expert_fraction: float = option(0.25, minimum=0.0, below=1.0,
+                                    help="share of expert transitions in every batch (paper: 0)")
+
+
+@dataclass
+class ModelConfig:
+    ego_relative_features: bool = option(True, help="networks also read the other vehicles' offsets from the ego")
+
+
+@dataclass
+class OptimConfig:
+    lr: float = option(3.0e-4, above=0.0, help="actor and critics (Adam)")
+    reward_lr: float = option(1.0e-3, above=0.0, help="reward network (Adam)")
+    utd_ratio: float = option(0.5, above=0.0, help="updates per collected frame")
+    tau: float = option(0.005, above=0.0, below=1.0, help="Polyak factor of the target critics")
+    max_grad_norm: Optional[float] = option(None, above=0.0, help="clip the gradient norm (null: no clipping)")
+
+
+@dataclass
+class EvalConfig:
+    episodes: int = option(10, above=0, help="deterministic episodes per evaluation")
+    every_rounds: int = option(1, above=0, help="evaluation cadence in rounds")
+    final_episodes: int = option(50, above=0, help="episodes of the reported test accomplish rate")
+    seed: int = option(1_000_000, minimum=0, help="eval episode i uses seed + i")
+
+
+@dataclass
+class LoggerConfig:
+    backend: str = option("wandb", choices=("wandb", "csv", "none"),
+                          help="wandb (offline unless mode=online) | csv | none; metrics.csv/jsonl always")
+    mode: str = option("offline", choices=("offline", "online", "disabled"), help="W&B mode")
+    project: str = option("torchrl-csirl", help="W&B project")
+    output_dir: str = option("runs", help="where run directories go")
+    exp_name: Optional[str] = option(None, help="run directory name (null: <scenario>-<method>-s<seed>-<time>)")
+    overwrite: bool = option(False, help="replace an existing run directory of the same name")
+    progress_bar: bool = option(True, help="a progress bar on a terminal")
+
+
+@dataclass
+class CheckpointConfig:
+    every_rounds: int = option(1, minimum=0, help="checkpoint cadence in rounds (0: only at the end)")
+    resume: Optional[str] = option(None, help="a run directory to continue")
+    save_buffer: bool = option(True, help="save the online buffer with the checkpoint (exact resume)")
+
+
+# ---------------------------------------------------------------------------------------- loading
+def preset_names(config_dir: str) -> tuple[str, ...]:
+    """``default`` and the presets of the config group ``<config_dir>/preset/*.yaml``."""
+    folder = os.path.join(config_dir, "preset")
+    found = sorted(n[:-5] for n in os.listdir(folder) if n.endswith(".yaml")) if os.path.isdir(folder) else []
+    return tuple(dict.fromkeys(["default", *found]))
+
+
+def parse_overrides(overrides: list[str]) -> DictConfig:
+    """``key=value`` strings as an OmegaConf tree (values parsed as YAML: ``null``, ``true``, ``3``)."""
+    for item in overrides:
+        if "=" not in item or item.startswith("="):
+            raise ConfigError(f"{item}: not of the form key=value (e.g. env.scenario=merge)")
+    try:
+        return OmegaConf.from_dotlist(list(overrides))
+    except OmegaConfBaseException as err:
+        raise ConfigError(f"bad override: {_first_line(err)}") from None
+
+
+def load_config(schema: type, overrides: list[str] | None = None, config_dir: str | None = None) -> DictConfig:
+    """Schema defaults, the ``preset`` (a config group under ``config_dir``), then ``overrides``.
+
+    Args:
+        schema: the recipe's top-level dataclass.
+        overrides: ``key=value`` strings (the command line).
+        config_dir: folder holding ``preset/<name>.yaml`` (None: no presets besides ``default``).
+
+    Raises:
+        ConfigError: one line naming the bad key or value.
+    """
+    cli = parse_overrides(list(overrides or []))
+    check_known_keys(schema, cli)
+    base = OmegaConf.structured(schema)
+    layers = []
+    preset = cli.get("preset", base.get("preset", "default")) if "preset" in base else None
+    if preset is not None:
+        allowed = preset_names(config_dir) if config_dir else ("default",)
+        if preset not in allowed:
+            raise ConfigError(f"preset={preset}: must be one of {', '.join(allowed)}")
+        if preset != "default":
+            layers.append(OmegaConf.load(os.path.join(config_dir, "preset", f"{preset}.yaml")))
+    return _merge_and_validate(schema, base, [*layers, cli])
+
+
+def load_run_config(schema: type, run_dir: str, overrides: list[str] | None = None) -> DictConfig:
+    """A run's saved ``config.yaml`` over the schema, updated by ``overrides`` (resume).
+
+    ``checkpoint.resume`` of the saved file is dropped, and ``preset`` cannot change (the saved
+    values already hold it).
+    """
+    path = os.path.join(run_dir, "config.yaml")
+    if not os.path.isfile(path):
+        raise ConfigError(f"checkpoint.resume={run_dir}: no config.yaml there")
+    saved = OmegaConf.load(path)
+    if "checkpoint" in saved and "resume" in saved.checkpoint:
+        saved.checkpoint.resume = None
+    cli = parse_overrides(list(overrides or []))
+    check_known_keys(schema, cli)
+    if "preset" in cli and "preset" in saved and cli.preset != saved.preset:
+        raise ConfigError(f"preset={cli.preset}: a resumed run keeps its preset ({saved.preset})")
+    return _merge_and_validate(schema, OmegaConf.structured(schema), [saved, cli], source=path)
+
+
+def check_known_keys(schema: type, overrides: DictConfig) -> None:
+    """Raises :class:`ConfigError` naming the first override key the schema does not have."""
+    for key in flatten_config(overrides):
+        if _leaf_field(schema, key) is None:
+            raise ConfigError(_unknown_key(schema, key, None))
+
+
+def _unknown_key(schema: type, key: str, source: str | None) -> str:
+    known = list(flatten_config(OmegaConf.structured(schema)))
+    close = difflib.get_close_matches(key, known, n=1)
+    hint = f"; did you mean {close[0]}?" if close else ""
+    where = f" (in {source})" if source else ""
+    return f"{key}: unknown configuration key{where}{hint}"
+
+
+def _merge_and_validate(schema: type, base: DictConfig, layers: list[DictConfig], source: str | None = None) -> DictConfig:
+    cfg = base
+    OmegaConf.set_struct(cfg, True)
+    for layer in layers:
+        try:
+            cfg = OmegaConf.merge(cfg, layer)
+        except OmegaConfBaseException as err:
+            raise ConfigError(_explain(schema, err, source)) from None
+    validate(cfg, schema)
+    return cfg
+
+
+def _explain(schema: type, err: OmegaConfBaseException, source: str | None) -> str:
+    """One line for an OmegaConf merge error: unknown key, or a value of the wrong type."""
+    key = getattr(err, "full_key", None) or ""
+    where = f" (in {source})" if source else ""
+    leaf = _leaf_field(schema, key)
+    if leaf is None:
+        return _unknown_key(schema, key or _first_line(err), source)
+    value = getattr(err, "value", None)
+    shown = _value_text(value) if value is not None else "?"
+    return f"{key}={shown}: must be {describe_allowed(*leaf)}{where}"
+
+
+def _first_line(err: Exception) -> str:
+    return str(err).strip().splitlines()[0]
+
+
+def _value_text(value: Any) -> str:
+    return "null" if value is None else str(value).lower() if isinstance(value, bool) else str(value)
+
+
+def _hints(cls: type) -> dict[str, Any]:
+    return typing.get_type_hints(cls)
+
+
+def _optional_inner(tp: Any) -> tuple[Any, bool]:
+    """(the type, whether null is allowed) of an annotation."""
+    if typing.get_origin(tp) is Union:
+        args = [a for a in typing.get_args(tp) if a is not type(None)]
+        return args[0], len(args) < len(typing.get_args(tp))
+    return tp, False
+
+
+def _leaf_field(schema: type, dotted: str) -> tuple[Any, dict] | None:
+    """(annotation, metadata) of the schema leaf at ``dotted``, or None if there is none."""
+    cls = schema
+    parts = dotted.split(".") if dotted else []
+    for i, part in enumerate(parts):
+        if not dataclasses.is_dataclass(cls):
+            return None
+        fields = {f.name: f for f in dataclasses.fields(cls)}
+        if part not in fields:
+            return None
+        tp = _hints(cls)[part]
+        if i == len(parts) - 1:
+            return (None, {}) if dataclasses.is_dataclass(tp) else (tp, dict(fields[part].metadata))
+        cls = tp
+    return None
+
+
+_TYPE_WORDS = {int: "an integer", float: "a number", bool: "true or false", str: "a string"}
+
+
+def describe_allowed(annotation: Any, metadata: dict) -> str:
+    """What a leaf accepts, in words: ``an integer > 0 or null``, ``one of a, b``.
+
+    Examples:
+        >>> describe_allowed(Optional[int], {"above": 0})
+        'an integer > 0 or null'
+        >>> describe_allowed(str, {"choices": ("ego", "position")})
+        'one of ego, position'
+    """
+    tp, nullable = _optional_inner(annotation)
+    if metadata.get("choices"):
+        text = "one of " + ", ".join(map(str, metadata["choices"]))
+    else:
+        text = _TYPE_WORDS.get(tp, getattr(tp, "__name__", str(tp)))
+        bounds = [f">= {metadata['minimum']}" if metadata.get("minimum") is not None else None,
+                  f"> {metadata['above']}" if metadata.get("above") is not None else None,
+                  f"< {metadata['below']}" if metadata.get("below") is not None else None]
+        bounds = [b for b in bounds if b]
+        if bounds:
+            text += " " + " and ".join(bounds)
+    return text + (" or null" if nullable else "")
+
+
+def validate(cfg: DictConfig, schema: type, prefix: str = "") -> None:
+    """Checks every leaf of ``cfg`` against its :func:`option` constraints.
+
+    Raises:
+        ConfigError: ``key=value: must be ...`` for the first value out of bounds.
+    """
+    hints = _hints(schema)
+    for f in dataclasses.fields(schema):
+        tp, value, key = hints[f.name], cfg.get(f.name), f"{prefix}{f.name}"
+        if dataclasses.is_dataclass(tp):
+            validate(value, tp, prefix=f"{key}.")
+        elif not _allowed(value, tp, f.metadata):
+            raise ConfigError(f"{key}={_value_text(value)}: must be {describe_allowed(tp, f.metadata)}")
+
+
+def _allowed(value: Any, annotation: Any, metadata: Any) -> bool:
+    tp, nullable = _optional_inner(annotation)
+    if value is None:
+        return nullable
+    if metadata.get("choices") and value not in metadata["choices"]:
+        return False
+    if metadata.get("minimum") is not None and value < metadata["minimum"]:
+        return False
+    if metadata.get("above") is not None and not value > metadata["above"]:
+        return False
+    if metadata.get("below") is not None and not value < metadata["below"]:
+        return False
+    return True
+
+
+# ---------------------------------------------------------------------------------------- views
+def flatten_config(cfg: DictConfig) -> dict[str, Any]:
+    """``{"dotted.key": value}`` for every leaf of ``cfg``.
+
+    Examples:
+        >>> flatten_config(OmegaConf.create({"env": {"scenario": "merge"}, "seed": 0}))
+        {'env.scenario': 'merge', 'seed': 0}
+    """
+    out: dict[str, Any] = {}
+
+    def visit(node: dict, prefix: str) -> None:
+        for key, value in node.items():
+            if isinstance(value, dict):
+                visit(value, f"{prefix}{key}.")
+            else:
+                out[f"{prefix}{key}"] = value
+
+    visit(OmegaConf.to_container(cfg), "")
+    return out
+
+
+def format_override(key: str, value: Any) -> str:
+    """``key=value`` as the command line writes it (``null``, lower-case booleans).
+
+    Examples:
+        >>> format_override("expert.path", None), format_override("csirl.intrinsic", False)
+        ('expert.path=null', 'csirl.intrinsic=false')
+    """
+    return f"{key}={_value_text(value)}"
+
+
+def describe(schema: type, prefix: str = "") -> list[str]:
+    """``key = default  # what is allowed; help`` for every leaf (a recipe's ``--help``).
+
+    Examples:
+        >>> describe(EnvConfig)
+        ['scenario = merge  # one of highway-fast, intersection, merge, roundabout; the driving scenario']
+    """
+    lines = []
+    hints = _hints(schema)
+    for f in dataclasses.fields(schema):
+        tp, key = hints[f.name], f"{prefix}{f.name}"
+        if dataclasses.is_dataclass(tp):
+            lines.extend(describe(tp, prefix=f"{key}."))
+            continue
+        help_text = f.metadata.get("help", "")
+        allowed = describe_allowed(tp, f.metadata)
+        lines.append(f"{key} = {_value_text(f.default)}  # {allowed}" + (f"; {help_text}" if help_text else ""))
+    return lines
