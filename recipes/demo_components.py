@@ -88,7 +88,7 @@ def main() -> None:
     curriculum = SubgoalCurriculum(curriculum_obs, sac, actor, seed=args.seed)
     matching = SubgoalMatchingReward(
         curriculum_obs,
-        subgoal=curriculum.subgoal,
+        subgoal=curriculum,  # the curriculum owns the subgoal; the reward reads it
         ego_feature_indices=spec.ego_feature_indices,
         position_feature_indices=spec.position_feature_indices,
         scale=spec.matching_scale,
@@ -124,8 +124,7 @@ def main() -> None:
             target_updater.step()
             updates += 1
         # round end: move the subgoal where the critics start to disagree
-        selection = curriculum.step()
-        matching.set_subgoal(selection.subgoal)
+        selection = curriculum.step()  # the matching reward reads the new subgoal from the curriculum
         subgoals.append(selection.subgoal)
         losses = {key: float(out[key].detach()) for key in LOGGED_LOSSES}
     collector.shutdown()

@@ -109,7 +109,7 @@ def test_actor_behaviour_cloning_pulls_the_deterministic_action_to_the_expert_an
 
     from torchrl_csirl.data import ExpertDemonstrations
     from torchrl_csirl.modules import make_actor
-    from torchrl_csirl.trainers import ActorBehaviourCloning
+    from torchrl_csirl.objectives import ActorBehaviourCloning
 
     torch.manual_seed(0)
     obs = torch.randn(20, 4)

@@ -330,3 +330,27 @@ class TestIntrinsicReward:
             CombineRewards(["a", "c"])(td)
         with pytest.raises(ValueError, match="weights"):
             CombineRewards(["a", "b"], weights=[1.0])
+
+
+def test_matching_reward_reads_the_subgoal_of_its_owner():
+    """One owner: a transform built with ``subgoal=curriculum`` follows it and cannot be set."""
+    from torchrl_csirl.curriculum import SubgoalCurriculum
+    from torchrl_csirl.modules import make_actor, make_qvalue
+    from torchrl_csirl.objectives import EnsembleSACLoss
+
+    expert = torch.stack([torch.tensor([float(i), 0.0]) for i in range(8)])
+    actor = make_actor(2, 1, hidden=(8,))
+    curriculum = SubgoalCurriculum(expert, EnsembleSACLoss(actor, make_qvalue(2, 1, hidden=(8,))), actor,
+                                   initial_subgoal=2)
+    t = SubgoalMatchingReward(expert, subgoal=curriculum, position_feature_indices=[0])
+    assert t.subgoal_source is curriculum and t.subgoal == 2
+    curriculum.set_subgoal(6)
+    assert t.subgoal == 6 and "subgoal=6" in repr(t)
+    td = TensorDict({"observation": torch.zeros(1, 2), "next": {"observation": torch.tensor([[1.0, 0.0]])}}, [1])
+    fixed = SubgoalMatchingReward(expert, subgoal=6, position_feature_indices=[0])
+    torch.testing.assert_close(t(td.clone())["next", "matching_reward"], fixed(td.clone())["next", "matching_reward"])
+    with pytest.raises(RuntimeError, match="reads its subgoal from SubgoalCurriculum"):
+        t.set_subgoal(3)
+    assert "curriculum" not in dict(t.named_modules())  # read, not owned: not a submodule
+    with pytest.raises(TypeError, match="an int or an object with an int 'subgoal' attribute"):
+        SubgoalMatchingReward(expert, subgoal="three")

@@ -21,7 +21,7 @@ from tensordict import TensorDict, TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
-from torchrl_csirl._validation import validate_subgoal
+from torchrl_csirl._validation import expert_observation_tensor, validate_subgoal
 from torchrl_csirl.objectives.ensemble_sac import _DISPERSIONS, qvalue_dispersion
 
 #: The paper's decision uncertainty ``U`` (Eq. 6): the ensemble's dispersion, one implementation.
@@ -162,9 +162,7 @@ class SubgoalCurriculum:
         deterministic_actions: bool = False,
         include_final: bool = False,
     ) -> None:
-        from torchrl_csirl.transforms.subgoal_matching import _expert_observation_tensor
-
-        expert = _expert_observation_tensor(expert_observations, include_final)
+        expert = expert_observation_tensor(expert_observations, include_final)
         if expert.ndim != 2 or expert.shape[0] < 1:
             raise ValueError(f"expert observations must have shape [L, D], got {tuple(expert.shape)}.")
         if not callable(getattr(loss, "qvalues", None)):

@@ -3,20 +3,13 @@ from __future__ import annotations
 
 from torchrl_csirl.trainers.collection import shutdown_collector
 from torchrl_csirl.trainers.evaluation import evaluate_policy
-from torchrl_csirl.trainers.hooks import (
-    ActorBehaviourCloning,
-    CheckpointHook,
-    EvaluationHook,
-    MetaRewardUpdate,
-    SACUpdate,
-    SubgoalSelectionHook,
-    load_checkpoint,
-)
+from torchrl_csirl.trainers.checkpoint import CheckpointHook, load_checkpoint
+from torchrl_csirl.trainers.hooks import EvaluationHook, SubgoalSelectionHook
 from torchrl_csirl.trainers.metrics_logger import MetricsLogger
 from torchrl_csirl.trainers.trainer import CSIRLTrainer, TrainingDivergedError, check_finite_losses
+from torchrl_csirl.trainers.updates import MetaRewardUpdate, SACUpdate
 
 __all__ = [
-    "ActorBehaviourCloning",
     "CSIRLTrainer",
     "CheckpointHook",
     "EvaluationHook",

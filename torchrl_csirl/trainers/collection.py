@@ -5,6 +5,8 @@ import warnings
 
 from torchrl.collectors import BaseCollector
 
+from torchrl_csirl._compat import collector_weight_sync_schemes
+
 __all__ = ["shutdown_collector"]
 
 
@@ -35,9 +37,7 @@ def shutdown_collector(collector: BaseCollector) -> None:
     try:
         collector.shutdown()
     finally:
-        # private in TorchRL 0.14.1: where the multi-process collectors keep their schemes
-        schemes = getattr(collector, "_weight_sync_schemes", None) or {}
-        for name, scheme in schemes.items():
+        for name, scheme in collector_weight_sync_schemes(collector).items():
             try:
                 scheme.shutdown()
             except Exception as error:  # keep shutting the others down

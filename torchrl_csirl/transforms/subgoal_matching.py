@@ -21,7 +21,7 @@ import torch
 from tensordict import TensorDictBase
 from tensordict.utils import NestedKey
 
-from torchrl_csirl._validation import validate_subgoal
+from torchrl_csirl._validation import SubgoalSource, expert_observation_tensor, validate_subgoal
 from torchrl_csirl.transforms._utils import TransitionRewardTransform
 
 __all__ = [
@@ -213,26 +213,6 @@ def _matching_reward_from_features(
     return delta.mul_(factor)
 
 
-def _expert_observation_tensor(expert: Any, include_final: bool) -> torch.Tensor:
-    """``[L, D]`` states from a tensor, a trajectory TensorDict or an ExpertDemonstrations."""
-    from torchrl_csirl.data.expert import ExpertDemonstrations
-
-    if isinstance(expert, ExpertDemonstrations):
-        return expert.trajectory_observations(0, include_final=include_final)
-    if isinstance(expert, TensorDictBase):
-        obs = expert.get("observation")
-        if include_final:
-            obs = torch.cat([obs, expert.get(("next", "observation"))[-1:]], 0)
-        return obs
-    try:
-        return torch.as_tensor(expert)
-    except Exception as err:  # noqa: BLE001
-        raise TypeError(
-            "expert_observations must be a [L, D] tensor, a trajectory TensorDict or "
-            f"ExpertDemonstrations, got {type(expert).__name__}."
-        ) from err
-
-
 def _check_indices(indices: Sequence[int] | None, dim: int, name: str) -> torch.Tensor | None:
     if indices is None:
         return None
@@ -250,8 +230,13 @@ class SubgoalMatchingReward(TransitionRewardTransform):
     Works as an environment transform (in a :class:`~torchrl.envs.TransformedEnv`, over a
     single, serial or parallel env: the transform and its subgoal live in the main process) and
     as a replay-buffer transform that recomputes the reward of sampled transitions
-    (``observation``, ``("next", "observation")``) for the *current* subgoal. The subgoal is set
-    with :meth:`set_subgoal` and used from the next step / sample on.
+    (``observation``, ``("next", "observation")``) for the *current* subgoal.
+
+    The subgoal has one owner. Given a *subgoal source* (any object with an int ``subgoal``
+    attribute, e.g. the :class:`~torchrl_csirl.curriculum.SubgoalCurriculum` that selects it),
+    the transform reads ``source.subgoal`` at every call and never stores it: moving the
+    curriculum moves the reward, with nothing to keep in step. Given an int, the transform owns a
+    fixed subgoal, changed with :meth:`set_subgoal` (standalone use).
 
     The reward is written under its own key (default ``"matching_reward"``, declared in the
     observation spec so that ``env.reward_key`` is unchanged). To train on it, sum it (with the
@@ -265,7 +250,8 @@ class SubgoalMatchingReward(TransitionRewardTransform):
             (its first trajectory).
 
     Keyword Args:
-        subgoal (int): initial subgoal ``g``. Defaults to ``0``.
+        subgoal (int or SubgoalSource): a fixed subgoal ``g`` (owned here, see
+            :meth:`set_subgoal`), or the object owning it (read at every call). Defaults to ``0``.
         ego_feature_indices (sequence of int, optional): features for the nearest-state search
             (e.g. ``ScenarioSpec.ego_feature_indices``). Defaults to all features.
         position_feature_indices (sequence of int, optional): features of the potential
@@ -290,13 +276,20 @@ class SubgoalMatchingReward(TransitionRewardTransform):
         >>> t.set_subgoal(0)  # now past the subgoal: head for s^e_1
         >>> t(td)["next", "matching_reward"]
         tensor([[5.]])
+        >>> class Owner:  # e.g. a SubgoalCurriculum
+        ...     subgoal = 3
+        >>> owner = Owner()
+        >>> follower = SubgoalMatchingReward(expert, subgoal=owner, position_feature_indices=[0])
+        >>> owner.subgoal = 1
+        >>> follower.subgoal
+        1
     """
 
     def __init__(
         self,
         expert_observations: Any,
         *,
-        subgoal: int = 0,
+        subgoal: int | SubgoalSource = 0,
         ego_feature_indices: Sequence[int] | None = None,
         position_feature_indices: Sequence[int] | None = None,
         scale: float = 1.0,
@@ -307,7 +300,7 @@ class SubgoalMatchingReward(TransitionRewardTransform):
         include_final: bool = False,
     ) -> None:
         super().__init__(in_keys=[in_key], out_key=out_key)
-        expert = _expert_observation_tensor(expert_observations, include_final)
+        expert = expert_observation_tensor(expert_observations, include_final)
         if expert.ndim != 2 or expert.shape[0] < 1:
             raise ValueError(f"expert observations must have shape [L, D] with L >= 1, got {tuple(expert.shape)}.")
         if not torch.is_floating_point(expert):
@@ -336,7 +329,17 @@ class SubgoalMatchingReward(TransitionRewardTransform):
         self.target = target
         self.sign = float(sign)
         self._subgoal = 0
-        self.set_subgoal(subgoal)
+        # not a submodule (a curriculum may hold networks): the transform only reads it
+        self.__dict__["_source"] = None
+        if isinstance(subgoal, (int, torch.Tensor)):
+            self.set_subgoal(subgoal)
+        elif isinstance(getattr(subgoal, "subgoal", None), int):
+            self.__dict__["_source"] = subgoal
+            validate_subgoal(subgoal.subgoal, self.length)
+        else:
+            raise TypeError(
+                f"subgoal must be an int or an object with an int 'subgoal' attribute (e.g. a SubgoalCurriculum), "
+                f"got {type(subgoal).__name__}.")
 
     @property
     def length(self) -> int:
@@ -344,12 +347,26 @@ class SubgoalMatchingReward(TransitionRewardTransform):
         return int(self.expert_observations.shape[0])
 
     @property
+    def subgoal_source(self) -> SubgoalSource | None:
+        """The object owning the subgoal, or None when the transform holds a fixed one."""
+        return self.__dict__.get("_source")
+
+    @property
     def subgoal(self) -> int:
-        """int: the current subgoal ``g``."""
-        return self._subgoal
+        """int: the current subgoal ``g`` (the source's, when there is one)."""
+        source = self.subgoal_source
+        return self._subgoal if source is None else validate_subgoal(source.subgoal, self.length)
 
     def set_subgoal(self, subgoal: int) -> None:
-        """Sets the subgoal ``g`` (an int in ``[0, L-1]``), used from the next step / sample on."""
+        """Sets the fixed subgoal ``g`` (an int in ``[0, L-1]``), used from the next step / sample on.
+
+        Raises:
+            RuntimeError: when the subgoal belongs to a source (move the source instead).
+        """
+        if self.subgoal_source is not None:
+            raise RuntimeError(
+                f"This transform reads its subgoal from {type(self.subgoal_source).__name__}; "
+                "change it there (e.g. SubgoalCurriculum.step() or set_subgoal()).")
         self._subgoal = validate_subgoal(subgoal, self.length)
 
     def _transition_reward(
@@ -371,20 +388,21 @@ class SubgoalMatchingReward(TransitionRewardTransform):
             self._expert_rows,
             self._expert_row_index,
             self._expert_pos,
-            self._subgoal,
+            self.subgoal,
             self.target,
             self.sign * self.scale,
         )
         return reward.reshape(batch_shape).to(torch.float32)
 
     def get_extra_state(self) -> dict[str, Any]:
-        return {"subgoal": self._subgoal}
+        return {"subgoal": self.subgoal}
 
     def set_extra_state(self, state: dict[str, Any]) -> None:
-        self.set_subgoal(int(state["subgoal"]))
+        if self.subgoal_source is None:  # a source restores its own state
+            self.set_subgoal(int(state["subgoal"]))
 
     def __repr__(self) -> str:
         return (
-            f"{type(self).__name__}(length={self.length}, subgoal={self._subgoal}, scale={self.scale}, "
+            f"{type(self).__name__}(length={self.length}, subgoal={self.subgoal}, scale={self.scale}, "
             f"target={self.target!r}, sign={self.sign}, in_key={self.in_keys[0]!r}, out_key={self.out_key!r})"
         )

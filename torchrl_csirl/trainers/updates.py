@@ -1,0 +1,139 @@
+"""The update steps of :class:`~torchrl_csirl.trainers.CSIRLTrainer` (its ``update_step``).
+
+* :class:`SACUpdate`: one ensemble-SAC step (CSIRL-B's whole update);
+* :class:`MetaRewardUpdate`: CSIRL's update, a joint SAC + meta-gradient step every
+  ``meta_every`` updates and a SAC step otherwise.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+import torch
+from tensordict import TensorDictBase
+from torch import nn
+
+from torchrl_csirl.trainers.trainer import CSIRLTrainer, check_finite_losses
+
+if TYPE_CHECKING:
+    from torchrl_csirl.objectives import ActorBehaviourCloning
+
+__all__ = ["MetaRewardUpdate", "SACUpdate"]
+
+
+def _detached(out: TensorDictBase, keys: tuple[str, ...]) -> dict[str, torch.Tensor]:
+    return {key: out.get(key).detach() for key in keys if key in out.keys()}
+
+
+class SACUpdate:
+    """One ensemble-SAC step: sample a batch, critic + actor losses, Adam, Polyak.
+
+    The batch comes from the trainer's online buffer, or from ``sample`` (e.g. online transitions
+    mixed with expert ones, :class:`~torchrl_csirl.data.DemonstrationMixer`); ``actor_bc`` adds
+    a behavioural-cloning term to the actor loss.
+
+    The reward is whatever the buffer's transform writes to ``("next", "reward")`` (e.g.
+    :class:`~torchrl_csirl.transforms.SubgoalMatchingReward` + :class:`IntrinsicReward` +
+    :class:`CombineRewards`). This is the whole update of CSIRL-B.
+
+    Args:
+        loss: the :class:`~torchrl_csirl.objectives.EnsembleSACLoss`.
+        optimizer: optimiser over the actor and critic parameters.
+        target_updater: e.g. :class:`~torchrl.objectives.SoftUpdate`.
+        max_grad_norm: clip the gradient norm (None: no clipping).
+        sample: ``callable() -> TensorDict`` giving a training batch (e.g.
+            :meth:`~torchrl_csirl.data.DemonstrationMixer.sample`). Defaults to sampling the
+            trainer's online buffer.
+        actor_bc: an :class:`ActorBehaviourCloning` term added to the actor loss (None: plain SAC).
+    """
+
+    LOSS_KEYS = ("loss_qvalue", "loss_actor", "loss_alpha")
+    LOG_KEYS = ("alpha", "entropy")
+
+    def __init__(self, loss: nn.Module, optimizer: torch.optim.Optimizer, target_updater: Any,
+                 max_grad_norm: float | None = None,
+                 sample: Callable[[], TensorDictBase] | None = None,
+                 actor_bc: ActorBehaviourCloning | None = None) -> None:
+        self.loss = loss
+        self.optimizer = optimizer
+        self.target_updater = target_updater
+        self.max_grad_norm = max_grad_norm
+        self._sample = sample
+        self.actor_bc = actor_bc
+
+    def sample(self, trainer: CSIRLTrainer) -> TensorDictBase:
+        """A training batch: ``sample()`` if given, else one of the trainer's online buffer."""
+        return self._sample() if self._sample is not None else trainer.online_buffer.sample()
+
+    def with_actor_bc(self, losses: dict[str, torch.Tensor]) -> tuple[dict[str, torch.Tensor], dict[str, torch.Tensor]]:
+        """``losses`` with the behavioural-cloning term (if any), and its diagnostics."""
+        if self.actor_bc is None:
+            return losses, {}
+        bc_losses, logs = self.actor_bc(losses["loss_actor"])
+        return {**losses, **bc_losses}, logs
+
+    def step(self, losses: dict[str, torch.Tensor], trainer: CSIRLTrainer) -> None:
+        """Checks, backpropagates and applies ``losses`` (sum) with the SAC optimiser."""
+        check_finite_losses(losses, f"update {trainer.updates + 1} (frames {trainer.frames})")
+        self.optimizer.zero_grad(set_to_none=True)
+        sum(losses.values()).backward()
+        if self.max_grad_norm is not None:
+            params = [p for group in self.optimizer.param_groups for p in group["params"]]
+            torch.nn.utils.clip_grad_norm_(params, self.max_grad_norm)
+        self.optimizer.step()
+        self.target_updater.step()
+
+    def __call__(self, trainer: CSIRLTrainer) -> dict[str, torch.Tensor]:
+        out = self.loss(self.sample(trainer))
+        losses, logs = self.with_actor_bc({key: out.get(key) for key in self.LOSS_KEYS if key in out.keys()})
+        self.step(losses, trainer)
+        return {**{key: value.detach() for key, value in losses.items()}, **_detached(out, self.LOG_KEYS), **logs}
+
+
+class MetaRewardUpdate:
+    """The CSIRL update: every ``meta_every``-th update a joint SAC + meta-gradient step, else SAC.
+
+    The joint step (:class:`~torchrl_csirl.objectives.MetaRewardLoss` with
+    ``joint_sac_update=True``) computes the real critic/actor losses and the meta-loss of the
+    reward network from one critic pass; the SAC optimiser steps the actor and critics, the reward
+    optimiser steps ``r_w``. The other updates are :class:`SACUpdate` steps whose reward is
+    ``r_m + r_w(s)`` recomputed by the buffer transform.
+
+    Args:
+        meta_loss: the :class:`~torchrl_csirl.objectives.MetaRewardLoss` (``joint_sac_update=True``).
+        sac_update: the plain step (shares the SAC optimiser and target updater).
+        reward_optimizer: optimiser over the reward network.
+        expert_buffer: replay buffer of expert transitions (the outer behavioural-cloning batch).
+        meta_every: cadence of the meta step (1 = every update, as the paper).
+    """
+
+    META_KEYS = ("loss_meta", "loss_imitation", "loss_reward_l1", "intrinsic_reward_mean", "meta_grad_norm",
+                 "meta_grad_norm_imitation", "meta_grad_norm_l1")
+
+    def __init__(self, meta_loss: nn.Module, sac_update: SACUpdate, reward_optimizer: torch.optim.Optimizer,
+                 expert_buffer: Any, meta_every: int = 1) -> None:
+        if not getattr(meta_loss, "joint_sac_update", False):
+            raise ValueError("MetaRewardUpdate needs a MetaRewardLoss built with joint_sac_update=True.")
+        if meta_every < 1:
+            raise ValueError(f"meta_every must be >= 1, got {meta_every}.")
+        self.meta_loss = meta_loss
+        self.sac_update = sac_update
+        self.reward_optimizer = reward_optimizer
+        self.expert_buffer = expert_buffer
+        self.meta_every = int(meta_every)
+
+    def __call__(self, trainer: CSIRLTrainer) -> dict[str, torch.Tensor]:
+        if trainer.updates % self.meta_every:
+            return self.sac_update(trainer)
+        online = self.sac_update.sample(trainer)
+        out = self.meta_loss(online, self.expert_buffer.sample(), regularizer=trainer.online_buffer.sample())
+        sac_losses, logs = self.sac_update.with_actor_bc(
+            {key: out.get(key) for key in SACUpdate.LOSS_KEYS if key in out.keys()})
+        meta = out.get("loss_meta")
+        check_finite_losses({**sac_losses, "loss_meta": meta}, f"update {trainer.updates + 1} (frames {trainer.frames})")
+        self.reward_optimizer.zero_grad(set_to_none=True)
+        # one backward: the SAC losses reach the actor/critics, the meta-loss the reward net only
+        self.sac_update.step({**sac_losses, "loss_meta": meta}, trainer)
+        self.reward_optimizer.step()
+        return {**{k: v.detach() for k, v in sac_losses.items()}, **_detached(out, SACUpdate.LOG_KEYS + self.META_KEYS),
+                **logs}
