@@ -1,8 +1,8 @@
 """Cost of the subgoal matching reward per batch of 256 transitions (replay-buffer use).
 
 Compares, in the same process, :class:`~torchrl_csirl.transforms.SubgoalMatchingReward` on a
-sampled batch with a transition-by-transition numpy loop of the same equations (for scale: the
-published code takes about 13 ms per single transition). Prints one JSON line at the end.
+sampled batch with a transition-by-transition numpy loop of the same equations (the published
+code's cost per transition, for scale, is in docs/PERFORMANCE.md). Prints one JSON line at the end.
 
 Usage::
 

@@ -21,6 +21,7 @@ from collections import Counter, defaultdict
 import torch
 from torchrl.envs import EnvBase, ExplorationType, set_exploration_type
 
+from torchrl_csirl._compat import gym_env_of
 from torchrl_csirl.envs import accomplish_rate_from_rollout, make_env, success_from_rollout
 from torchrl_csirl.modules import load_policy
 
@@ -29,7 +30,7 @@ OUTCOMES = ("success", "crash", "offroad", "timeout")
 
 def traffic_ahead(env: EnvBase) -> str:
     """``"free"`` or ``"blocked"``: the lanes of the two main-road vehicles ahead of the ego (after a reset)."""
-    road = env._env.unwrapped.road
+    road = gym_env_of(env).unwrapped.road
     ego = road.vehicles[0]
     ahead = sorted((v for v in road.vehicles[1:] if v.lane_index[0] == "a" and v.position[0] > ego.position[0]),
                    key=lambda v: v.position[0])[:2]

@@ -13,6 +13,7 @@ from highway_env.envs.intersection_env import IntersectionEnv
 from tensordict import TensorDict
 from torchrl.envs.utils import check_env_specs
 
+from torchrl_csirl._compat import gym_env_of
 from torchrl_csirl.envs import (
     INFO_KEYS,
     SCENARIOS,
@@ -239,7 +240,7 @@ def test_episode_limit_is_truncation(name):
 
 def test_merge_truncates_at_60_steps_in_torchrl():
     env = make_env("merge", seed=0)
-    base = env._env.unwrapped
+    base = gym_env_of(env).unwrapped
     td = env.reset()
     base.road.vehicles = [base.vehicle]
     for step in range(1, 61):

@@ -71,7 +71,6 @@ class ExpertConfig:
         safety_margin: minimal gap [m] (between vehicle outlines, approximately) kept to others.
         max_acceleration: largest acceleration the expert commands [m/s^2].
         max_braking: largest deceleration the expert commands [m/s^2].
-        finish_position: the scenario's finish position (used to rank behaviours near the end).
         replan_every: steps between two decisions (the chosen behaviour's controllers run every step).
         perception_radius: only vehicles within this distance [m] are simulated in the look-ahead.
         time_headway: IDM desired time gap to the vehicle ahead [s].
@@ -109,7 +108,6 @@ class ExpertConfig:
     safety_margin: float = 1.5
     max_acceleration: float = 6.0
     max_braking: float = 12.0
-    finish_position: tuple[float, float] | None = None
     replan_every: int = 2
     perception_radius: float = 120.0
     time_headway: float = 1.0
@@ -129,7 +127,6 @@ EXPERT_CONFIGS: dict[str, ExpertConfig] = {
         preferred_lane=2,
         horizon=12,
         perception_radius=60.0,
-        finish_position=(650.0, 8.0),
     ),
     "merge": ExpertConfig(
         destination="d",
@@ -143,7 +140,6 @@ EXPERT_CONFIGS: dict[str, ExpertConfig] = {
         episode_end_x=370.0,
         perception_radius=80.0,
         max_acceleration=15.0,
-        finish_position=(400.0, 4.0),
     ),
     "roundabout": ExpertConfig(
         destination="nxr",
@@ -158,7 +154,6 @@ EXPERT_CONFIGS: dict[str, ExpertConfig] = {
         yield_roads=(("ses", "se"),),
         horizon=20,
         perception_radius=60.0,
-        finish_position=(2.0, -75.0),
     ),
     "intersection": ExpertConfig(
         destination="o11",
@@ -168,7 +163,6 @@ EXPERT_CONFIGS: dict[str, ExpertConfig] = {
         yield_roads=(("o10", "ir10"),),
         perception_radius=60.0,
         horizon=20,
-        finish_position=(-45.0, -2.0),
     ),
 }
 
@@ -594,8 +588,12 @@ class ExpertDriver:
     def __init__(self, scenario: str, config: ExpertConfig | None = None, dt: float = 0.2) -> None:
         if scenario not in EXPERT_CONFIGS and config is None:
             raise ValueError(f"Unknown scenario {scenario!r}; expected one of {sorted(EXPERT_CONFIGS)}.")
+        from torchrl_csirl.envs.scenarios import SCENARIOS
+
         self.scenario = scenario
         self.config = config or EXPERT_CONFIGS[scenario]
+        # one place for the finish: the scenario spec (used to rank behaviours near the end)
+        self.finish_position = SCENARIOS[scenario].finish_position if scenario in SCENARIOS else None
         self.dt = dt
         self._route: _RouteFollower | None = None
         self._previous: _Behaviour | None = None
@@ -743,7 +741,7 @@ class ExpertDriver:
             current = route.lane_id_on(route.road_index, ego.position, None)
             penalty += 1.0 * abs(behaviour.lane_id - current)
         preferred = self.config.preferred_lane
-        finish = self.config.finish_position
+        finish = self.finish_position
         if preferred is not None and finish is not None and behaviour.lane_id is not None:
             remaining = finish[0] - ego.position[0]
             if remaining < 250:

@@ -14,7 +14,11 @@ from typing import Any
 
 from torchrl.envs import ParallelEnv
 
+from torchrl_csirl._compat import check_parallel_env_internals
+
 __all__ = ["YieldingParallelEnv"]
+
+check_parallel_env_internals()  # the private ParallelEnv names the override below relies on
 
 
 class YieldingParallelEnv(ParallelEnv):
@@ -22,9 +26,9 @@ class YieldingParallelEnv(ParallelEnv):
 
     Args:
         *args: as :class:`~torchrl.envs.ParallelEnv` (``num_workers``, ``create_env_fn``, ...).
-        poll_interval: seconds slept between two polls of the workers' done flags. A step of a
-            driving scenario takes 1.5-8 ms; the default 50 us adds at most the sleep overshoot
-            (~0.1 ms on Linux) per step. ``0`` yields the CPU (``time.sleep(0)``) between polls.
+        poll_interval: seconds slept between two polls of the workers' done flags, small against
+            a driving scenario's step (docs/PERFORMANCE.md); the default 50 us adds at most the
+            sleep overshoot per step. ``0`` yields the CPU (``time.sleep(0)``) between polls.
         **kwargs: as :class:`~torchrl.envs.ParallelEnv`.
 
     Examples:
@@ -44,6 +48,9 @@ class YieldingParallelEnv(ParallelEnv):
         self.poll_interval = float(poll_interval)
 
     def _wait_for_workers(self, workers_range) -> None:
+        if not getattr(self, "_internals_checked", False):
+            check_parallel_env_internals(self)
+            self._internals_checked = True
         if not self._use_buffers:  # the pipe mode already blocks in the OS
             return super()._wait_for_workers(workers_range)
         timeout = self.BATCHED_PIPE_TIMEOUT

@@ -100,11 +100,6 @@ class ScenarioSpec:
                 out.append(-1.0 + (position[i] - lo) * 2.0 / (hi - lo))
         return np.asarray(out)
 
-    @property
-    def normalized_finish_position(self) -> np.ndarray:
-        """The finish position in normalised observation coordinates (see :meth:`normalize_position`)."""
-        return self.normalize_position(self.finish_position)
-
     def default_config(self) -> dict:
         """A deep copy of the scenario's full highway-env config."""
         return copy.deepcopy(dict(self.config))

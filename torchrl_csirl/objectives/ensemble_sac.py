@@ -14,9 +14,13 @@ from torchrl.objectives import SACLoss
 from torchrl.objectives.utils import ValueEstimators
 from torchrl.objectives.value import TD0Estimator
 
+from torchrl_csirl._compat import check_sac_internals, detached_qvalue_params, vmap_qvalue_networks
+
 __all__ = ["EnsembleSACLoss", "qvalue_dispersion", "reinitialize_module"]
 
 _DISPERSIONS = ("variance", "abs_cv")
+
+check_sac_internals()  # the two SACLoss internals overridden below
 
 
 def reinitialize_module(module: nn.Module) -> nn.Module:
@@ -217,7 +221,7 @@ class EnsembleSACLoss(SACLoss):
             a ``[N, *batch]`` tensor.
         """
         td_in = tensordict.select(*self.qvalue_network.in_keys, strict=True)
-        td_out = self._vmap_qnetworkN0(td_in, self.qvalue_network_params)
+        td_out = vmap_qvalue_networks(self, td_in, self.qvalue_network_params)
         return td_out.get(self.tensor_keys.state_action_value).squeeze(-1)
 
     def qvalue_dispersion(
@@ -283,7 +287,7 @@ class EnsembleSACLoss(SACLoss):
         override = self.__dict__.get("_actor_loss_qvalue_params")
         if override is not None:
             return override
-        return SACLoss._cached_detached_qvalue_params.fget(self)
+        return detached_qvalue_params(self)
 
     @contextlib.contextmanager
     def using_params(

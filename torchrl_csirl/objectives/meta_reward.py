@@ -11,6 +11,7 @@ from tensordict.utils import NestedKey
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 from torchrl.objectives.common import LossModule
 
+from torchrl_csirl._compat import sac_alpha, sac_reduced_alpha_loss
 from torchrl_csirl.objectives.ensemble_sac import EnsembleSACLoss
 
 __all__ = ["MetaRewardLoss"]
@@ -375,12 +376,11 @@ class MetaRewardLoss(LossModule):
         loss_qvalue = _linear_surrogate(loss_q, phi_real, grads_phi)
         loss_actor, metadata = sac.actor_loss(td)
         log_prob = metadata["log_prob"]
-        weights = sac._maybe_get_priority_weight(td)
-        loss_alpha = sac._reduce_loss(sac._alpha_loss(log_prob), tensordict=td, weights=weights)
+        loss_alpha = sac_reduced_alpha_loss(sac, log_prob, td)
         return {
             "loss_qvalue": loss_qvalue,
             "loss_actor": loss_actor,
             "loss_alpha": loss_alpha,
-            "alpha": sac._alpha,
+            "alpha": sac_alpha(sac),
             "entropy": -log_prob.mean(),
         }

@@ -1,0 +1,124 @@
+"""Every reach into TorchRL internals, in one place.
+
+torchrl-csirl sometimes needs behaviour that TorchRL 0.14.1 only offers through private methods or
+attributes (a loss's critic target, a collector's weight-sync schemes, a wrapped gym env). Each such
+reach is a small named function here, and ``tests/test_compat.py`` pins the behaviour we rely on, so
+a TorchRL upgrade that changes it fails there, in one visible place, instead of deep in a run.
+Where a private method must be *overridden* (``SACLoss._compute_target_v2``,
+``SACLoss._cached_detached_qvalue_params``, ``ParallelEnv._wait_for_workers``), the subclass keeps
+the override and calls a ``check_*`` function below when it is defined, so a rename fails at import.
+
+Everything else in the package uses TorchRL's public API.
+"""
+from __future__ import annotations
+
+import inspect
+from typing import Any
+
+import torch
+from tensordict import TensorDictBase
+from torchrl.envs import EnvBase, ParallelEnv
+from torchrl.objectives import SACLoss
+
+__all__ = [
+    "check_parallel_env_internals",
+    "check_sac_internals",
+    "collector_weight_sync_schemes",
+    "detached_qvalue_params",
+    "gym_env_of",
+    "sac_alpha",
+    "sac_reduced_alpha_loss",
+    "vmap_qvalue_networks",
+]
+
+
+class TorchRLInternalsChanged(RuntimeError):
+    """A private TorchRL name we rely on is gone or changed (see torchrl_csirl/_compat.py)."""
+
+
+def _require(condition: bool, what: str) -> None:
+    if not condition:
+        raise TorchRLInternalsChanged(f"TorchRL changed: {what}. Update torchrl_csirl/_compat.py.")
+
+
+# ------------------------------------------------------------------------------ objectives (SACLoss)
+def check_sac_internals() -> None:
+    """The SACLoss internals :class:`~torchrl_csirl.objectives.EnsembleSACLoss` overrides.
+
+    * ``_compute_target_v2(tensordict)``: the critic target (overridden to keep the graph of a
+      differentiable reward);
+    * ``_cached_detached_qvalue_params``: a property, the critic parameters the actor loss uses
+      (overridden to evaluate the actor loss with graph-carrying critic parameters).
+    """
+    target = getattr(SACLoss, "_compute_target_v2", None)
+    _require(callable(target) and list(inspect.signature(target).parameters) == ["self", "tensordict"],
+             "SACLoss._compute_target_v2(self, tensordict) is gone or has a new signature")
+    _require(isinstance(inspect.getattr_static(SACLoss, "_cached_detached_qvalue_params", None), property),
+             "SACLoss._cached_detached_qvalue_params is no longer a property")
+
+
+def detached_qvalue_params(loss: SACLoss) -> TensorDictBase:
+    """SACLoss's own (cached, detached) critic parameters of the actor loss."""
+    return SACLoss._cached_detached_qvalue_params.fget(loss)
+
+
+def vmap_qvalue_networks(loss: SACLoss, tensordict: TensorDictBase, params: TensorDictBase) -> TensorDictBase:
+    """The critic evaluated with each of the ``[N]`` stacked parameter sets (SACLoss's vmap)."""
+    return loss._vmap_qnetworkN0(tensordict, params)
+
+
+def sac_alpha(loss: SACLoss) -> torch.Tensor:
+    """The current entropy coefficient (``exp(log_alpha)`` clamped, no grad)."""
+    return loss._alpha
+
+
+def sac_reduced_alpha_loss(loss: SACLoss, log_prob: torch.Tensor, tensordict: TensorDictBase) -> torch.Tensor:
+    """The temperature loss reduced as SACLoss's ``forward`` reduces it (priority weights included)."""
+    weights = loss._maybe_get_priority_weight(tensordict)
+    return loss._reduce_loss(loss.alpha_loss(log_prob), tensordict=tensordict, weights=weights)
+
+
+# ------------------------------------------------------------------------------ collectors and envs
+def collector_weight_sync_schemes(collector: Any) -> dict[str, Any]:
+    """The weight-sync schemes a multi-process collector keeps (empty for others).
+
+    TorchRL 0.14.1's multi-process collectors leave them running after ``shutdown()``; see
+    :func:`~torchrl_csirl.trainers.shutdown_collector`.
+    """
+    return dict(getattr(collector, "_weight_sync_schemes", None) or {})
+
+
+_PARALLEL_ENV_NAMES = ("_wait_for_workers", "_shutdown_workers")
+_PARALLEL_ENV_STARTED_NAMES = ("_use_buffers", "_shm_done_flags", "_worker_indices", "_workers", "BATCHED_PIPE_TIMEOUT")
+
+
+def check_parallel_env_internals(env: ParallelEnv | None = None) -> None:
+    """The ParallelEnv internals :class:`~torchrl_csirl.envs.YieldingParallelEnv` relies on.
+
+    Class level (checked at import): ``_wait_for_workers(workers_range)``, ``_shutdown_workers``.
+    With a started ``env``: ``_use_buffers``, ``_shm_done_flags`` (one flag per worker, set by a
+    worker when its step is done), ``_worker_indices``, ``_workers``, ``BATCHED_PIPE_TIMEOUT``.
+    """
+    for name in _PARALLEL_ENV_NAMES:
+        _require(hasattr(ParallelEnv, name), f"ParallelEnv.{name} is gone")
+    wait = ParallelEnv._wait_for_workers
+    _require(list(inspect.signature(wait).parameters) == ["self", "workers_range"],
+             "ParallelEnv._wait_for_workers(self, workers_range) has a new signature")
+    if env is not None:
+        for name in _PARALLEL_ENV_STARTED_NAMES:
+            _require(hasattr(env, name), f"a started ParallelEnv has no {name}")
+
+
+def gym_env_of(env: EnvBase) -> Any:
+    """The gymnasium env a TorchRL ``GymEnv`` / ``GymWrapper`` wraps (no public accessor in 0.14.1).
+
+    Examples:
+        >>> from torchrl_csirl.envs import make_env
+        >>> env = make_env("merge")
+        >>> type(gym_env_of(env).unwrapped).__name__
+        'CSIRLMergeEnv'
+    """
+    base = getattr(env, "base_env", env)
+    inner = getattr(base, "_env", None)
+    _require(inner is not None, f"{type(base).__name__} has no _env (the wrapped gym env)")
+    return inner
