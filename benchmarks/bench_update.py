@@ -9,11 +9,14 @@ one forward giving the SAC losses on the local reward ``r_m + r_w(s)`` and the m
 network evaluated without grad), then ``MetaRewardLoss`` forward/backward and the reward
 Adam step. 5 critics 2x256, observation size 25, action size 2,
 expert batch 32, ``torch.set_num_threads(2)``; warm-up then the median over iterations.
-The two measurements are interleaved so that their ratio is robust to machine load.
+The measurements are interleaved so that their ratios are robust to machine load.
+``--reference`` also times, interleaved in the same process, the same learner with the critics
+evaluated by SACLoss's ``torch.vmap`` (``reference_*`` keys and the ``*_speedup`` ratios).
 
 Usage::
 
-    python benchmarks/bench_update.py [--batch 256] [--iters 30] [--warmup 5]
+    python benchmarks/bench_update.py [--batch 256] [--iters 30] [--warmup 5] [--reference]
+    python benchmarks/bench_update.py --device cuda     # the learner on a GPU
 
 Prints one final JSON line.
 """
@@ -35,7 +38,7 @@ from torchrl_csirl.objectives import EnsembleSACLoss, MetaRewardLoss
 OBS_DIM, ACTION_DIM, EXPERT_BATCH = 25, 2, 32
 
 
-def _online_batch(batch: int) -> TensorDict:
+def _online_batch(batch: int, device: torch.device) -> TensorDict:
     return TensorDict(
         {
             "observation": torch.randn(batch, OBS_DIM),
@@ -47,7 +50,93 @@ def _online_batch(batch: int) -> TensorDict:
             ("next", "truncated"): torch.zeros(batch, 1, dtype=torch.bool),
         },
         [batch],
+        device=device,
     )
+
+
+class _Learner:
+    """One learner (ensemble SAC, reward net, optimisers) and its three timed steps."""
+
+    def __init__(self, fused_qvalue: bool, fused_adam: bool, batch: int, device: torch.device) -> None:
+        torch.manual_seed(0)
+        self.sac = sac = EnsembleSACLoss(
+            make_actor(OBS_DIM, ACTION_DIM), make_qvalue(OBS_DIM, ACTION_DIM), fused_qvalue=fused_qvalue
+        ).to(device)
+        self.updater = SoftUpdate(sac, tau=0.005)
+        self.reward_net = make_reward_network(OBS_DIM).to(device)
+        self.meta = MetaRewardLoss(sac, self.reward_net)
+        self.joint = MetaRewardLoss(sac, self.reward_net, joint_sac_update=True)
+        adam = dict(fused=True) if fused_adam else {}
+        self.optim_q = torch.optim.Adam(list(sac.qvalue_network_params.values(True, True)), lr=3e-4, **adam)
+        self.optim_pi = torch.optim.Adam(list(sac.actor_network_params.values(True, True)), lr=3e-4, **adam)
+        self.optim_w = torch.optim.Adam(self.reward_net.parameters(), lr=1e-3, **adam)
+        self.online = _online_batch(batch, device)
+        self.regularizer = _online_batch(batch, device)
+        self.expert = TensorDict(
+            {
+                "observation": torch.randn(EXPERT_BATCH, OBS_DIM),
+                "action": torch.rand(EXPERT_BATCH, ACTION_DIM) * 2 - 1,
+            },
+            [EXPERT_BATCH],
+            device=device,
+        )
+
+    def _sac_update(self, td: TensorDict) -> None:
+        losses = self.sac(td)
+        self.optim_q.zero_grad(set_to_none=True)
+        self.optim_pi.zero_grad(set_to_none=True)
+        (losses["loss_qvalue"] + losses["loss_actor"]).backward()
+        self.optim_q.step()
+        self.optim_pi.step()
+        self.updater.step()
+
+    def plain_step(self) -> None:
+        td = self.online.copy()
+        td["next", "reward"] = td["next", "matching_reward"]
+        self._sac_update(td)
+
+    def sequential_step(self) -> None:
+        td = self.online.copy()
+        with torch.no_grad():
+            r_w = self.meta.intrinsic_reward(td)
+        td["next", "reward"] = td["next", "matching_reward"] + r_w
+        self._sac_update(td)
+        losses = self.meta(self.online, self.expert, self.regularizer)
+        self.optim_w.zero_grad(set_to_none=True)
+        losses["loss_meta"].backward()
+        self.optim_w.step()
+
+    def csirl_step(self) -> None:
+        losses = self.joint(self.online, self.expert, self.regularizer)
+        optims = (self.optim_q, self.optim_pi, self.optim_w)
+        for optim in optims:
+            optim.zero_grad(set_to_none=True)
+        (losses["loss_qvalue"] + losses["loss_actor"] + losses["loss_meta"]).backward()
+        for optim in optims:
+            optim.step()
+        self.updater.step()
+
+
+def _timed(fn, device: torch.device) -> float:
+    start = time.perf_counter()
+    fn()
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+    return (time.perf_counter() - start) * 1e3
+
+
+def _summary(prefix: str, times: dict[str, list[float]]) -> dict[str, float]:
+    sac_ms, csirl_ms, seq_ms = times["plain"], times["csirl"], times["sequential"]
+    return {
+        f"{prefix}sac_update_ms": round(statistics.median(sac_ms), 2),
+        f"{prefix}csirl_iteration_ms": round(statistics.median(csirl_ms), 2),
+        f"{prefix}csirl_sequential_ms": round(statistics.median(seq_ms), 2),
+        f"{prefix}sac_update_ms_min": round(min(sac_ms), 2),
+        f"{prefix}csirl_iteration_ms_min": round(min(csirl_ms), 2),
+        f"{prefix}csirl_sequential_ms_min": round(min(seq_ms), 2),
+        f"{prefix}csirl_over_sac_ratio": round(statistics.median(b / a for a, b in zip(sac_ms, csirl_ms)), 3),
+        f"{prefix}sequential_over_sac_ratio": round(statistics.median(c / a for a, c in zip(sac_ms, seq_ms)), 3),
+    }
 
 
 def main() -> None:
@@ -60,97 +149,46 @@ def main() -> None:
         "--no-fused-adam", dest="fused_adam", action="store_false",
         help="use torch's default (for-loop) Adam instead of fused=True",
     )
+    parser.add_argument(
+        "--vmap-critics", dest="fused_qvalue", action="store_false",
+        help="evaluate the critic ensemble with SACLoss's torch.vmap instead of the fused ensemble",
+    )
+    parser.add_argument(
+        "--reference", action="store_true",
+        help="also time the vmapped-critic learner (reference_* keys), interleaved in this process",
+    )
+    parser.add_argument("--device", default="cpu", help="where the learner runs (cpu, cuda, cuda:1...)")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
-    torch.manual_seed(0)
+    device = torch.device(args.device)
 
-    sac = EnsembleSACLoss(make_actor(OBS_DIM, ACTION_DIM), make_qvalue(OBS_DIM, ACTION_DIM))
-    updater = SoftUpdate(sac, tau=0.005)
-    reward_net = make_reward_network(OBS_DIM)
-    meta = MetaRewardLoss(sac, reward_net)
-    joint = MetaRewardLoss(sac, reward_net, joint_sac_update=True)
-    adam = dict(fused=True) if args.fused_adam else {}
-    optim_q = torch.optim.Adam(list(sac.qvalue_network_params.values(True, True)), lr=3e-4, **adam)
-    optim_pi = torch.optim.Adam(list(sac.actor_network_params.values(True, True)), lr=3e-4, **adam)
-    optim_w = torch.optim.Adam(reward_net.parameters(), lr=1e-3, **adam)
-
-    online = _online_batch(args.batch)
-    regularizer = _online_batch(args.batch)
-    expert = TensorDict(
-        {
-            "observation": torch.randn(EXPERT_BATCH, OBS_DIM),
-            "action": torch.rand(EXPERT_BATCH, ACTION_DIM) * 2 - 1,
-        },
-        [EXPERT_BATCH],
-    )
-
-    def sac_update(td: TensorDict) -> None:
-        losses = sac(td)
-        optim_q.zero_grad(set_to_none=True)
-        optim_pi.zero_grad(set_to_none=True)
-        (losses["loss_qvalue"] + losses["loss_actor"]).backward()
-        optim_q.step()
-        optim_pi.step()
-        updater.step()
-
-    def plain_step() -> None:
-        td = online.copy()
-        td["next", "reward"] = td["next", "matching_reward"]
-        sac_update(td)
-
-    def sequential_step() -> None:
-        td = online.copy()
-        with torch.no_grad():
-            r_w = meta.intrinsic_reward(td)
-        td["next", "reward"] = td["next", "matching_reward"] + r_w
-        sac_update(td)
-        losses = meta(online, expert, regularizer)
-        optim_w.zero_grad(set_to_none=True)
-        losses["loss_meta"].backward()
-        optim_w.step()
-
-    def csirl_step() -> None:
-        losses = joint(online, expert, regularizer)
-        for optim in (optim_q, optim_pi, optim_w):
-            optim.zero_grad(set_to_none=True)
-        (losses["loss_qvalue"] + losses["loss_actor"] + losses["loss_meta"]).backward()
-        for optim in (optim_q, optim_pi, optim_w):
-            optim.step()
-        updater.step()
-
-    def timed(fn) -> float:
-        start = time.perf_counter()
-        fn()
-        return (time.perf_counter() - start) * 1e3
-
+    learners = {"": _Learner(args.fused_qvalue, args.fused_adam, args.batch, device)}
+    if args.reference:
+        learners["reference_"] = _Learner(False, args.fused_adam, args.batch, device)
+    steps = ("plain", "csirl", "sequential")
     for _ in range(args.warmup):
-        plain_step()
-        csirl_step()
-        sequential_step()
-    sac_ms, csirl_ms, seq_ms, ratios, seq_ratios = [], [], [], [], []
+        for learner in learners.values():
+            for step in steps:
+                getattr(learner, f"{step}_step")()
+    times = {prefix: {step: [] for step in steps} for prefix in learners}
     for _ in range(args.iters):
-        a = timed(plain_step)
-        b = timed(csirl_step)
-        c = timed(sequential_step)
-        sac_ms.append(a)
-        csirl_ms.append(b)
-        seq_ms.append(c)
-        ratios.append(b / a)
-        seq_ratios.append(c / a)
+        for prefix, learner in learners.items():
+            for step in steps:
+                times[prefix][step].append(_timed(getattr(learner, f"{step}_step"), device))
     result = {
         "batch": args.batch,
+        "device": str(device),
         "threads": args.threads,
         "iters": args.iters,
         "fused_adam": args.fused_adam,
-        "sac_update_ms": round(statistics.median(sac_ms), 2),
-        "csirl_iteration_ms": round(statistics.median(csirl_ms), 2),
-        "csirl_sequential_ms": round(statistics.median(seq_ms), 2),
-        "sac_update_ms_min": round(min(sac_ms), 2),
-        "csirl_iteration_ms_min": round(min(csirl_ms), 2),
-        "csirl_sequential_ms_min": round(min(seq_ms), 2),
-        "csirl_over_sac_ratio": round(statistics.median(ratios), 3),
-        "sequential_over_sac_ratio": round(statistics.median(seq_ratios), 3),
+        "fused_qvalue": learners[""].sac.fused_qvalue,
     }
+    for prefix in learners:
+        result.update(_summary(prefix, times[prefix]))
+    if args.reference:  # per-iteration ratios of the interleaved runs: robust to machine load
+        for name, step in (("sac_update", "plain"), ("csirl_iteration", "csirl")):
+            pairs = zip(times[""][step], times["reference_"][step])
+            result[f"{name}_speedup"] = round(statistics.median(ref / new for new, ref in pairs), 3)
     print(json.dumps(result))
 
 

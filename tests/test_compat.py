@@ -70,6 +70,23 @@ def test_vmap_over_critic_params_gives_one_value_per_critic(loss):
     assert out.get("state_action_value").shape == torch.Size([3, 6, 1])
 
 
+def test_every_critic_evaluation_goes_through_the_installed_evaluator(loss):
+    """The fused critic ensemble relies on: SACLoss evaluates its N critics (target, critic loss,
+    actor loss) only through ``_vmap_qnetworkN0``, which ``_make_vmap`` builds."""
+    fused = loss._vmap_qnetworkN0
+    calls = []
+
+    def spy(tensordict, params):
+        calls.append(params.batch_size)
+        return fused(tensordict, params)
+
+    _compat.set_qvalue_ensemble_evaluator(loss, spy)
+    loss(_batch())
+    assert calls == [torch.Size([3])] * 3  # target, critic loss, actor loss
+    loss._make_vmap()  # what set_vmap_randomness calls: EnsembleSACLoss re-installs its evaluator
+    assert loss._vmap_qnetworkN0 is fused
+
+
 def test_alpha_and_its_reduced_loss(loss):
     assert torch.isclose(_compat.sac_alpha(loss), loss.log_alpha.exp())
     log_prob = torch.randn(6)

@@ -238,3 +238,39 @@ def test_training_step_with_soft_update():
     for key, value in loss.target_qvalue_network_params.items(True, True):
         expected = 0.995 * target_before.get(key) + 0.005 * online.get(key)
         torch.testing.assert_close(value, expected)
+
+
+def test_fused_critic_ensemble_is_the_default_and_identical_to_vmap():
+    fused, vmapped = _loss(), _loss(fused_qvalue=False)
+    assert fused.fused_qvalue and not vmapped.fused_qvalue
+    assert set(fused.state_dict()) == set(vmapped.state_dict())  # same parameters, same checkpoints
+    td = _batch(16)
+    td["next", "terminated"][:4] = True
+    outs, grads = [], []
+    for loss in (fused, vmapped):
+        torch.manual_seed(3)
+        out = loss(td.clone())
+        (out["loss_qvalue"] + out["loss_actor"]).backward()
+        outs.append(out)
+        grads.append([p.grad for p in loss.parameters()])
+    for key in ("loss_qvalue", "loss_actor", "loss_alpha", "entropy"):
+        assert torch.equal(outs[0][key], outs[1][key]), key
+    for g_fused, g_vmap in zip(*grads):
+        assert torch.equal(g_fused, g_vmap)
+    assert torch.equal(fused.qvalues(td), vmapped.qvalues(td))
+    assert fused.qvalues(_batch(12).reshape(3, 4)).shape == (5, 3, 4)
+
+
+def test_fused_critic_ensemble_survives_set_vmap_randomness():
+    loss = _loss()
+    loss.set_vmap_randomness("different")  # SACLoss rebuilds its vmapped callers
+    assert loss.fused_qvalue
+    assert loss.qvalues(_batch()).shape == (5, 8)
+
+
+def test_fused_qvalue_true_needs_a_supported_critic():
+    critic = TensorDictModule(
+        torch.nn.Sequential(torch.nn.Linear(OBS + ACT, 1)), in_keys=["observation"], out_keys=["state_action_value"]
+    )
+    with pytest.raises(ValueError, match="fused_qvalue=True"):
+        EnsembleSACLoss(make_actor(OBS, ACT, hidden=HID), critic, fused_qvalue=True)

@@ -7,7 +7,16 @@ from torch import nn
 
 from torchrl.modules import TanhNormal
 
-from torchrl_csirl.modules import BoundedLogStdNormalParams, MaskedReLU, make_actor, make_qvalue
+from torchrl_csirl.modules import (
+    BoundedLogStdNormalParams,
+    EgoRelativeFeatures,
+    FusedCriticEnsemble,
+    MaskedReLU,
+    fused_critic_ensemble,
+    make_actor,
+    make_qvalue,
+)
+from torchrl_csirl.modules.actor_critic import masked_relu
 
 
 def _linears(module: nn.Module) -> list[nn.Linear]:
@@ -94,3 +103,86 @@ def test_masked_relu_matches_relu_values_and_gradients():
     (g2,) = torch.autograd.grad(y2.pow(2).sum(), x)
     assert torch.equal(y1, y2)
     assert torch.equal(g1, g2)
+
+
+def test_masked_relu_under_vmap_and_without_second_order_edge():
+    x = torch.randn(3, 8, dtype=torch.float64)
+    x[0, 0] = 0.0
+    assert torch.equal(torch.vmap(masked_relu)(x), torch.relu(x))  # the functorch-capable path
+    assert torch.equal(torch.vmap(torch.func.grad(lambda v: masked_relu(v).pow(2).sum()))(x),
+                       torch.vmap(torch.func.grad(lambda v: torch.relu(v).pow(2).sum()))(x))
+    # d/dx of the input gradient: no edge back through the mask (the point of MaskedReLU)
+    xs = x.clone().requires_grad_(True)
+    (g,) = torch.autograd.grad(masked_relu(xs).sum(), xs, create_graph=True)
+    assert not g.requires_grad
+
+
+def _stacked_params(critics: list[nn.Module]) -> TensorDict:
+    return TensorDict.from_modules(*critics, as_module=False)
+
+
+def _vmapped_values(critic: nn.Module, params: TensorDict, td: TensorDict) -> torch.Tensor:
+    def call(p):
+        with p.to_module(critic):
+            return critic(td.clone())["state_action_value"]
+
+    return torch.vmap(call)(params)
+
+
+@pytest.mark.parametrize("features", [False, True])
+@pytest.mark.parametrize("batch", [(7,), (3, 4)])
+def test_fused_critic_ensemble_matches_vmap(features, batch):
+    torch.manual_seed(0)
+    obs_dim = 25
+    feats = EgoRelativeFeatures(5, 5, relative_indices=[1, 2], gains=[1.0, 1.0]) if features else None
+    critics = [make_qvalue(obs_dim, 2, hidden=(32, 16), input_features=feats) for _ in range(4)]
+    fused = fused_critic_ensemble(critics[0])
+    assert isinstance(fused, FusedCriticEnsemble)
+    params = _stacked_params(critics).apply(lambda p: p.detach().requires_grad_(True))
+    td = TensorDict({"observation": torch.randn(*batch, obs_dim),
+                     "action": (torch.rand(*batch, 2) * 2 - 1).requires_grad_(True)}, list(batch))
+    out = fused(td, params)
+    assert out.batch_size == torch.Size([4, *batch])
+    value = out["state_action_value"]
+    expected = _vmapped_values(critics[0], params, td)
+    assert torch.equal(value, expected)  # forward values are bit-identical
+    leaves = [td["action"], *params.values(True, True)]
+    weights = torch.randn_like(value)
+    grads = torch.autograd.grad((value * weights).sum(), leaves)
+    expected_grads = torch.autograd.grad((expected * weights).sum(), leaves)
+    for g, e in zip(grads, expected_grads):
+        assert torch.equal(g, e)
+
+
+def test_fused_critic_ensemble_second_order_matches_vmap():
+    torch.manual_seed(0)
+    critics = [make_qvalue(4, 2, hidden=(6, 5)).double() for _ in range(3)]
+    params = _stacked_params(critics).apply(lambda p: p.detach().requires_grad_(True))
+    td = TensorDict({"observation": torch.randn(5, 4, dtype=torch.float64),
+                     "action": torch.rand(5, 2, dtype=torch.float64)}, [5])
+    target = torch.randn(3, 5, 1, dtype=torch.float64, requires_grad=True)
+    leaves = list(params.values(True, True))
+
+    def second_order(values):
+        grads = torch.autograd.grad(((values - target) ** 2).sum(), leaves, create_graph=True)
+        return torch.autograd.grad(sum(g.pow(2).sum() for g in grads), target)[0]
+
+    fused = fused_critic_ensemble(critics[0])
+    torch.testing.assert_close(second_order(fused(td, params)["state_action_value"]),
+                               second_order(_vmapped_values(critics[0], params, td)), rtol=1e-10, atol=1e-12)
+
+
+def test_fused_critic_ensemble_rejects_unknown_critics():
+    assert fused_critic_ensemble(nn.Linear(3, 1)) is None
+    from tensordict.nn import TensorDictModule
+
+    other = TensorDictModule(nn.Sequential(nn.Linear(3, 1)), in_keys=["observation"], out_keys=["v"])
+    assert fused_critic_ensemble(other) is None
+    with_norm = make_qvalue(4, 2, hidden=(8,))
+    with_norm.module.mlp.insert(1, nn.LayerNorm(8))  # a layer with parameters between the linears
+    assert fused_critic_ensemble(with_norm) is None
+    with pytest.raises(ValueError, match="batch size"):
+        fused_critic_ensemble(make_qvalue(4, 2, hidden=(8,)))(
+            TensorDict({"observation": torch.randn(2, 4), "action": torch.rand(2, 2)}, [2]),
+            TensorDict.from_module(make_qvalue(4, 2, hidden=(8,))),
+        )

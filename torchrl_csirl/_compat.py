@@ -28,6 +28,7 @@ __all__ = [
     "gym_env_of",
     "sac_alpha",
     "sac_reduced_alpha_loss",
+    "set_qvalue_ensemble_evaluator",
     "vmap_qvalue_networks",
 ]
 
@@ -48,13 +49,29 @@ def check_sac_internals() -> None:
     * ``_compute_target_v2(tensordict)``: the critic target (overridden to keep the graph of a
       differentiable reward);
     * ``_cached_detached_qvalue_params``: a property, the critic parameters the actor loss uses
-      (overridden to evaluate the actor loss with graph-carrying critic parameters).
+      (overridden to evaluate the actor loss with graph-carrying critic parameters);
+    * ``_make_vmap(self)``: builds the critic-ensemble evaluator ``_vmap_qnetworkN0`` (overridden
+      to install a fused evaluator, :func:`set_qvalue_ensemble_evaluator`).
     """
     target = getattr(SACLoss, "_compute_target_v2", None)
     _require(callable(target) and list(inspect.signature(target).parameters) == ["self", "tensordict"],
              "SACLoss._compute_target_v2(self, tensordict) is gone or has a new signature")
     _require(isinstance(inspect.getattr_static(SACLoss, "_cached_detached_qvalue_params", None), property),
              "SACLoss._cached_detached_qvalue_params is no longer a property")
+    make_vmap = getattr(SACLoss, "_make_vmap", None)
+    _require(callable(make_vmap) and list(inspect.signature(make_vmap).parameters) == ["self"],
+             "SACLoss._make_vmap(self) is gone or has a new signature")
+
+
+def set_qvalue_ensemble_evaluator(loss: SACLoss, evaluator: Any) -> None:
+    """Makes ``evaluator(tensordict, params)`` SACLoss's evaluator of the ``[N]`` stacked critics.
+
+    SACLoss evaluates its critics in the critic loss, the actor loss and the critic target
+    through one attribute, ``_vmap_qnetworkN0`` (``torch.vmap(qvalue_network, (None, 0))``,
+    built by ``_make_vmap``). Call this from an override of ``_make_vmap``, after SACLoss's.
+    """
+    _require(hasattr(loss, "_vmap_qnetworkN0"), "SACLoss no longer builds _vmap_qnetworkN0 in _make_vmap")
+    loss._vmap_qnetworkN0 = evaluator
 
 
 def detached_qvalue_params(loss: SACLoss) -> TensorDictBase:

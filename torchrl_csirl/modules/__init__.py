@@ -3,18 +3,23 @@ from __future__ import annotations
 
 from torchrl_csirl.modules.actor_critic import (
     BoundedLogStdNormalParams,
+    ConcatMLP,
     MaskedReLU,
     make_actor,
     make_qvalue,
 )
+from torchrl_csirl.modules.ensemble import FusedCriticEnsemble, fused_critic_ensemble
 from torchrl_csirl.modules.export import load_policy, save_policy
 from torchrl_csirl.modules.features import EgoRelativeFeatures
 from torchrl_csirl.modules.reward import make_reward_network
 
 __all__ = [
     "BoundedLogStdNormalParams",
+    "ConcatMLP",
     "EgoRelativeFeatures",
+    "FusedCriticEnsemble",
     "MaskedReLU",
+    "fused_critic_ensemble",
     "load_policy",
     "make_actor",
     "make_qvalue",

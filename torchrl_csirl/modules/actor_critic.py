@@ -10,7 +10,7 @@ from torch import nn
 from torchrl.data import Bounded
 from torchrl.modules import MLP, ProbabilisticActor, TanhNormal
 
-__all__ = ["BoundedLogStdNormalParams", "MaskedReLU", "make_actor", "make_qvalue"]
+__all__ = ["BoundedLogStdNormalParams", "ConcatMLP", "MaskedReLU", "make_actor", "make_qvalue", "masked_relu"]
 
 
 class BoundedLogStdNormalParams(nn.Module):
@@ -156,6 +156,41 @@ class _ReLUDetachedMask(torch.autograd.Function):
         return _ReLUDetachedMask.apply(x), in_dims[0]
 
 
+class _ReLUDetachedMaskNoFunctorch(torch.autograd.Function):
+    """:class:`_ReLUDetachedMask` in the combined forward/ctx form, which ``Function.apply`` calls
+    without binding the arguments through ``inspect.signature`` (several times cheaper per call);
+    functorch transforms (``vmap``) need the separate ``setup_context`` form."""
+
+    @staticmethod
+    def forward(ctx, x: torch.Tensor) -> torch.Tensor:
+        out = torch.relu(x)
+        ctx.save_for_backward(out.detach())
+        return out
+
+    @staticmethod
+    def backward(ctx, grad: torch.Tensor) -> torch.Tensor:
+        (output,) = ctx.saved_tensors
+        return torch.ops.aten.threshold_backward(grad, output, 0)
+
+
+_functorch_transforms_active = getattr(torch._C, "_are_functorch_transforms_active", lambda: True)
+
+
+def masked_relu(x: torch.Tensor) -> torch.Tensor:
+    """Functional :class:`MaskedReLU`.
+
+    Examples:
+        >>> import torch
+        >>> x = torch.tensor([-1.0, 0.0, 2.0], requires_grad=True)
+        >>> masked_relu(x).sum().backward()
+        >>> x.grad
+        tensor([0., 0., 1.])
+    """
+    if _functorch_transforms_active():
+        return _ReLUDetachedMask.apply(x)
+    return _ReLUDetachedMaskNoFunctorch.apply(x)
+
+
 class MaskedReLU(nn.Module):
     """ReLU with the same values and gradients as :class:`torch.nn.ReLU`, cheaper to differentiate twice.
 
@@ -175,13 +210,26 @@ class MaskedReLU(nn.Module):
     """
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return _ReLUDetachedMask.apply(x)
+        return masked_relu(x)
 
 
-class _ConcatMLP(nn.Module):
-    """MLP over the concatenation of its inputs along the last dimension.
+class ConcatMLP(nn.Module):
+    """MLP over the concatenation of its inputs along the last dimension (the critic's network).
 
     ``input_features``, if given, maps the first input (the observation) before the concatenation.
+    :func:`~torchrl_csirl.modules.fused_critic_ensemble` recognises this structure and evaluates
+    an ensemble of such critics without ``vmap``.
+
+    Args:
+        in_features (int): width of the concatenated input.
+        hidden (sequence of int): hidden layer widths.
+        input_features (nn.Module, optional): parameter-free map of the first input.
+
+    Examples:
+        >>> import torch
+        >>> net = ConcatMLP(5, (8,))
+        >>> net(torch.randn(3, 4), torch.randn(3, 1)).shape
+        torch.Size([3, 1])
     """
 
     def __init__(self, in_features: int, hidden: Sequence[int], input_features: nn.Module | None = None) -> None:
@@ -231,7 +279,7 @@ def make_qvalue(
     """
     hidden = _check_dims(obs_dim, action_dim, hidden)
     return TensorDictModule(
-        _ConcatMLP(_input_size(obs_dim, input_features) + action_dim, hidden, input_features),
+        ConcatMLP(_input_size(obs_dim, input_features) + action_dim, hidden, input_features),
         in_keys=["observation", "action"],
         out_keys=["state_action_value"],
     )

@@ -14,13 +14,19 @@ from torchrl.objectives import SACLoss
 from torchrl.objectives.utils import ValueEstimators
 from torchrl.objectives.value import TD0Estimator
 
-from torchrl_csirl._compat import check_sac_internals, detached_qvalue_params, vmap_qvalue_networks
+from torchrl_csirl._compat import (
+    check_sac_internals,
+    detached_qvalue_params,
+    set_qvalue_ensemble_evaluator,
+    vmap_qvalue_networks,
+)
+from torchrl_csirl.modules.ensemble import fused_critic_ensemble
 
 __all__ = ["EnsembleSACLoss", "qvalue_dispersion", "reinitialize_module"]
 
 _DISPERSIONS = ("variance", "abs_cv")
 
-check_sac_internals()  # the two SACLoss internals overridden below
+check_sac_internals()  # the SACLoss internals overridden below
 
 
 def reinitialize_module(module: nn.Module) -> nn.Module:
@@ -95,6 +101,12 @@ class EnsembleSACLoss(SACLoss):
       ``N`` critics is also accepted and used as is.
     * :meth:`qvalues` / :meth:`qvalue_dispersion`: per-critic ``Q_k(s, a)`` and their
       disagreement (curricular subgoal selection).
+    * **a fused critic ensemble**: for critics built by
+      :func:`~torchrl_csirl.modules.make_qvalue`, every place SACLoss evaluates the ``N`` critics
+      (critic loss, actor loss, target) goes through a
+      :class:`~torchrl_csirl.modules.FusedCriticEnsemble` (one batched matmul per layer over the
+      same stacked parameters) instead of ``torch.vmap``; values are bit-identical, see
+      docs/PERFORMANCE.md for the speed. ``fused_qvalue=False`` keeps the vmap.
     * CSIRL defaults: fixed ``alpha = 0.01``, ``gamma = 0.99`` (TD(0)), squared-error
       critic loss summed over critics.
     * a **differentiable-reward mode** (:attr:`differentiable_reward` or the
@@ -132,6 +144,10 @@ class EnsembleSACLoss(SACLoss):
         reinitialize_qvalue (bool): re-draw each copied member. Defaults to ``True``.
         differentiable_reward (bool): initial value of :attr:`differentiable_reward`.
             Defaults to ``False``.
+        fused_qvalue (bool, optional): evaluate the critics with a
+            :class:`~torchrl_csirl.modules.FusedCriticEnsemble` (``True``; an error if the critic
+            is not supported) or with SACLoss's ``torch.vmap`` (``False``). Defaults to ``None``:
+            fused when the critic is supported.
         **kwargs: forwarded to :class:`~torchrl.objectives.SACLoss`.
 
     Examples:
@@ -164,6 +180,7 @@ class EnsembleSACLoss(SACLoss):
         dispersion: str = "variance",
         reinitialize_qvalue: bool = True,
         differentiable_reward: bool = False,
+        fused_qvalue: bool | None = None,
         **kwargs,
     ) -> None:
         if kwargs.get("value_network") is not None:
@@ -173,6 +190,12 @@ class EnsembleSACLoss(SACLoss):
         if dispersion not in _DISPERSIONS:
             raise ValueError(f"dispersion must be one of {_DISPERSIONS}, got {dispersion!r}.")
         members = self._make_members(qvalue_network, num_qvalue_nets, reinitialize_qvalue)
+        fused = None if fused_qvalue is False else fused_critic_ensemble(members[0])
+        if fused_qvalue and fused is None:
+            raise ValueError(
+                "fused_qvalue=True needs critics built by make_qvalue (a TensorDictModule over a "
+                f"ConcatMLP of Linear layers and element-wise activations), got {members[0]}."
+            )
         super().__init__(
             actor_network,
             members,
@@ -186,6 +209,19 @@ class EnsembleSACLoss(SACLoss):
         self.dispersion = dispersion
         self.differentiable_reward = differentiable_reward
         self.__dict__["_actor_loss_qvalue_params"] = None
+        self.__dict__["_fused_qvalue"] = fused
+        self._make_vmap()
+
+    @property
+    def fused_qvalue(self) -> bool:
+        """Whether the critics are evaluated by a fused ensemble (``False``: ``torch.vmap``)."""
+        return self.__dict__.get("_fused_qvalue") is not None
+
+    def _make_vmap(self) -> None:
+        super()._make_vmap()
+        fused = self.__dict__.get("_fused_qvalue")
+        if fused is not None:
+            set_qvalue_ensemble_evaluator(self, fused)
 
     @staticmethod
     def _make_members(

@@ -5,7 +5,7 @@ from dataclasses import dataclass
 
 import torch
 from tensordict import TensorDict, TensorDictBase
-from tensordict.nn import TensorDictModule
+from tensordict.nn import TensorDictModule, TensorDictParams
 from tensordict.utils import NestedKey
 
 from torchrl.envs.utils import ExplorationType, set_exploration_type
@@ -17,9 +17,14 @@ from torchrl_csirl.objectives.ensemble_sac import EnsembleSACLoss
 __all__ = ["MetaRewardLoss"]
 
 
-def _leaves_like(params: TensorDictBase) -> TensorDictBase:
-    """Detached copies (sharing storage) of ``params`` that are fresh autograd leaves."""
-    return params.apply(lambda p: p.detach().requires_grad_(True))
+def _leaves_like(params: TensorDictBase) -> TensorDictParams:
+    """Detached copies (sharing storage) of ``params`` that are fresh autograd leaves.
+
+    Returned as a :class:`~tensordict.nn.TensorDictParams` (not converted to ``nn.Parameter``),
+    which :meth:`EnsembleSACLoss.using_params` then swaps in without wrapping it again.
+    """
+    leaves = {key: value.detach().requires_grad_(True) for key, value in params.items(True, True)}
+    return TensorDictParams(TensorDict(leaves, batch_size=params.batch_size), no_convert=True)
 
 
 def sgd_lookahead(
@@ -37,7 +42,7 @@ def sgd_lookahead(
         >>> w = torch.tensor(3.0, requires_grad=True)
         >>> new = sgd_lookahead((w * p["w"]).sum(), p, lr=0.1)
         >>> new["w"]  # 1 - 0.1 * w
-        tensor([0.7000, 0.7000], grad_fn=<SubBackward0>)
+        tensor([0.7000, 0.7000], grad_fn=<AddBackward0>)
     """
     return _sgd_lookahead_and_grads(loss, params, lr, create_graph=create_graph)[0]
 
@@ -58,21 +63,45 @@ def _sgd_lookahead_and_grads(
     grads = _grads_or_zeros(loss, tensors, create_graph=create_graph)
     out = params.empty()
     for key, tensor, grad in zip(keys, tensors, grads):
-        out.set(key, tensor - lr * grad)
+        out.set(key, torch.add(tensor, grad, alpha=-lr))  # one fused pass (and one in backward)
     return out, grads
 
 
 def _norm(tensors: list[torch.Tensor]) -> torch.Tensor:
     """Global L2 norm of a list of tensors (detached)."""
-    return torch.stack([t.detach().pow(2).sum() for t in tensors]).sum().sqrt()
+    return torch.linalg.vector_norm(torch.stack(torch._foreach_norm([t.detach() for t in tensors])))
+
+
+class _WithGradients(torch.autograd.Function):
+    """``value`` (detached) whose backward hands ``grads`` (times the incoming scalar) to ``params``."""
+
+    @staticmethod
+    def forward(ctx, value: torch.Tensor, grads: tuple[torch.Tensor, ...], *params: torch.Tensor) -> torch.Tensor:
+        ctx.grads = grads
+        return value.clone()
+
+    @staticmethod
+    def backward(ctx, grad_output: torch.Tensor) -> tuple[torch.Tensor | None, ...]:
+        return (None, None, *(g * grad_output for g in ctx.grads))
 
 
 def _linear_surrogate(
     value: torch.Tensor, params: list[torch.Tensor], grads: list[torch.Tensor]
 ) -> torch.Tensor:
-    """A scalar equal to ``value`` whose gradient w.r.t. ``params`` is exactly ``grads``."""
-    linear = sum((p * g.detach()).sum() for p, g in zip(params, grads))
-    return value.detach() + (linear - linear.detach())
+    """A scalar equal to ``value`` whose gradient w.r.t. ``params`` is exactly ``grads``.
+
+    The same value and gradient as ``value + sum_i <p_i, g_i> - sum_i <p_i, g_i>`` (detached), without
+    computing the inner products.
+
+    Examples:
+        >>> import torch
+        >>> p = torch.zeros(2, requires_grad=True)
+        >>> s = _linear_surrogate(torch.tensor(5.0), [p], [torch.tensor([1.0, 2.0])])
+        >>> s.backward()
+        >>> s.item(), p.grad
+        (5.0, tensor([1., 2.]))
+    """
+    return _WithGradients.apply(value.detach(), tuple(g.detach() for g in grads), *params)
 
 
 class MetaRewardLoss(LossModule):
@@ -350,7 +379,7 @@ class MetaRewardLoss(LossModule):
         if self.reward_l1_coef > 0:  # the regulariser's share of the meta-gradient (a cheap diagnostic)
             grads_l1 = _grads_or_zeros(self.scale * self.reward_l1_coef * loss_l1, w_params, retain_graph=True)
         grads = _grads_or_zeros(loss, w_params)
-        grads_imitation = grads if grads_l1 is None else [g - g1 for g, g1 in zip(grads, grads_l1)]
+        grads_imitation = grads if grads_l1 is None else torch._foreach_sub(grads, grads_l1)
         # same value as ``loss``, gradient w.r.t. w exactly ``grads``, nothing else.
         out = {
             "loss_meta": _linear_surrogate(loss, w_params, grads),

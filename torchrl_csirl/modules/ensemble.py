@@ -1,0 +1,173 @@
+"""A critic ensemble evaluated with one batched matmul per layer (no ``torch.vmap``).
+
+:class:`~torchrl.objectives.SACLoss` keeps the ``N`` critics as one parameter TensorDict of
+batch size ``[N]`` (every weight stacked as ``[N, out, in]``) and evaluates them with
+``torch.vmap`` over the critic module. For the small MLPs of CSIRL the vmap machinery (parameter
+swapping, batching rules, TensorDict wrapping) costs about as much as the arithmetic.
+:class:`FusedCriticEnsemble` reads the same stacked parameters and evaluates the whole ensemble
+directly: one batched matmul per layer, the bias added as vmap adds it, the activations called
+on the whole ``[N, batch, width]`` block. The values are bit-identical to the vmapped critic;
+see docs/PERFORMANCE.md for the timings.
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import torch
+from tensordict import TensorDict, TensorDictBase
+from tensordict.nn import TensorDictModule
+from tensordict.utils import NestedKey
+from torch import nn
+
+from torchrl_csirl.modules.actor_critic import ConcatMLP, MaskedReLU
+
+__all__ = ["FusedCriticEnsemble", "fused_critic_ensemble"]
+
+# parameter-free, element-wise layers that act the same on [M, H] and on [N, M, H]
+_ELEMENTWISE = (MaskedReLU, nn.ReLU, nn.Tanh, nn.ELU, nn.LeakyReLU, nn.SiLU, nn.GELU, nn.Identity)
+
+
+class FusedCriticEnsemble:
+    """Evaluates ``N`` stacked copies of a :class:`ConcatMLP` critic without ``vmap``.
+
+    A drop-in replacement of ``torch.vmap(critic, (None, 0))`` for critics built by
+    :func:`~torchrl_csirl.modules.make_qvalue`: called with a TensorDict of inputs (batch
+    ``[*B]``, shared by the critics) and a parameter TensorDict of batch ``[N]`` (SACLoss's
+    ``qvalue_network_params``, its target copy, a detached or graph-carrying version), it
+    returns a TensorDict of batch ``[N, *B]`` holding the critic's output entry ``[N, *B, 1]``.
+    Gradients flow to the parameters and inputs as through the vmapped critic; forward values
+    are bit-identical to it.
+
+    Build it with :func:`fused_critic_ensemble`, which returns ``None`` for critics it does not
+    recognise.
+
+    Args:
+        in_keys (sequence of NestedKey): the critic's inputs, concatenated in this order.
+        out_key (NestedKey): the critic's output entry.
+        linear_keys (sequence of (NestedKey, NestedKey or None)): the ``(weight, bias)`` keys
+            of each linear layer in the parameter TensorDict, in order.
+        activations (sequence of nn.Module): the element-wise layer after each linear layer
+            but the last.
+        input_features (nn.Module, optional): parameter-free map of the first input.
+
+    Examples:
+        >>> import torch
+        >>> from tensordict import TensorDict
+        >>> from tensordict.nn import TensorDictParams
+        >>> from torchrl_csirl.modules import make_qvalue
+        >>> critic = make_qvalue(4, 2, hidden=(8, 8))
+        >>> fused = fused_critic_ensemble(critic)
+        >>> params = TensorDict.from_module(critic).expand(3).clone()  # 3 stacked critics
+        >>> td = TensorDict({"observation": torch.randn(5, 4), "action": torch.rand(5, 2)}, [5])
+        >>> fused(td, params)["state_action_value"].shape
+        torch.Size([3, 5, 1])
+    """
+
+    def __init__(
+        self,
+        in_keys: Sequence[NestedKey],
+        out_key: NestedKey,
+        linear_keys: Sequence[tuple[NestedKey, NestedKey | None]],
+        activations: Sequence[nn.Module],
+        input_features: nn.Module | None = None,
+    ) -> None:
+        if len(activations) != len(linear_keys) - 1:
+            raise ValueError(
+                f"Need one activation between consecutive linear layers: {len(linear_keys)} "
+                f"layers, {len(activations)} activations."
+            )
+        self.in_keys = list(in_keys)
+        self.out_key = out_key
+        self.linear_keys = [tuple(pair) for pair in linear_keys]
+        self.activations = list(activations)
+        self.input_features = input_features
+
+    def critic_input(self, tensordict: TensorDictBase) -> torch.Tensor:
+        """The concatenated input ``[*B, D]`` the critics share."""
+        inputs = [tensordict.get(key) for key in self.in_keys]
+        if self.input_features is not None:
+            inputs[0] = self.input_features(inputs[0])
+        return torch.cat(inputs, dim=-1)
+
+    def values(self, x: torch.Tensor, params: TensorDictBase) -> torch.Tensor:
+        """``[N, *B, out]`` outputs of the ``N`` critics on a shared input ``x`` of shape ``[*B, D]``."""
+        batch_shape = x.shape[:-1]
+        x = x.reshape(-1, x.shape[-1])
+        h = None
+        for index, (weight_key, bias_key) in enumerate(self.linear_keys):
+            weight = params.get(weight_key)
+            bias = None if bias_key is None else params.get(bias_key)
+            h = _first_layer(x, weight) if index == 0 else torch.bmm(h, weight.transpose(1, 2))
+            if bias is not None:
+                h = h + bias.unsqueeze(1)
+            if index < len(self.activations):
+                h = self.activations[index](h)
+        return h.reshape(h.shape[0], *batch_shape, h.shape[-1])
+
+    def __call__(self, tensordict: TensorDictBase, params: TensorDictBase) -> TensorDictBase:
+        if params.ndim != 1:
+            raise ValueError(f"Expected critic parameters of batch size [N], got {params.batch_size}.")
+        value = self.values(self.critic_input(tensordict), params)
+        return TensorDict({self.out_key: value}, batch_size=value.shape[:-1])
+
+
+def _first_layer(x: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:
+    """``[N, M, out]`` products of a shared input ``[M, in]`` with ``N`` stacked weights.
+
+    A broadcast ``matmul``, which is what ``vmap`` runs: one ``mm`` over the stacked weights would
+    also do, but for small batches it sums in a different order (values would differ in the last bit).
+    """
+    return torch.matmul(x, weight.transpose(1, 2))
+
+
+def fused_critic_ensemble(qvalue_network: nn.Module) -> FusedCriticEnsemble | None:
+    """A :class:`FusedCriticEnsemble` for ``qvalue_network``, or ``None`` if it is not supported.
+
+    Supported: a :class:`~tensordict.nn.TensorDictModule` over a :class:`ConcatMLP` (what
+    :func:`~torchrl_csirl.modules.make_qvalue` builds) whose MLP alternates ``nn.Linear`` layers
+    with parameter-free element-wise activations, with one output.
+
+    Examples:
+        >>> from torchrl_csirl.modules import make_qvalue
+        >>> fused_critic_ensemble(make_qvalue(4, 2)) is not None
+        True
+        >>> import torch
+        >>> fused_critic_ensemble(torch.nn.Linear(3, 1)) is None
+        True
+    """
+    if not isinstance(qvalue_network, TensorDictModule) or not isinstance(qvalue_network.module, ConcatMLP):
+        return None
+    if len(qvalue_network.out_keys) != 1:
+        return None
+    concat = qvalue_network.module
+    features = concat.input_features
+    if features is not None and any(True for _ in (*features.parameters(), *features.buffers())):
+        return None
+    prefix = _module_path(qvalue_network, concat.mlp)
+    linear_keys, activations = [], []
+    expect_linear = True
+    for name, layer in concat.mlp.named_children():
+        if expect_linear and isinstance(layer, nn.Linear):
+            bias = None if layer.bias is None else (*prefix, name, "bias")
+            linear_keys.append(((*prefix, name, "weight"), bias))
+        elif not expect_linear and isinstance(layer, _ELEMENTWISE):
+            activations.append(layer)
+        else:
+            return None
+        expect_linear = not expect_linear
+    if expect_linear or not linear_keys:  # must end on a linear layer
+        return None
+    return FusedCriticEnsemble(
+        qvalue_network.in_keys,
+        qvalue_network.out_keys[0],
+        linear_keys,
+        activations,
+        concat.input_features,
+    )
+
+
+def _module_path(root: nn.Module, target: nn.Module) -> tuple[str, ...]:
+    for name, module in root.named_modules():
+        if module is target:
+            return tuple(name.split(".")) if name else ()
+    raise ValueError("target is not a submodule of root.")
