@@ -28,6 +28,7 @@ TINY = [
     "replay_buffer.warmup_frames=100",
     "replay_buffer.batch_size=64",
     "csirl.updates_per_round=20",
+    "optim.utd_ratio=0.5",
     "eval.episodes=2",
     "eval.final_episodes=2",
     "logger.progress_bar=false",
