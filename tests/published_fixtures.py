@@ -8,7 +8,8 @@ shipped demonstrations of our own expert (real episodes of our scenes):
   (only numpy classes in the pickle), file N = the empty-road curriculum trajectory + N-1 others;
 * every trajectory stored for the full padded width L (:data:`PADDED_WIDTH`), ``lengths`` a plain
   list equal to L; a recording shorter than L is continued at constant velocity (the recorder
-  went on), a longer one is cut at L (highway: x of about 600-650 m at step 75);
+  went on); highway's longer ones are the L steps ending at x = 625 m (episodes end at x of
+  600-650 m);
 * ``dones`` True on the last five steps of every trajectory (the recorder's padding);
 * roundabout: an earlier ``done`` in some trajectories (:data:`ROUNDABOUT_EARLY_DONES`, three
   steps after the arrival, where the continued ego has left the road), and in the 24-file one
@@ -42,6 +43,7 @@ PADDING_DONES = 5
 D_ACTIONS_SIZES = (10, 20, 24)
 ROUNDABOUT_EARLY_DONES = (2, 5)
 MERGE_RECORDED_TO_X = 390.0
+HIGHWAY_END_X = 625.0
 _STALL_STEP = 8
 
 
@@ -89,6 +91,11 @@ def _padded(spec, demos: ExpertDemonstrations, index: int, width: int, *, keep: 
     actions = demos.trajectory(index)["action"].numpy()
     if keep is not None:
         observations, actions = observations[: keep + 1], actions[:keep]
+    if spec.name == "highway-fast" and len(actions) > width:
+        # the published highway episodes end at x of 600-650 m after L steps: the L steps ending there
+        x = _world(spec, "x", observations[:, spec.features.index("x")])
+        end = max(int(np.argmax(x >= HIGHWAY_END_X)), width)
+        observations, actions = observations[end - width : end + 1], actions[end - width : end]
     missing = width + 1 - len(observations)
     if missing > 0:
         more = _continue(spec, observations[-1], missing, stand=stand, ego_to_x=ego_to_x)
