@@ -240,7 +240,6 @@ class TestImportPublished:
             (lambda d: d.__setitem__("lengths", np.array([6, 0, 2])), "'lengths' must lie in"),
             (lambda d: d.__setitem__("lengths", np.array([6, 7, 2])), "'lengths' must lie in"),
             (lambda d: d.__setitem__("lengths", np.array([6, 4])), "'lengths' must have shape"),
-            (lambda d: d["dones"].__setitem__((0, 2), 1.0), "done at step 2 before its last step"),
             (lambda d: d.__setitem__("dones", d["dones"][:2]), "'dones' must have shape"),
         ],
     )
@@ -249,6 +248,28 @@ class TestImportPublished:
         corrupt(data)
         with pytest.raises(ValueError, match=match):
             import_published(_save_published(tmp_path, data))
+
+    def test_early_done_is_kept_and_reported(self, tmp_path):
+        data = _published_dict()
+        data["dones"][0, 2] = 1.0
+        path = _save_published(tmp_path, data)
+        demos = import_published(path)
+        assert demos.lengths.tolist() == [6, 4, 2] and demos.metadata["early_dones"] == [[0, 2]]
+        assert import_published(path, end_at="first_done").lengths.tolist() == [3, 4, 2]
+
+    @pytest.mark.parametrize(
+        "kwargs,match",
+        [
+            ({"end_at": "first_crash"}, "end_at must be one of"),
+            ({"end_at": "termination"}, "needs the scenario"),
+            ({"done_mapping": "truncated"}, "done_mapping must be one of"),
+            ({"scenario": "mars"}, "Unknown scenario 'mars'"),
+            ({"scenario": "merge"}, "observations of size 5, but 'merge' has 25"),
+        ],
+    )
+    def test_rejects_bad_options(self, tmp_path, kwargs, match):
+        with pytest.raises(ValueError, match=match):
+            import_published(_save_published(tmp_path, _published_dict()), **kwargs)
 
     def test_nan_in_padding_is_ignored(self, tmp_path):
         data = _published_dict()
@@ -291,6 +312,101 @@ class TestImportPublished:
         np.save(tmp_path / "plain.npy", np.zeros((2, 3)))
         with pytest.raises(ValueError, match="expected a pickled dict"):
             import_published(tmp_path / "plain.npy")
+
+
+@pytest.fixture(scope="module")
+def published_files(tmp_path_factory):
+    """scenario -> {N: path} of synthetic files in the published layout (tests/published_fixtures.py)."""
+    from published_fixtures import write_published_files
+
+    folder = tmp_path_factory.mktemp("published")
+    written: dict[str, dict[int, str]] = {}
+
+    def files(scenario: str) -> dict[int, str]:
+        if scenario not in written:
+            written[scenario] = write_published_files(folder, scenario)
+        return written[scenario]
+
+    return files
+
+
+def _shipped_length(scenario: str, curriculum: str, index: int) -> int:
+    from torchrl_csirl.data import expert_dataset_path
+
+    return int(ExpertDemonstrations.load(expert_dataset_path(scenario, curriculum)).lengths[index])
+
+
+class TestPublishedFiles:
+    """The facts about the authors' files (issue 17), on synthetic files that reproduce them."""
+
+    @pytest.mark.parametrize("scenario", ["highway-fast", "merge", "roundabout", "intersection"])
+    def test_every_file_loads_with_the_defaults(self, published_files, scenario):
+        from published_fixtures import D_ACTIONS_SIZES, PADDED_WIDTH, PUBLISHED_SIZES
+
+        width = PADDED_WIDTH[scenario]
+        files = published_files(scenario)
+        largest = import_published(files[25])
+        for size in PUBLISHED_SIZES:
+            raw = np.load(files[size], allow_pickle=True).item()
+            assert raw["lengths"] == [width] * size and raw["dones"][:, -5:].all()
+            demos = import_published(files[size])
+            assert demos.num_trajectories == size and demos.lengths.tolist() == [width] * size
+            flags = demos.transitions()["next"]
+            # the padding dones end the recording: every trajectory ends truncated, none terminates
+            assert not flags["terminated"].any() and int(flags["truncated"].sum()) == size
+            assert demos.metadata["ignored_keys"] == (["d_actions"] if size in D_ACTIONS_SIZES else [])
+            np.testing.assert_array_equal(demos.trajectory(size - 1)["observation"].numpy(), raw["states"][-1])
+            stalled = scenario == "roundabout" and size == 24
+            for i in range(size - 1 if stalled else size):  # nested files (but roundabout's 24-file)
+                torch.testing.assert_close(demos.trajectory(i)["observation"], largest.trajectory(i)["observation"])
+
+    def test_roundabout_early_dones(self, published_files):
+        from published_fixtures import ROUNDABOUT_EARLY_DONES
+
+        path = published_files("roundabout")[25]
+        demos = import_published(path)
+        early = demos.metadata["early_dones"]
+        assert [i for i, _ in early] == list(ROUNDABOUT_EARLY_DONES)
+        first_done = import_published(path, end_at="first_done")
+        for i, length in enumerate(first_done.lengths.tolist()):
+            expected = dict(early).get(i, 55 - 5) + 1
+            assert length == expected and first_done.trajectory(i)["next", "terminated"][-1].item()
+
+    def test_termination_merge(self, published_files):
+        files = published_files("merge")
+        raw = np.load(files[25], allow_pickle=True).item()
+        # recorded past our termination (x = 370 m, 0.74 normalised) to about 390 m
+        assert raw["next_states"][:, -1, 1].min() > 0.77
+        # two distinct trajectories; the expert never accelerates
+        assert len(np.unique(raw["states"], axis=0)) == 2 and raw["actions"][..., 0].max() <= 0.0
+        demos = import_published(files[25], end_at="termination", scenario="merge")
+        expected = [_shipped_length("merge", "empty", 0)] + [_shipped_length("merge", "traffic", 1)] * 24
+        assert demos.lengths.tolist() == expected
+        assert demos.transitions()["next", "terminated"].sum() == 25
+        assert demos.metadata["scenario"] == "merge" and demos.metadata["end_at"] == "termination"
+
+    def test_termination_intersection(self, published_files):
+        demos = import_published(published_files("intersection")[5], end_at="termination", scenario="intersection")
+        # the curriculum trajectory stops short of the finish: the time limit truncates it
+        assert demos.lengths[0] == 65 and demos.trajectory(0)["next", "truncated"][-1].item()
+        # the others are cut at the step our environment sees the arrival
+        assert demos.lengths[1:].tolist() == [_shipped_length("intersection", "traffic", i) for i in range(1, 5)]
+        assert all(demos.trajectory(i)["next", "terminated"][-1].item() for i in range(1, 5))
+
+    def test_termination_roundabout_and_highway(self, published_files):
+        from published_fixtures import ROUNDABOUT_EARLY_DONES
+
+        demos = import_published(published_files("roundabout")[24], end_at="termination", scenario="roundabout")
+        early = dict(demos.metadata["early_dones"])
+        for i, length in enumerate(demos.lengths.tolist()):
+            # off the road: terminated there; otherwise the recording runs to our time limit
+            terminated = demos.trajectory(i)["next", "terminated"][-1].item()
+            assert (length, terminated) == ((early[i] + 1, True) if i in ROUNDABOUT_EARLY_DONES else (55, False))
+        highway = import_published(published_files("highway-fast")[4], end_at="termination", scenario="highway-fast")
+        assert highway.lengths.tolist() == [75] * 4 and not highway.transitions()["next", "terminated"].any()
+        # highway episodes end at x of about 600-650 m (x in [150, 700] normalised to [-1, 1])
+        final_x = 150 + (np.stack([highway.trajectory(i)["next", "observation"][-1, 1].numpy() for i in range(4)]) + 1) * 275
+        assert final_x.min() > 550 and final_x.max() < 700
 
 
 class TestDemonstrationMixer:

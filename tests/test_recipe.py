@@ -224,6 +224,37 @@ def test_malformed_expert_file_is_a_clear_error(tmp_path, content):
         builders.load_experts(cfg.expert, csirl_utils.SCENARIOS["merge"])
 
 
+@pytest.mark.parametrize("curriculum, expected", [("empty", 0), ("traffic", 1)])
+def test_published_file_drives_the_run(tmp_path, curriculum, expected):
+    """expert.path=<published file> builds the run; expert.curriculum picks the curriculum trajectory."""
+    from published_fixtures import write_published_files
+
+    from torchrl_csirl.data import import_published
+
+    path = write_published_files(tmp_path / "published", "merge", sizes=(5,))[5]
+    stored = import_published(path)
+    cfg = _tiny_cfg(tmp_path, f"expert.path={path}", f"expert.curriculum={curriculum}",
+                    "expert.num_trajectories=5")
+    run = csirl_utils.make_trainer(cfg, str(tmp_path / "run"))
+    try:
+        assert run.demos.num_trajectories == 5 and run.demos.metadata["curriculum_trajectory"] == expected
+        assert run.demos.lengths.tolist() == [60] * 5
+        curriculum_obs = stored.trajectory_observations(expected, include_final=True)
+        torch.testing.assert_close(run.curriculum.expert_observations.cpu(), curriculum_obs)
+        assert run.curriculum.length == 61 and len(run.expert_buffer) == 5 * 60
+    finally:
+        run.close()
+
+
+def test_published_file_without_traffic_is_a_clear_error(tmp_path):
+    from published_fixtures import write_published_files
+
+    path = write_published_files(tmp_path, "merge", sizes=(1,))[1]
+    cfg = _tiny_cfg(tmp_path, f"expert.path={path}", "expert.curriculum=traffic", "expert.num_trajectories=1")
+    with pytest.raises(csirl_utils.ExpertDataError, match="expert.curriculum=traffic: no trajectory of .*merge_1.npy"):
+        builders.load_experts(cfg.expert, csirl_utils.SCENARIOS["merge"])
+
+
 @pytest.mark.parametrize(
     "override, message",
     [

@@ -44,6 +44,7 @@ __all__ = [
     "Run",
     "assemble_trainer",
     "check_collector",
+    "curriculum_first",
     "envs_per_worker",
     "load_experts",
     "make_collector",
@@ -51,6 +52,7 @@ __all__ = [
     "make_logger",
     "make_online_buffer",
     "make_worker_env_fn",
+    "recorded_in_traffic",
 ]
 
 MAX_ENVS_PER_WORKER = 4
@@ -59,6 +61,11 @@ MAX_ENVS_PER_WORKER = 4
 # ---------------------------------------------------------------------------------------- data
 def load_experts(expert: DictConfig, spec: ScenarioSpec) -> ExpertDemonstrations:
     """The demonstrations: the shipped ones, or ``expert.path`` (checked against the scenario).
+
+    ``expert.path`` is an :class:`ExpertDemonstrations` ``.npz`` or a published file (read by
+    :func:`~torchrl_csirl.data.import_published` with its defaults); ``expert.curriculum`` picks
+    its curriculum trajectory (:func:`curriculum_first`), then the first
+    ``expert.num_trajectories`` are kept.
 
     Raises:
         ExpertDataError: a missing, malformed or mismatched file, naming it.
@@ -81,7 +88,53 @@ def load_experts(expert: DictConfig, spec: ScenarioSpec) -> ExpertDemonstrations
         raise ExpertDataError(
             f"expert.path: {path!r} holds {demos.num_trajectories} trajectories, "
             f"expert.num_trajectories asks for {n}.")
+    demos = curriculum_first(demos, expert.curriculum, spec, path)
     return demos.subset(n) if n < demos.num_trajectories else demos
+
+
+def recorded_in_traffic(observations: torch.Tensor, spec: ScenarioSpec) -> bool:
+    """Whether another vehicle is present in any of the observations ``[T, D]`` of a trajectory.
+
+    Examples:
+        >>> obs = torch.zeros(3, 25)
+        >>> recorded_in_traffic(obs, SCENARIOS["merge"])
+        False
+        >>> obs[1, 5] = 1.0  # presence of the first other vehicle
+        >>> recorded_in_traffic(obs, SCENARIOS["merge"])
+        True
+    """
+    rows = observations.reshape(observations.shape[0], spec.vehicles_count, len(spec.features))
+    return bool((rows[:, 1:, spec.features.index("presence")] > 0.5).any())
+
+
+def curriculum_first(demos: ExpertDemonstrations, curriculum: str, spec: ScenarioSpec,
+                     path: str = "expert.path") -> ExpertDemonstrations:
+    """The demonstrations of a file with the curriculum trajectory chosen by ``expert.curriculum`` first.
+
+    ``"empty"``: trajectory 0 as stored (the published files, like ours, store the empty-road
+    trajectory first). ``"traffic"``: the first trajectory in which another vehicle is observed,
+    moved to the front (the others keep their order); ``metadata["curriculum_trajectory"]`` is its
+    index in the file.
+
+    Raises:
+        ExpertDataError: ``"traffic"`` and no trajectory of the file was recorded in traffic.
+    """
+    if curriculum != "traffic":
+        return demos.with_metadata(curriculum_trajectory=0)
+    found = [i for i in range(demos.num_trajectories)
+             if recorded_in_traffic(demos.trajectory(i)["observation"], spec)]
+    if not found:
+        raise ExpertDataError(f"expert.curriculum=traffic: no trajectory of {path!r} was recorded in traffic "
+                              "(no other vehicle observed); use expert.curriculum=empty.")
+    first = found[0]
+    if first == 0:
+        return demos.with_metadata(curriculum_trajectory=0)
+    order = [first, *(i for i in range(demos.num_trajectories) if i != first)]
+    metadata = demos.metadata
+    if len(metadata.get("episodes") or []) == demos.num_trajectories:
+        metadata["episodes"] = [metadata["episodes"][i] for i in order]
+    metadata["curriculum_trajectory"] = first
+    return ExpertDemonstrations.from_episodes([demos.trajectory(i) for i in order], metadata=metadata)
 
 
 # ---------------------------------------------------------------------------------------- envs

@@ -112,7 +112,8 @@ class CollectorConfig:
 class ExpertConfig:
     num_trajectories: int = option(25, above=0, help="demonstrations used (1, 5, 10, 15, 20, 25 shipped)")
     curriculum: str = option("empty", choices=("empty", "traffic"),
-                             help="how the curriculum trajectory was recorded (shipped data)")
+                             help="the curriculum trajectory: empty (empty road: trajectory 0 of a file) | traffic "
+                                  "(recorded in traffic: the first such trajectory of a file)")
     path: Optional[str] = option(None, help="your own demonstrations (.npz, or a published pickle)")
     batch_size: int = option(32, above=0, help="expert pairs per meta / cloning step")
 

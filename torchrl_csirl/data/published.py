@@ -7,19 +7,40 @@ holding a pickled 0-d object array), with arrays of shape ``(N, L, ...)`` padded
 * ``actions``: ``(N, L, A)``, normalised to ``[-1, 1]``;
 * ``rewards`` (optional here): ``(N, L)`` or ``(N, L, 1)``;
 * ``dones``: ``(N, L)`` or ``(N, L, 1)``;
-* ``lengths``: ``(N,)``, the number of valid steps of each trajectory (``1 <= length <= L``).
+* ``lengths``: ``(N,)`` (a plain list in the published files), the number of recorded steps of
+  each trajectory (``1 <= length <= L``);
+* any other key (the published files sometimes carry ``d_actions``) is ignored and listed in
+  ``metadata["ignored_keys"]``.
 
 The pickle is read with a **restricted unpickler** that only reconstructs plain containers and
 numpy arrays/dtypes/scalars: any other global (``os.system``, ``builtins.eval``, ...) is refused
 with :class:`pickle.UnpicklingError`, so no code from the file is ever executed.
 
-Mapping of ``dones``: the published data set ``done`` both on crashes/arrival (termination)
-and when the time limit ends an episode (truncation). With ``done_mapping="full_length"``
-(default) a ``done`` on the final step of an episode that lasted ``max_episode_steps`` steps
-(default: the padded width ``L``) is read as **truncated**; any other final ``done`` as
-**terminated**. A final step without ``done`` is truncated (the recording stopped there).
-``done_mapping="terminated"`` reads every ``done`` as termination (the published code's view).
-A ``done`` before the last valid step is malformed and rejected.
+What the published files look like (see ``docs/EXPERTS.md``): every trajectory is recorded for
+the full padded width ``L`` (``lengths`` = ``L``), and ``dones`` is True on the **last five
+steps of every trajectory** whatever happened (padding of the recorder); some roundabout
+trajectories also carry an earlier ``done`` (the ego left the road and the recorder went on).
+So a ``done`` before the last step is normal. Where a trajectory ends is chosen by ``end_at``:
+
+* ``"recording"`` (default): the whole recording, ``lengths[i]`` steps. The trailing run of
+  ``dones`` is read as the end of the recording, earlier ``dones`` are kept in the data and listed
+  in ``metadata["early_dones"]`` as ``[trajectory, step]`` pairs;
+* ``"first_done"``: cut each trajectory after its first ``done`` (for the published files the
+  first padding step, or the earlier off-road ``done``);
+* ``"termination"``: cut where our scenario's environment would end the episode (needs
+  ``scenario``): after a ``done`` recorded before the trailing run (crash, off-road), after the
+  first step whose next state passes the scene's termination (merge: x > 370 m; intersection:
+  arrival on the exit lane; highway-fast and roundabout do not terminate on arrival), or at the
+  scenario's time limit; otherwise at the end of the recording.
+
+Mapping of the last kept step to ``terminated`` / ``truncated``: with ``end_at="termination"``
+the step is terminated when the cut is a termination of our scene, truncated otherwise. With the
+other two, ``done_mapping="full_length"`` (default) reads a ``done`` on the last kept step as
+**terminated** when the trajectory is shorter than ``max_episode_steps`` (default: the padded
+width ``L``), as **truncated** otherwise (a full-width recording ended; so every trajectory of a
+published file ends truncated by default); a last step without ``done`` is truncated.
+``done_mapping="terminated"`` reads a ``done`` on the last kept step as termination (the
+published code's view).
 """
 from __future__ import annotations
 
@@ -33,10 +54,13 @@ import torch
 
 from torchrl_csirl.data.expert import ExpertDemonstrations
 
-__all__ = ["import_published", "load_published_dict", "RestrictedUnpickler"]
+__all__ = ["END_AT", "import_published", "load_published_dict", "RestrictedUnpickler"]
 
 _REQUIRED_KEYS = ("states", "next_states", "actions", "dones", "lengths")
+_KNOWN_KEYS = (*_REQUIRED_KEYS, "rewards")
 _DONE_MAPPINGS = ("full_length", "terminated")
+END_AT = ("recording", "first_done", "termination")
+"""Where :func:`import_published` ends each trajectory (see the module docstring)."""
 
 
 def _numpy_global(module: str, name: str) -> Any:
@@ -148,9 +172,114 @@ def _per_step(array: np.ndarray, key: str, n: int, length: int, path: str) -> np
     return array
 
 
+
+def _trailing_run_start(done: np.ndarray) -> int:
+    """Index where the run of ``done`` steps ending at the last step starts (``len`` if none).
+
+    Examples:
+        >>> _trailing_run_start(np.array([0, 1, 0, 1, 1], bool)), _trailing_run_start(np.zeros(3, bool))
+        (3, 3)
+    """
+    start = len(done)
+    while start > 0 and done[start - 1]:
+        start -= 1
+    return start
+
+
+def _denormalise(spec: Any, feature: str, value: np.ndarray) -> np.ndarray:
+    low, high = spec.features_range[feature]
+    return low + (np.asarray(value, dtype=np.float64) + 1.0) * (high - low) / 2.0
+
+
+class _SceneTermination:
+    """Whether our scenario's environment terminates in a (next) state, from the ego row alone.
+
+    Merge ends past ``merge_end_x``; intersection on arrival on its exit lane (road network of
+    the scene, as the environment decides it); highway-fast and roundabout never terminate on
+    arrival (crashes and off-road are read from the recorded ``dones``).
+    """
+
+    def __init__(self, scenario: str) -> None:
+        from torchrl_csirl.envs import resolve_scenario
+
+        self.spec = resolve_scenario(scenario)
+        self._env = None
+
+    def _road_env(self) -> Any:
+        if self._env is None:
+            from torchrl_csirl.envs import make_gym_env
+
+            env = make_gym_env(self.spec.name)
+            env.reset(seed=0)
+            self._env = env.unwrapped
+        return self._env
+
+    def __call__(self, ego: np.ndarray) -> np.ndarray:
+        """``ego``: ``(T, F)`` normalised ego rows; returns ``(T,)`` bool."""
+        features = self.spec.features
+        x = _denormalise(self.spec, "x", ego[:, features.index("x")])
+        if self.spec.name == "merge":
+            return x > float(self.spec.config["merge_end_x"])
+        if self.spec.name != "intersection":
+            return np.zeros(len(ego), dtype=bool)
+        env = self._road_env()
+        y = _denormalise(self.spec, "y", ego[:, features.index("y")])
+        heading = np.arctan2(ego[:, features.index("sin_h")], ego[:, features.index("cos_h")])
+        network = env.road.network
+        out = np.zeros(len(ego), dtype=bool)
+        for t, position in enumerate(np.stack([x, y], -1)):
+            lane_index = network.get_closest_lane_index(position, float(heading[t]))
+            vehicle = _EgoState(lane_index, network.get_lane(lane_index), position)
+            out[t] = env.has_arrived(vehicle)
+        return out
+
+
+class _EgoState:
+    """The three attributes the environment's arrival test reads from a vehicle."""
+
+    def __init__(self, lane_index: tuple, lane: Any, position: np.ndarray) -> None:
+        self.lane_index, self.lane, self.position = lane_index, lane, position
+
+
+def _end_of_trajectory(
+    done: np.ndarray,
+    end_at: str,
+    done_mapping: str,
+    limit: int,
+    scene_end: np.ndarray | None,
+) -> tuple[int, bool, list[int]]:
+    """``(kept steps, terminated, early done steps)`` of one recorded trajectory.
+
+    Examples:
+        >>> done = np.array([0, 1, 0, 0, 1, 1], bool)
+        >>> _end_of_trajectory(done, "recording", "full_length", 6, None)
+        (6, False, [1])
+        >>> _end_of_trajectory(done, "first_done", "full_length", 6, None)
+        (2, True, [1])
+    """
+    length = len(done)
+    early = np.flatnonzero(done[: _trailing_run_start(done)]).tolist()
+    if end_at == "termination":
+        candidates = [(limit, False), (length, False)]
+        if early:
+            candidates.append((early[0] + 1, True))
+        if scene_end is not None and scene_end.any():
+            candidates.append((int(np.flatnonzero(scene_end)[0]) + 1, True))
+        # earliest cut; at equal steps a termination wins over the time limit
+        end, terminated = min(candidates, key=lambda c: (c[0], not c[1]))
+        return end, terminated, early
+    end = length
+    if end_at == "first_done" and done.any():
+        end = int(np.flatnonzero(done)[0]) + 1
+    last_done = bool(done[end - 1])
+    terminated = last_done and (done_mapping == "terminated" or end < limit)
+    return end, terminated, early
+
 def import_published(
     path: str | os.PathLike,
     *,
+    end_at: str = "recording",
+    scenario: str | None = None,
     done_mapping: str = "full_length",
     max_episode_steps: int | None = None,
     action_tolerance: float = 1e-6,
@@ -160,35 +289,54 @@ def import_published(
 
     Args:
         path (path-like): the file (``numpy.save``'d pickled dict, see the module docstring).
-        done_mapping (str): ``"full_length"`` (default: a final ``done`` of an episode lasting
-            ``max_episode_steps`` steps is a truncation, other dones terminations) or
-            ``"terminated"`` (every ``done`` is a termination).
-        max_episode_steps (int, optional): the time limit; defaults to the padded width ``L``.
+        end_at (str): where each trajectory ends: ``"recording"`` (default: the whole recording,
+            the trailing padding ``dones`` read as its end), ``"first_done"`` (after the first
+            ``done``) or ``"termination"`` (where our scenario's environment would end the
+            episode; needs ``scenario``). See the module docstring.
+        scenario (str, optional): the scenario the file was recorded in (``"merge"``, ...);
+            required by ``end_at="termination"``, checked against the observation size and
+            recorded in the metadata when given.
+        done_mapping (str): ``"full_length"`` (default: a ``done`` on the last kept step of a
+            trajectory shorter than ``max_episode_steps`` is a termination, otherwise the
+            recording was truncated) or ``"terminated"`` (a ``done`` there is a termination).
+            Not used by ``end_at="termination"``.
+        max_episode_steps (int, optional): the time limit; defaults to the padded width ``L``
+            (``end_at="termination"``: the scenario's episode limit).
         action_tolerance (float): slack allowed outside ``[-1, 1]``. Defaults to ``1e-6``.
-        metadata (dict, optional): extra metadata; ``source`` and ``done_mapping`` are recorded.
+        metadata (dict, optional): extra metadata; ``source``, ``end_at``, ``done_mapping``,
+            ``recorded_lengths``, ``early_dones`` and ``ignored_keys`` are recorded.
 
     Returns:
         ExpertDemonstrations: trajectories in file order.
 
     Raises:
         pickle.UnpicklingError: the pickle references a forbidden global (never executed).
-        ValueError: a missing key, wrong shapes, NaN/inf values, actions outside ``[-1, 1]``,
-            lengths out of range or a ``done`` before the end of an episode.
+        ValueError: a bad ``end_at`` / ``done_mapping`` / ``scenario``, a missing key, wrong
+            shapes, NaN/inf values in the kept steps, actions outside ``[-1, 1]`` or lengths out
+            of range.
 
     Examples:
         >>> import numpy as np, tempfile, os
-        >>> n, L, d = 2, 4, 3
+        >>> n, L, d = 2, 8, 3
+        >>> dones = np.zeros((n, L), bool); dones[:, -5:] = True  # the recorder's padding
         >>> data = {"states": np.zeros((n, L, d)), "next_states": np.ones((n, L, d)),
         ...         "actions": np.zeros((n, L, 2)), "rewards": np.zeros((n, L)),
-        ...         "dones": np.zeros((n, L)), "lengths": np.array([4, 2])}
+        ...         "dones": dones, "lengths": [L, L]}
         >>> path = os.path.join(tempfile.mkdtemp(), "expert.npy")
         >>> np.save(path, data, allow_pickle=True)
         >>> demos = import_published(path)
-        >>> demos.lengths.tolist(), demos.trajectory(1)["next", "truncated"].squeeze(-1).tolist()
-        ([4, 2], [False, True])
+        >>> demos.lengths.tolist(), demos.trajectory(1)["next", "truncated"][-1].item()
+        ([8, 8], True)
+        >>> import_published(path, end_at="first_done").lengths.tolist()
+        [4, 4]
     """
+    if end_at not in END_AT:
+        raise ValueError(f"end_at must be one of {END_AT}, got {end_at!r}.")
     if done_mapping not in _DONE_MAPPINGS:
         raise ValueError(f"done_mapping must be one of {_DONE_MAPPINGS}, got {done_mapping!r}.")
+    if end_at == "termination" and scenario is None:
+        raise ValueError('end_at="termination" needs the scenario the file was recorded in (scenario=...).')
+    termination = _SceneTermination(scenario) if scenario is not None else None
     path = os.fspath(path)
     data = load_published_dict(path)
     missing = [key for key in _REQUIRED_KEYS if key not in data]
@@ -200,7 +348,11 @@ def import_published(
     lengths = _array(data, "lengths", path).reshape(-1)
     if states.ndim != 3:
         raise ValueError(f"{path}: 'states' must have shape (N, L, D), got {states.shape}.")
-    n, width, _ = states.shape
+    n, width, obs_dim = states.shape
+    if termination is not None and obs_dim != termination.spec.obs_dim:
+        raise ValueError(
+            f"{path}: observations of size {obs_dim}, but {termination.spec.name!r} has {termination.spec.obs_dim}."
+        )
     if next_states.shape != states.shape:
         raise ValueError(f"{path}: 'next_states' shape {next_states.shape} != 'states' shape {states.shape}.")
     if actions.ndim == 2:
@@ -218,48 +370,68 @@ def import_published(
     lengths = lengths.astype(np.int64)
     if np.any(lengths < 1) or np.any(lengths > width):
         raise ValueError(f"{path}: 'lengths' must lie in [1, {width}], got {lengths.tolist()}.")
-    limit = width if max_episode_steps is None else int(max_episode_steps)
+    if max_episode_steps is not None:
+        limit = int(max_episode_steps)
+    else:
+        limit = termination.spec.max_steps if end_at == "termination" else width
     if limit < 1:
         raise ValueError(f"max_episode_steps must be positive, got {max_episode_steps}.")
 
-    episodes = []
-    for i, length in enumerate(lengths.tolist()):
-        valid = {"states": states[i, :length], "next_states": next_states[i, :length], "actions": actions[i, :length]}
-        if rewards is not None:
-            valid["rewards"] = rewards[i, :length]
-        for key, value in valid.items():
-            if not np.all(np.isfinite(value)):
-                raise ValueError(f"{path}: trajectory {i}: {key!r} contains NaN or infinite values.")
-        low, high = float(valid["actions"].min()), float(valid["actions"].max())
-        if low < -1 - action_tolerance or high > 1 + action_tolerance:
-            raise ValueError(
-                f"{path}: trajectory {i}: actions must lie in [-1, 1], found range [{low:.4g}, {high:.4g}]."
-            )
-        done = dones[i, :length]
-        if np.any(done[:-1]):
-            first = int(np.flatnonzero(done[:-1])[0])
-            raise ValueError(f"{path}: trajectory {i}: done at step {first} before its last step {length - 1}.")
-        terminated = np.zeros(length, dtype=bool)
-        truncated = np.zeros(length, dtype=bool)
-        if done[-1] and (done_mapping == "terminated" or length < limit):
-            terminated[-1] = True
-        else:
-            truncated[-1] = True
-        episode = {
-            "observation": torch.as_tensor(valid["states"], dtype=torch.float32),
-            "action": torch.as_tensor(valid["actions"], dtype=torch.float32),
-            "next_observation": torch.as_tensor(valid["next_states"], dtype=torch.float32),
-            "terminated": torch.from_numpy(terminated),
-            "truncated": torch.from_numpy(truncated),
-        }
-        if rewards is not None:
-            episode["reward"] = torch.as_tensor(valid["rewards"], dtype=torch.float32)
-        episodes.append(episode)
+    episodes, early_dones = [], []
+    for i, recorded in enumerate(lengths.tolist()):
+        scene_end = None
+        if end_at == "termination":
+            ego = np.asarray(next_states[i, :recorded, : len(termination.spec.features)], dtype=np.float64)
+            scene_end = termination(np.nan_to_num(ego))
+        length, terminated, early = _end_of_trajectory(dones[i, :recorded], end_at, done_mapping, limit, scene_end)
+        early_dones.extend([i, step] for step in early)
+        episodes.append(_episode(i, length, terminated, states, next_states, actions, rewards, action_tolerance, path))
     info = {
         "source": "published",
         "source_file": os.path.basename(path),
+        "end_at": end_at,
         "done_mapping": done_mapping,
         "max_episode_steps": limit,
+        "recorded_lengths": lengths.tolist(),
+        "early_dones": early_dones,
+        "ignored_keys": sorted(str(key) for key in data if key not in _KNOWN_KEYS),
+        **({"scenario": termination.spec.name} if termination is not None else {}),
         **(metadata or {}),
     }
     return ExpertDemonstrations.from_episodes(episodes, metadata=info)
+
+
+def _episode(
+    i: int,
+    length: int,
+    terminated_at_end: bool,
+    states: np.ndarray,
+    next_states: np.ndarray,
+    actions: np.ndarray,
+    rewards: np.ndarray | None,
+    action_tolerance: float,
+    path: str,
+) -> dict[str, torch.Tensor]:
+    """The first ``length`` steps of trajectory ``i``, checked, as an episode mapping."""
+    valid = {"states": states[i, :length], "next_states": next_states[i, :length], "actions": actions[i, :length]}
+    if rewards is not None:
+        valid["rewards"] = rewards[i, :length]
+    for key, value in valid.items():
+        if not np.all(np.isfinite(value)):
+            raise ValueError(f"{path}: trajectory {i}: {key!r} contains NaN or infinite values.")
+    low, high = float(valid["actions"].min()), float(valid["actions"].max())
+    if low < -1 - action_tolerance or high > 1 + action_tolerance:
+        raise ValueError(f"{path}: trajectory {i}: actions must lie in [-1, 1], found range [{low:.4g}, {high:.4g}].")
+    terminated = np.zeros(length, dtype=bool)
+    truncated = np.zeros(length, dtype=bool)
+    (terminated if terminated_at_end else truncated)[-1] = True
+    episode = {
+        "observation": torch.as_tensor(valid["states"], dtype=torch.float32),
+        "action": torch.as_tensor(valid["actions"], dtype=torch.float32),
+        "next_observation": torch.as_tensor(valid["next_states"], dtype=torch.float32),
+        "terminated": torch.from_numpy(terminated),
+        "truncated": torch.from_numpy(truncated),
+    }
+    if rewards is not None:
+        episode["reward"] = torch.as_tensor(valid["rewards"], dtype=torch.float32)
+    return episode
