@@ -172,7 +172,6 @@ def _per_step(array: np.ndarray, key: str, n: int, length: int, path: str) -> np
     return array
 
 
-
 def _trailing_run_start(done: np.ndarray) -> int:
     """Index where the run of ``done`` steps ending at the last step starts (``len`` if none).
 
@@ -274,6 +273,7 @@ def _end_of_trajectory(
     last_done = bool(done[end - 1])
     terminated = last_done and (done_mapping == "terminated" or end < limit)
     return end, terminated, early
+
 
 def import_published(
     path: str | os.PathLike,
