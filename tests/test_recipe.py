@@ -255,6 +255,27 @@ def test_published_file_without_traffic_is_a_clear_error(tmp_path):
         builders.load_experts(cfg.expert, csirl_utils.SCENARIOS["merge"])
 
 
+def test_expert_end_at_cuts_a_published_file_where_our_scene_ends(tmp_path):
+    """expert.end_at=termination: merge's recording past 370 m is cut where our episode ends."""
+    from published_fixtures import write_published_files
+
+    from torchrl_csirl.data import import_published
+    from torchrl_csirl.data.published import END_AT
+
+    assert config.PUBLISHED_END_AT == END_AT  # the schema's choices are the importer's
+    path = write_published_files(tmp_path / "published", "merge", sizes=(5,))[5]
+    spec = csirl_utils.SCENARIOS["merge"]
+    cfg = _tiny_cfg(tmp_path, f"expert.path={path}", "expert.end_at=termination", "expert.num_trajectories=5")
+    demos = builders.load_experts(cfg.expert, spec)
+    expected = import_published(path, end_at="termination", scenario="merge")
+    assert demos.lengths.tolist() == expected.lengths.tolist()
+    assert max(demos.lengths.tolist()) < 60 and demos.metadata["end_at"] == "termination"
+    npz = tmp_path / "demos.npz"
+    expected.save(npz)
+    with pytest.raises(csirl_utils.ExpertDataError, match="expert.end_at=termination applies to published files"):
+        builders.load_experts(_tiny_cfg(tmp_path, f"expert.path={npz}", "expert.end_at=termination").expert, spec)
+
+
 @pytest.mark.parametrize(
     "override, message",
     [
@@ -274,6 +295,7 @@ def test_published_file_without_traffic_is_a_clear_error(tmp_path):
         (["csirl.matching_features=speed"], "csirl.matching_features=speed: must be one of ego, position"),
         (["collector.envs_per_worker=3"], "multiple of collector.num_workers x collector.envs_per_worker"),
         (["device=tpu"], "device=tpu: must be one of cpu, cuda, auto"),
+        (["expert.end_at=crash"], "expert.end_at=crash: must be one of recording, first_done, termination"),
     ],
 )
 def test_config_errors_name_the_problem(override, message):

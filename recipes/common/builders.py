@@ -63,7 +63,7 @@ def load_experts(expert: DictConfig, spec: ScenarioSpec) -> ExpertDemonstrations
     """The demonstrations: the shipped ones, or ``expert.path`` (checked against the scenario).
 
     ``expert.path`` is an :class:`ExpertDemonstrations` ``.npz`` or a published file (read by
-    :func:`~torchrl_csirl.data.import_published` with its defaults); ``expert.curriculum`` picks
+    :func:`~torchrl_csirl.data.import_published` with ``end_at=expert.end_at``); ``expert.curriculum`` picks
     its curriculum trajectory (:func:`curriculum_first`), then the first
     ``expert.num_trajectories`` are kept.
 
@@ -76,8 +76,14 @@ def load_experts(expert: DictConfig, spec: ScenarioSpec) -> ExpertDemonstrations
     path = os.path.abspath(os.path.expanduser(str(expert.path)))
     if not os.path.isfile(path):
         raise ExpertDataError(f"expert.path: no such file {path!r}.")
+    if path.endswith(".npz") and expert.end_at != "recording":
+        raise ExpertDataError(f"expert.end_at={expert.end_at} applies to published files; {path!r} is an .npz "
+                              "of ExpertDemonstrations (its episodes end where they were recorded).")
     try:
-        demos = ExpertDemonstrations.load(path) if path.endswith(".npz") else import_published(path)
+        if path.endswith(".npz"):
+            demos = ExpertDemonstrations.load(path)
+        else:
+            demos = import_published(path, end_at=expert.end_at, scenario=spec.name)
     except Exception as err:
         raise ExpertDataError(f"expert.path: {path!r} is not a valid expert file ({type(err).__name__}: {err}).") from None
     if demos.observation_dim != spec.obs_dim or demos.action_dim != spec.action_dim:

@@ -59,6 +59,7 @@ __all__ = [
 ]
 
 SCENARIO_NAMES = ("highway-fast", "intersection", "merge", "roundabout")
+PUBLISHED_END_AT = ("recording", "first_done", "termination")  # torchrl_csirl.data.END_AT
 DEVICES = ("cpu", "cuda", "auto")
 
 
@@ -115,6 +116,9 @@ class ExpertConfig:
                              help="the curriculum trajectory: empty (empty road: trajectory 0 of a file) | traffic "
                                   "(recorded in traffic: the first such trajectory of a file)")
     path: Optional[str] = option(None, help="your own demonstrations (.npz, or a published pickle)")
+    end_at: str = option("recording", choices=PUBLISHED_END_AT,
+                         help="where a published file's trajectories end: recording (whole recording) | first_done "
+                              "| termination (where our scenario ends the episode); docs/EXPERTS.md")
     batch_size: int = option(32, above=0, help="expert pairs per meta / cloning step")
 
 
