@@ -444,25 +444,30 @@ def test_meta_gradient_balance_of_a_trained_run(full_run):
     assert out["meta_grad_norm_l1"] > 0
 
 
-def test_merge_outcomes_splits_test_episodes_by_the_traffic_ahead(tmp_path, capsys):
-    import merge_outcomes
+def test_policy_outcomes_reports_outcomes_and_speeds_and_splits_merge_by_the_traffic_ahead(tmp_path, capsys):
+    import policy_outcomes
 
     from torchrl_csirl.envs import SCENARIOS
     from torchrl_csirl.modules import make_actor, save_policy
 
-    spec = SCENARIOS["merge"]
-    path = save_policy(make_actor(spec.obs_dim, spec.action_dim), tmp_path / "policy.pt", obs_dim=spec.obs_dim,
-                       action_dim=spec.action_dim, scenario="merge", frames=0)
-    stats = merge_outcomes.main([str(path), "--episodes", "4"])
+    def saved(scenario):
+        spec = SCENARIOS[scenario]
+        return str(save_policy(make_actor(spec.obs_dim, spec.action_dim), tmp_path / f"{scenario}.pt",
+                               obs_dim=spec.obs_dim, action_dim=spec.action_dim, scenario=scenario, frames=0))
+
+    stats = policy_outcomes.main([saved("merge"), "--episodes", "4"])
     assert json.loads(capsys.readouterr().out.strip().splitlines()[-1])["all"] == stats["all"]
-    assert stats["free"]["episodes"] + stats["blocked"]["episodes"] == stats["all"]["episodes"] == 4
+    assert sum(stats[g]["episodes"] for g in ("free", "blocked") if g in stats) == stats["all"]["episodes"] == 4
     for group in stats.values():
-        assert sum(group[o] for o in merge_outcomes.OUTCOMES) == group["episodes"]
+        assert sum(group[o] for o in policy_outcomes.OUTCOMES) == group["episodes"]
     assert 0.0 <= stats["all"]["accomplish_rate"] <= 1.0
-    other = save_policy(make_actor(35, 2), tmp_path / "roundabout.pt", obs_dim=35, action_dim=2,
-                        scenario="roundabout", frames=0)
+    # merge starts the ego at 30 m/s: the speeds read back from the observation are in that range
+    assert 15.0 < stats["all"]["mean_speed"] <= stats["all"]["max_speed"] < 60.0
+    roundabout = policy_outcomes.main([saved("roundabout"), "--episodes", "2"])
+    assert set(roundabout) == {"all"} and roundabout["all"]["episodes"] == 2
+    other = save_policy(make_actor(35, 2), tmp_path / "other.pt", obs_dim=35, action_dim=2, scenario="relocate", frames=0)
     with pytest.raises(SystemExit):
-        merge_outcomes.main([str(other)])
+        policy_outcomes.main([str(other)])
 
 
 def test_a_wrong_type_on_the_command_line_is_one_line_and_exit_2(tmp_path):

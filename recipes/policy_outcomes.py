@@ -1,0 +1,151 @@
+"""How a driving policy's test episodes end, and how fast it drives: any scenario.
+
+``python recipes/policy_outcomes.py <run dir or policy.pt> [--episodes 50] [--seed 1000000]``
+
+Rolls out the saved deterministic policy on the recipe's test episodes (seeds
+``seed .. seed + episodes - 1``, as the final evaluation does) and reports, per group of
+episodes, the accomplish rate, the outcomes (success, crash, off-road, time-out), the ego's mean
+and largest speed, the speed and the step at which crashed episodes ended, and the mean
+accomplish rate of the crashed episodes (an accomplish rate earned by driving far and then
+crashing is not expert-like). On merge the episodes are also split by the traffic ahead at reset:
+two main-road vehicles ahead of the ego slow to 20 m/s; when they share a lane the other one is
+**free**, when they do not both lanes are **blocked** and finishing means squeezing past them (the
+expert nudges, docs/EXPERTS.md). The last line is JSON.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from collections import Counter, defaultdict
+
+import torch
+from torchrl.envs import EnvBase, ExplorationType, set_exploration_type
+
+from torchrl_csirl._compat import gym_env_of
+from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, accomplish_rate_from_rollout, make_env, success_from_rollout
+from torchrl_csirl.modules import load_policy
+
+OUTCOMES = ("success", "crash", "offroad", "timeout")
+
+
+def traffic_ahead(env: EnvBase) -> str:
+    """Merge: ``"free"`` or ``"blocked"``, the lanes of the two main-road vehicles ahead of the ego (after a reset)."""
+    road = gym_env_of(env).unwrapped.road
+    ego = road.vehicles[0]
+    ahead = sorted((v for v in road.vehicles[1:] if v.lane_index[0] == "a" and v.position[0] > ego.position[0]),
+                   key=lambda v: v.position[0])[:2]
+    return "blocked" if len({v.lane_index[2] for v in ahead}) > 1 else "free"
+
+
+def outcome(rollout) -> str:
+    """How an episode ended: success (as the recipe's evaluation counts it), crash, off-road or time-out."""
+    if bool(success_from_rollout(rollout)):
+        return "success"
+    for name, key in (("crash", "crashed"), ("offroad", "offroad")):
+        if bool(rollout["next", key].any()):
+            return name
+    return "timeout"
+
+
+def ego_speeds(observations: torch.Tensor, spec: ScenarioSpec) -> torch.Tensor:
+    """The ego's speed [m/s] at each step, from the normalised ``vx``, ``vy`` of its observation row."""
+    speeds = []
+    for name in ("vx", "vy"):
+        lo, hi = spec.features_range[name]
+        value = observations[..., spec.features.index(name)]  # the ego row comes first
+        speeds.append(lo + (value + 1.0) * (hi - lo) / 2.0)
+    return torch.stack(speeds, -1).norm(dim=-1)
+
+
+def classify_episodes(policy, scenario: str, episodes: int, seed: int) -> list[dict]:
+    """One record per test episode: ``group``, ``outcome``, ``accomplish_rate``, ``steps``, speeds."""
+    spec = SCENARIOS[scenario]
+    env = make_env(scenario)
+    records = []
+    try:
+        with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
+            for i in range(episodes):
+                env.set_seed(seed + i)  # the reset below is the one of evaluate_policy's rollout
+                start = env.reset()
+                group = traffic_ahead(env) if scenario == "merge" else "all"
+                rollout = env.rollout(spec.max_steps, policy, auto_reset=False, tensordict=start,
+                                      break_when_any_done=True)
+                speeds = ego_speeds(rollout["next", "observation"], spec)
+                records.append({"episode": i, "group": group, "outcome": outcome(rollout),
+                                "accomplish_rate": float(accomplish_rate_from_rollout(rollout)),
+                                "steps": rollout.shape[-1], "mean_speed": float(speeds.mean()),
+                                "max_speed": float(speeds.max()), "final_speed": float(speeds[-1])})
+    finally:
+        env.close()
+    return records
+
+
+def _mean(values: list[float]) -> float | None:
+    return sum(values) / len(values) if values else None
+
+
+def summarize_group(group: list[dict]) -> dict[str, object]:
+    """Episodes, mean accomplish rate, outcome counts, speeds, and what the crashed episodes had reached."""
+    counts = Counter(r["outcome"] for r in group)
+    crashed = [r for r in group if r["outcome"] == "crash"]
+    return {
+        "episodes": len(group),
+        "accomplish_rate": _mean([r["accomplish_rate"] for r in group]),
+        **{o: counts.get(o, 0) for o in OUTCOMES},
+        "mean_speed": _mean([r["mean_speed"] for r in group]),
+        "max_speed": max((r["max_speed"] for r in group), default=None),
+        "crash_speed": _mean([r["final_speed"] for r in crashed]),
+        "crash_step": _mean([float(r["steps"]) for r in crashed]),
+        "crash_accomplish_rate": _mean([r["accomplish_rate"] for r in crashed]),
+    }
+
+
+def summarize(records: list[dict]) -> dict[str, dict]:
+    """:func:`summarize_group` per group (merge: ``free``, ``blocked``) and over ``all`` episodes."""
+    groups: dict[str, list[dict]] = defaultdict(list)
+    for record in records:
+        if record["group"] != "all":
+            groups[record["group"]].append(record)
+    groups["all"] = list(records)
+    return {name: summarize_group(group) for name, group in groups.items()}
+
+
+def _cell(value: object, fmt: str) -> str:
+    return "-" if value is None else format(value, fmt)
+
+
+def print_table(stats: dict[str, dict]) -> None:
+    """The groups as a Markdown table on stderr."""
+    print("| episodes | n | accomplish (raw) | success | crash | off-road | time-out | mean / max speed [m/s] "
+          "| at a crash: speed, step, accomplish |", file=sys.stderr)
+    print("|---|---|---|---|---|---|---|---|---|", file=sys.stderr)
+    for name, s in stats.items():
+        crash = f"{_cell(s['crash_speed'], '.1f')}, {_cell(s['crash_step'], '.0f')}, {_cell(s['crash_accomplish_rate'], '.2f')}"
+        print(f"| {name} | {s['episodes']} | {_cell(s['accomplish_rate'], '.3f')} | {s['success']} | {s['crash']} "
+              f"| {s['offroad']} | {s['timeout']} | {_cell(s['mean_speed'], '.1f')} / {_cell(s['max_speed'], '.1f')} "
+              f"| {crash} |", file=sys.stderr)
+
+
+def main(argv: list[str] | None = None) -> dict[str, dict]:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("policy", help="a run directory or its policy.pt")
+    parser.add_argument("--episodes", type=int, default=50)
+    parser.add_argument("--seed", type=int, default=1_000_000, help="seed of the first episode (the recipe's eval.seed)")
+    args = parser.parse_args(argv)
+    if args.episodes <= 0:
+        parser.error(f"--episodes must be positive, got {args.episodes}")
+    policy = load_policy(args.policy)
+    scenario = policy.metadata.get("scenario")
+    if scenario not in SCENARIOS:
+        parser.error(f"{args.policy}: a policy for {scenario!r}, not one of the driving scenarios {sorted(SCENARIOS)}")
+    torch.set_num_threads(1)
+    stats = summarize(classify_episodes(policy, scenario, args.episodes, args.seed))
+    print_table(stats)
+    print(json.dumps({"policy": os.path.abspath(args.policy), "scenario": scenario, **stats}))
+    return stats
+
+
+if __name__ == "__main__":
+    main()
