@@ -42,7 +42,7 @@ from common.registry import register_recipe
 from common.run import ExpertDataError, resolve_device
 from torchrl_csirl.curriculum import SubgoalCurriculum
 from torchrl_csirl.data import DemonstrationMixer
-from torchrl_csirl.envs import SCENARIOS, ScenarioSpec
+from torchrl_csirl.envs import FAILURE_KEYS, SCENARIOS, ScenarioSpec
 from torchrl_csirl.modules import EgoRelativeFeatures, make_actor, make_qvalue, make_reward_network
 from torchrl_csirl.objectives import ActorBehaviourCloning, EnsembleSACLoss, MetaRewardLoss
 from torchrl_csirl.trainers import MetaRewardUpdate, SACUpdate, SubgoalSelectionHook
@@ -70,6 +70,9 @@ class CSIRLConfig:
                                   help="final (the paper's text) | next (published code)")
     matching_features: str = option("position", choices=("ego", "position"),
                                     help="nearest expert state on: position | ego (the whole ego row: paper, code)")
+    failure_resets_progress: bool = option(
+        False, help="true: a crash or leaving the road gives s' the matching potential of the curriculum's start "
+                    "(the episode pays back its progress); false: the paper")
     gamma: float = option(0.99, above=0.0, below=1.0, help="discount")
     alpha: float = option(0.01, above=0.0, help="entropy coefficient (its initial value unless fixed_alpha)")
     actor_bc_coef: float = option(0.0, minimum=0.0, help="> 0: behavioural cloning on the actor (TD3+BC-style)")
@@ -194,6 +197,7 @@ def make_matching(cfg: DictConfig, spec: ScenarioSpec, curriculum_obs: torch.Ten
         position_feature_indices=spec.position_feature_indices,
         scale=spec.matching_scale,
         target=cfg.csirl.matching_target,
+        failure_keys=FAILURE_KEYS if cfg.csirl.failure_resets_progress else (),
     )
 
 

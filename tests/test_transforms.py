@@ -354,3 +354,55 @@ def test_matching_reward_reads_the_subgoal_of_its_owner():
     assert "curriculum" not in dict(t.named_modules())  # read, not owned: not a submodule
     with pytest.raises(TypeError, match="an int or an object with an int 'subgoal' attribute"):
         SubgoalMatchingReward(expert, subgoal="three")
+
+
+def test_a_failed_termination_pays_back_the_progress_made():
+    from torchrl_csirl.transforms import failed_termination_potential
+
+    expert = torch.arange(5.0).unsqueeze(-1)  # s^e_0 .. s^e_4 at 0 .. 4, target "final" = 4
+    transform = SubgoalMatchingReward(expert, subgoal=0, scale=10.0, target="final",
+                                      failure_keys=("crashed", "offroad"))
+    s = torch.tensor([[3.0], [3.0], [3.0], [-1.0]])
+    s_next = torch.tensor([[3.5], [3.5], [3.5], [-1.5]])
+    td = TensorDict({"observation": s, "next": {
+        "observation": s_next,
+        "crashed": torch.tensor([[False], [True], [False], [True]]),
+        "offroad": torch.tensor([[False], [False], [True], [False]])}}, [4])
+    reward = transform(td)["next", "matching_reward"].squeeze(-1)
+    # psi(s) = 1; a failure gives s' the start's potential psi(s^e_0) = 4, not psi(s') = 0.5;
+    # behind the start, psi(s') = 5.5 > 4 is kept: a failure never pays more than no failure
+    assert reward.tolist() == [5.0, -30.0, -30.0, -5.0]
+    # without the flags (e.g. an expert transition) nothing is a failure
+    plain = transform(TensorDict({"observation": s, "next": {"observation": s_next}}, [4]))
+    assert plain["next", "matching_reward"].squeeze(-1).tolist() == [5.0, 5.0, 5.0, -5.0]
+    # the published behaviour is the default
+    assert SubgoalMatchingReward(expert, scale=10.0, target="final")(td)["next", "matching_reward"][1].item() == 5.0
+    # an episode from the start that fails keeps nothing of its progress (undiscounted)
+    path = torch.tensor([0.0, 1.0, 2.0, 3.0, 3.5]).unsqueeze(-1)
+    episode = TensorDict({"observation": path[:-1], "next": {
+        "observation": path[1:], "crashed": torch.tensor([False, False, False, True]).unsqueeze(-1)}}, [4])
+    assert transform(episode)["next", "matching_reward"].sum().item() == 0.0
+    assert failed_termination_potential(torch.tensor([0.5]), torch.tensor([0.0]), torch.tensor([[4.0]]),
+                                        torch.tensor([True])).item() == 4.0
+
+
+def test_a_crash_in_highway_fast_pays_back_the_progress_in_the_env():
+    from torchrl_csirl.data import curriculum_trajectory
+    from torchrl_csirl.envs import FAILURE_KEYS, SCENARIOS, make_env
+
+    spec = SCENARIOS["highway-fast"]
+    expert = curriculum_trajectory("highway-fast")["observation"]
+    env = TransformedEnv(make_env("highway-fast", seed=0), SubgoalMatchingReward(
+        expert, subgoal=0, ego_feature_indices=spec.position_feature_indices,
+        position_feature_indices=spec.position_feature_indices, scale=spec.matching_scale, target="final",
+        failure_keys=FAILURE_KEYS))
+    full_throttle = TensorDict({"action": torch.tensor([1.0, 0.0])}, [])
+    rollout = env.rollout(spec.max_steps, lambda td: td.update(full_throttle))
+    env.close()
+    assert rollout["next", "crashed"][-1].item()  # into the slower traffic ahead
+    x = rollout["observation"][:, spec.position_feature_indices[0]]
+    goal = expert[-1, spec.position_feature_indices[0]]
+    start = expert[0, spec.position_feature_indices[0]]
+    last = rollout["next", "matching_reward"][-1].item()
+    assert last == pytest.approx(spec.matching_scale * ((goal - x[-1]).abs() - (goal - start).abs()).item(), rel=1e-5)
+    assert rollout["next", "matching_reward"][:-1].sum().item() > 0 > last

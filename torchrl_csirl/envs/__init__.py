@@ -28,11 +28,12 @@ from torchrl_csirl.envs.scenarios import (
     resolve_scenario,
     scenario_config_overrides,
 )
-from torchrl_csirl.envs.torchrl_env import INFO_KEYS, info_spec, make_env, make_serial_env
+from torchrl_csirl.envs.torchrl_env import FAILURE_KEYS, INFO_KEYS, info_spec, make_env, make_serial_env
 
 register_scenarios()
 
 __all__ = [
+    "FAILURE_KEYS",
     "INFO_KEYS",
     "SCENARIOS",
     "ScenarioSpec",

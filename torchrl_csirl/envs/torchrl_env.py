@@ -15,7 +15,7 @@ from torchrl_csirl.envs.scenarios import (
     scenario_config_overrides,
 )
 
-__all__ = ["INFO_KEYS", "ScenarioInfoReader", "info_spec", "make_env", "make_serial_env"]
+__all__ = ["FAILURE_KEYS", "INFO_KEYS", "ScenarioInfoReader", "info_spec", "make_env", "make_serial_env"]
 
 #: info entries read into the TensorDict (root at reset, under "next" after a step)
 INFO_KEYS: tuple[str, ...] = (
@@ -26,6 +26,9 @@ INFO_KEYS: tuple[str, ...] = (
     "arrived",
     "success",
 )
+
+#: the info entries that mark a failed termination (a crash, leaving the road)
+FAILURE_KEYS: tuple[str, ...] = ("crashed", "offroad")
 
 
 class ScenarioInfoReader(default_info_dict_reader):

@@ -39,6 +39,7 @@ from torchrl_csirl.transforms.combine_rewards import CombineRewards
 from torchrl_csirl.transforms.intrinsic_reward import IntrinsicReward
 from torchrl_csirl.transforms.subgoal_matching import (
     SubgoalMatchingReward,
+    failed_termination_potential,
     matching_potential,
     matching_reward,
     matching_target_index,
@@ -49,6 +50,7 @@ __all__ = [
     "CombineRewards",
     "IntrinsicReward",
     "SubgoalMatchingReward",
+    "failed_termination_potential",
     "matching_potential",
     "matching_reward",
     "matching_target_index",

@@ -30,6 +30,7 @@ __all__ = [
     "matching_reward",
     "matching_target_index",
     "distinct_expert_states",
+    "failed_termination_potential",
     "nearest_expert_index",
 ]
 
@@ -201,16 +202,56 @@ def _matching_reward_from_features(
     subgoal: int,
     target: str,
     factor: float,
+    failed: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """Steps 1-4 on pre-selected features (flat ``[B, F]``); ``factor = sign * scale``.
 
-    ``expert_rows``/``expert_row_index`` come from :func:`distinct_expert_states`.
+    ``expert_rows``/``expert_row_index`` come from :func:`distinct_expert_states`; ``failed``
+    (``[B]`` bool) marks transitions into a failed termination (:func:`failed_termination_potential`).
     """
     nearest = _nearest_distinct(ego, expert_rows, expert_row_index)
     target_index = matching_target_index(nearest, subgoal, expert_position.shape[0], target)
     target_position = expert_position[target_index]
-    delta = matching_potential(position, target_position) - matching_potential(next_position, target_position)
+    next_potential = matching_potential(next_position, target_position)
+    if failed is not None:
+        next_potential = failed_termination_potential(next_potential, expert_position[0], target_position, failed)
+    delta = matching_potential(position, target_position) - next_potential
     return delta.mul_(factor)
+
+
+def failed_termination_potential(
+    next_potential: torch.Tensor,
+    start_position: torch.Tensor,
+    target_position: torch.Tensor,
+    failed: torch.Tensor,
+) -> torch.Tensor:
+    """The potential of ``s'`` when a transition ends the episode in failure (e.g. a crash).
+
+    A failed termination leads to an absorbing state whose potential is the one of the curriculum
+    trajectory's **start**, ``psi(s^e_0)``, or ``psi(s')`` if that is larger: the last transition
+    then pays back the progress the episode had made (with the ``"final"`` target the undiscounted
+    matching return of a failed episode started at ``s^e_0`` is at most 0), and a failure is never
+    paid more than the same transition without it. Not in the paper (there a crash only stops the
+    reward): an accomplish rate earned by driving fast and then crashing is not expert-like.
+
+    Args:
+        next_potential (torch.Tensor): ``[B]`` the ordinary ``psi(s')``.
+        start_position (torch.Tensor): ``[P]`` position features of ``s^e_0``.
+        target_position (torch.Tensor): ``[B, P]`` position features of each transition's target.
+        failed (torch.Tensor): ``[B]`` bool, the transitions that end in failure.
+
+    Returns:
+        torch.Tensor: ``[B]`` the potential of ``s'`` to use.
+
+    Examples:
+        >>> import torch
+        >>> target = torch.tensor([[10.0], [10.0]])
+        >>> failed_termination_potential(torch.tensor([2.0, 2.0]), torch.tensor([0.0]), target,
+        ...                               torch.tensor([False, True])).tolist()
+        [2.0, 10.0]
+    """
+    start_potential = matching_potential(start_position.expand_as(target_position), target_position)
+    return torch.where(failed, torch.maximum(next_potential, start_potential), next_potential)
 
 
 def _check_indices(indices: Sequence[int] | None, dim: int, name: str) -> torch.Tensor | None:
@@ -263,6 +304,12 @@ class SubgoalMatchingReward(TransitionRewardTransform):
         in_key (NestedKey): observation key. Defaults to ``"observation"``.
         out_key (NestedKey): output key inside ``"next"``. Defaults to ``"matching_reward"``.
         include_final (bool): with a trajectory input, append its last next-observation.
+        failure_keys (sequence of NestedKey): boolean entries of ``"next"`` that mark a failed
+            termination (e.g. ``("crashed", "offroad")``, the driving envs' flags); on such a
+            transition ``s'`` takes the potential of the curriculum's start
+            (:func:`failed_termination_potential`), so a crash pays back the progress made. A
+            transition without these entries (e.g. an expert one) is not a failure. Defaults to
+            ``()`` (the paper: a failure only ends the reward).
 
     Examples:
         >>> import torch
@@ -298,8 +345,12 @@ class SubgoalMatchingReward(TransitionRewardTransform):
         in_key: NestedKey = "observation",
         out_key: NestedKey = "matching_reward",
         include_final: bool = False,
+        failure_keys: Sequence[NestedKey] = (),
     ) -> None:
         super().__init__(in_keys=[in_key], out_key=out_key)
+        if isinstance(failure_keys, str):
+            failure_keys = (failure_keys,)
+        self.failure_keys = tuple(failure_keys)
         expert = expert_observation_tensor(expert_observations, include_final)
         if expert.ndim != 2 or expert.shape[0] < 1:
             raise ValueError(f"expert observations must have shape [L, D] with L >= 1, got {tuple(expert.shape)}.")
@@ -391,8 +442,19 @@ class SubgoalMatchingReward(TransitionRewardTransform):
             self.subgoal,
             self.target,
             self.sign * self.scale,
+            self._failed(next_tensordict, obs.shape[0]),
         )
         return reward.reshape(batch_shape).to(torch.float32)
+
+    def _failed(self, next_tensordict: TensorDictBase, numel: int) -> torch.Tensor | None:
+        """``[B]`` bool: the transitions flagged by any of ``failure_keys`` (None without keys or flags)."""
+        flags = [next_tensordict.get(key) for key in self.failure_keys if key in next_tensordict.keys(True)]
+        if not flags:
+            return None
+        failed = torch.zeros(numel, dtype=torch.bool, device=flags[0].device)
+        for flag in flags:
+            failed |= flag.reshape(numel).bool()
+        return failed
 
     def get_extra_state(self) -> dict[str, Any]:
         return {"subgoal": self.subgoal}
@@ -404,5 +466,6 @@ class SubgoalMatchingReward(TransitionRewardTransform):
     def __repr__(self) -> str:
         return (
             f"{type(self).__name__}(length={self.length}, subgoal={self.subgoal}, scale={self.scale}, "
-            f"target={self.target!r}, sign={self.sign}, in_key={self.in_keys[0]!r}, out_key={self.out_key!r})"
+            f"target={self.target!r}, sign={self.sign}, in_key={self.in_keys[0]!r}, out_key={self.out_key!r}"
+            + (f", failure_keys={self.failure_keys!r})" if self.failure_keys else ")")
         )
