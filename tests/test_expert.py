@@ -139,6 +139,39 @@ def test_roundabout_exit_approach_lane_is_the_outer_ring_lane():
     env.close()
 
 
+def test_intersection_junction_clearance_rule():
+    """Slow inside the junction counts as stuck only where crossing traffic drives (not just past the
+    stop line, not when moving at ``junction_min_speed`` or faster)."""
+    env = make_gym_env("intersection")
+    env.reset(seed=0)
+    expert = make_expert("intersection")
+    expert.reset(env)
+    route = expert._route.copy()
+    k = route.roads.index(("ir10", "il11"))
+    assert route.roads[k - 1] in expert.config.yield_roads
+    route.road_index = k
+    ego = env.unwrapped.vehicle
+    turn = route.lanes_of(k)[0]
+    assert any(lane.local_coordinates(turn.position(turn.length / 2, 0.0))[0] >= 0 for lane in route.crossing_lanes(k))
+    for longitudinal, speed, stuck in ((turn.length / 2, 0.0, True), (turn.length / 2, 5.0, False), (0.5, 0.0, False)):
+        ego.position = turn.position(longitudinal, 0.0)
+        ego.heading = turn.heading_at(longitudinal)
+        ego.speed = speed
+        assert expert._stuck_in_junction(ego, route) is stuck, (longitudinal, speed)
+    # the rule is off in the other scenarios
+    assert all(make_expert(s).config.junction_min_speed is None for s in ("highway-fast", "merge", "roundabout"))
+    env.close()
+
+
+def test_intersection_expert_does_not_stop_in_crossing_traffic():
+    """Seed 20004: without the junction-clearance rule the expert entered the junction, braked to a
+    stop on the left-turn path (a vehicle crossing ahead) and was hit by a vehicle turning from the west."""
+    env = make_gym_env("intersection")
+    episode = rollout_expert(env, seed=20004, scenario="intersection", max_steps=35)  # the crash was at step 30
+    assert not episode["crashed"] and not episode["offroad"]
+    env.close()
+
+
 def test_merge_expert_nudges_past_two_slow_vehicles_side_by_side():
     """Seed 10007: the two vehicles ahead slow to 20 m/s in different lanes ~9 m apart (both lanes
     blocked); before nudging the expert stayed behind them and timed out."""

@@ -97,6 +97,12 @@ class ExpertConfig:
         episode_end_x: the scenario ends the episode once the ego passes this x [m] (merge: 370 m);
             the look-ahead stops there, so that a long horizon at high speed does not count driving
             off the end of the road, which the episode never reaches, as a failure.
+        junction_min_speed: optional junction-clearance rule [m/s]: a behaviour whose look-ahead has
+            the ego inside the junction (the route's road right after a stop line of
+            ``yield_roads``) slower than this is rejected (scored below every behaviour that keeps
+            moving through it, above every collision), so the expert enters the junction only when
+            it can cross it without stopping in the crossing traffic's path, and waits at the stop
+            line otherwise (intersection: 3 m/s).
     """
 
     destination: str | None
@@ -117,6 +123,7 @@ class ExpertConfig:
     approach_lane_cost: float = 0.0
     nudge_offset: float | None = None
     episode_end_x: float | None = None
+    junction_min_speed: float | None = None
 
 
 EXPERT_CONFIGS: dict[str, ExpertConfig] = {
@@ -163,6 +170,7 @@ EXPERT_CONFIGS: dict[str, ExpertConfig] = {
         yield_roads=(("o10", "ir10"),),
         perception_radius=60.0,
         horizon=20,
+        junction_min_speed=3.0,
     ),
 }
 
@@ -278,6 +286,14 @@ def clone_road(road: Any, center: np.ndarray | None = None, radius: float = math
     return new_road, mapping
 
 
+def _overlaps_lane(vehicle: Any, lane: Any) -> bool:
+    """Whether a vehicle's outline (approximately: its centre within half a lane + half its width) is on a lane."""
+    long, lat = lane.local_coordinates(vehicle.position)
+    if not (-vehicle.LENGTH / 2 <= long <= lane.length + vehicle.LENGTH / 2):
+        return False
+    return abs(lat) <= lane.width_at(long) / 2 + vehicle.WIDTH / 2
+
+
 # ----------------------------------------------------------------------------------------------------
 # Low-level control
 # ----------------------------------------------------------------------------------------------------
@@ -315,7 +331,7 @@ class _RouteFollower:
         self.roads = list(roads)
         self.config = config
         self.road_index = 0
-        self._approach: dict[tuple[int, int], int | None] = {}  # shared by copies (same route)
+        self._approach: dict[tuple, Any] = {}  # per-route lane caches, shared by copies (same route)
 
     def copy(self) -> _RouteFollower:
         clone = copy.copy(self)
@@ -345,6 +361,24 @@ class _RouteFollower:
                     continue
                 break
             self.road_index += 1
+
+    def crossing_lanes(self, k: int) -> list[Any]:
+        """Lanes whose traffic crosses or joins road ``k`` of the route.
+
+        Every lane of a road that is not on the route and does not start at road ``k``'s start node.
+        """
+        key = ("crossing", k)
+        if key not in self._approach:
+            start = self.roads[k][0]
+            self._approach[key] = [
+                lane
+                for _from, to_dict in self.network.graph.items()
+                if _from != start
+                for _to, lanes in to_dict.items()
+                if (_from, _to) not in self.roads
+                for lane in lanes
+            ]
+        return self._approach[key]
 
     def approach_lane(self, k: int, window: int | None = None) -> int | None:
         """Lane of road ``k`` that leads to the next narrower road of the route (``None``: any).
@@ -680,7 +714,7 @@ class ExpertDriver:
         route = self._route.copy()
         start = route.progress(ego)
         min_gap = math.inf
-        failed_at = None
+        failed_at = stuck_at = None
         for t in range(self.config.horizon):
             acceleration, steering = route.control(ego, sim_road.vehicles, behaviour)
             ego.act({"acceleration": acceleration, "steering": steering})
@@ -693,14 +727,36 @@ class ExpertDriver:
                 break
             min_gap = min(min_gap, self._clearance(ego, sim_road))
             route.update(ego)
+            if stuck_at is None and self._stuck_in_junction(ego, route):
+                stuck_at = t
         if failed_at is not None:
             return -1e6 + 1e3 * failed_at + route.progress(ego) - start
+        if stuck_at is not None:
+            return -1e5 + 1e3 * stuck_at + route.progress(ego) - start
         score = route.progress(ego) - start
         if min_gap < self.config.safety_margin:
             score -= 200.0 * (self.config.safety_margin - min_gap) + 100.0
         score -= self._lane_penalty(ego, route, behaviour)
         score -= self._approach_penalty(ego, route)
         return score
+
+    def _stuck_in_junction(self, ego: Any, route: _RouteFollower) -> bool:
+        """Junction-clearance rule: the ego is slower than ``junction_min_speed`` in the crossing traffic's path.
+
+        The junction is the route's road right after a stop line (a road of ``yield_roads``); the
+        crossing traffic's path is any lane of a road off the route that does not start where the
+        ego's junction road starts (those diverge from the same stop line: traffic on them follows
+        the ego) and that the ego's outline overlaps.
+        """
+        min_speed = self.config.junction_min_speed
+        k = route.road_index
+        if min_speed is None or k == 0 or route.roads[k - 1] not in self.config.yield_roads:
+            return False
+        if float(ego.speed) >= min_speed:
+            return False
+        return any(
+            _overlaps_lane(ego, lane) for lane in route.crossing_lanes(k)
+        )
 
     def _episode_over(self, ego: Any) -> bool:
         """Whether the scenario ends the episode at the ego's (simulated) position (``episode_end_x``)."""
