@@ -36,6 +36,7 @@ serial or parallel env) to get the rewards at collection time.
 from __future__ import annotations
 
 from torchrl_csirl.transforms.combine_rewards import CombineRewards
+from torchrl_csirl.transforms.constant_reward import ConstantReward
 from torchrl_csirl.transforms.intrinsic_reward import IntrinsicReward
 from torchrl_csirl.transforms.subgoal_matching import (
     SubgoalMatchingReward,
@@ -48,6 +49,7 @@ from torchrl_csirl.transforms.subgoal_matching import (
 
 __all__ = [
     "CombineRewards",
+    "ConstantReward",
     "IntrinsicReward",
     "SubgoalMatchingReward",
     "failed_termination_potential",
