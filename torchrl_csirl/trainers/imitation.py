@@ -16,14 +16,22 @@ from dataclasses import dataclass
 from typing import Any
 
 import torch
+from tensordict import TensorDict
 from torch import nn
 from torchrl.data import TensorDictReplayBuffer
 from torchrl.envs.transforms import Transform
 from torchrl.objectives import SoftUpdate
 
 from torchrl_csirl.data.mixing import DemonstrationMixer
-from torchrl_csirl.objectives._imitation import SACHyperparameters, make_sac_learner
+from torchrl_csirl.objectives._imitation import SACHyperparameters, make_sac_learner, sample
+from torchrl.objectives import GAILLoss
+
+from torchrl_csirl.objectives.dac import DACDiscriminatorLoss, DACHyperparameters, make_dac_discriminator
+from torchrl_csirl.objectives.gail import GAILHyperparameters, gail_discriminator_input, make_gail_discriminator
 from torchrl_csirl.objectives.sqil import SQILHyperparameters, sqil_reward_labels
+from torchrl_csirl.trainers.imitation_updates import AdversarialImitationUpdate, DiscriminatorStep
+from torchrl_csirl.transforms.absorbing_states import AbsorbingStates
+from torchrl_csirl.transforms.discriminator_reward import DiscriminatorReward
 from torchrl_csirl.trainers.trainer import CSIRLTrainer
 from torchrl_csirl.trainers.updates import SACUpdate
 
@@ -85,8 +93,55 @@ def _make_sqil(actor, make_qvalue, hp: SQILHyperparameters, device, **_dims: int
                            make_update_step, hp)
 
 
+# ------------------------------------------------------------------------------ GAIL, DAC
+def _adversarial(name: str, actor, hp, loss, discriminator_loss, discriminator, optimizer, make_input, loss_keys,
+                 online_transforms, expert_transforms, sac) -> ImitationMethod:
+    sac_optimizer, target_updater = sac
+
+    def make_update_step(online: TensorDictReplayBuffer, expert: TensorDictReplayBuffer) -> UpdateStep:
+        step = DiscriminatorStep(discriminator_loss, optimizer, make_input, online, expert, hp.discriminator_batch_size,
+                                 loss_keys)
+        sac_update = SACUpdate(loss, sac_optimizer, target_updater, hp.max_grad_norm,
+                               sample=lambda: sample(online, hp.batch_size))
+        return AdversarialImitationUpdate(step, sac_update, hp.discriminator_every)
+
+    states = {"loss": loss, "optim_sac": sac_optimizer, "discriminator": discriminator,
+              "optim_discriminator": optimizer}
+    return ImitationMethod(name, actor, online_transforms, expert_transforms, states, make_update_step, hp)
+
+
+def _make_gail(actor, make_qvalue, hp: GAILHyperparameters, device, **_dims: int) -> ImitationMethod:
+    loss, sac_optimizer, target_updater = _sac(actor, make_qvalue, hp, device)
+    discriminator = make_gail_discriminator(make_qvalue()).to(device)
+    discriminator_loss = GAILLoss(discriminator, use_grad_penalty=hp.use_grad_penalty, gp_lambda=hp.gp_lambda)
+    optimizer = _adam(discriminator, hp.discriminator_lr)
+    loss_keys = {"loss": "loss_discriminator"}
+    return _adversarial("gail", actor, hp, loss, discriminator_loss, discriminator, optimizer, gail_discriminator_input,
+                        loss_keys, [DiscriminatorReward(discriminator, "gail")], [], (sac_optimizer, target_updater))
+
+
+def _dac_input(expert, online):
+    return TensorDict({"expert": expert, "collector": online}, [])
+
+
+def _make_dac(actor, make_qvalue, hp: DACHyperparameters, device, **_dims: int) -> ImitationMethod:
+    loss, sac_optimizer, target_updater = _sac(actor, make_qvalue, hp, device)
+    discriminator = make_dac_discriminator(make_qvalue(), hp.absorbing_states).to(device)
+    discriminator_loss = DACDiscriminatorLoss(discriminator, gp_lambda=hp.gp_lambda)
+    optimizer = _adam(discriminator, hp.discriminator_lr)
+    loss_keys = {"loss_discriminator": "loss_discriminator", "loss_gradient_penalty": "loss_gradient_penalty"}
+    online_transforms = [AbsorbingStates()] if hp.absorbing_states else []
+    expert_transforms = [AbsorbingStates()] if hp.absorbing_states else []
+    online_transforms.append(DiscriminatorReward(discriminator, "logit",
+                                                 absorbing_gamma=hp.gamma if hp.absorbing_states else None))
+    return _adversarial("dac", actor, hp, loss, discriminator_loss, discriminator, optimizer, _dac_input, loss_keys,
+                        online_transforms, expert_transforms, (sac_optimizer, target_updater))
+
+
 _BUILDERS: dict[str, tuple[type, Callable[..., ImitationMethod]]] = {
     "sqil": (SQILHyperparameters, _make_sqil),
+    "gail": (GAILHyperparameters, _make_gail),
+    "dac": (DACHyperparameters, _make_dac),
 }
 IMITATION_METHODS = ("gail", "dac", "valuedice", "sqil", "iqlearn")
 _IMPLEMENTED = tuple(_BUILDERS)
