@@ -298,3 +298,16 @@ def test_method_trains_in_the_csirl_trainer_on_a_mock_env(name):
         collector.shutdown()
     assert t.updates == 20 and t.last_losses and all(map(math.isfinite, t.last_losses.values()))
     t.load_state_dict(t.state_dict())
+
+
+def test_baselines_page_example_runs():
+    """docs/BASELINES.md's example runs as written (one DAC update on the shipped merge demonstrations)."""
+    import os
+    import re
+
+    path = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "docs", "BASELINES.md")
+    with open(path, encoding="utf-8") as f:
+        (block,) = re.findall(r"```python\n(.*?)```", f.read(), flags=re.S)
+    namespace: dict = {}
+    exec(compile(block, "docs/BASELINES.md", "exec"), namespace)  # noqa: S102 - our own docs
+    assert {"loss_discriminator", "loss_gradient_penalty", "loss_qvalue", "loss_actor"} <= set(namespace["losses"])
