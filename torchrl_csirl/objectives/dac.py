@@ -54,11 +54,15 @@ class DACHyperparameters(SACHyperparameters):
 
 
 class AbsorbingLogit(nn.Module):
-    """A discriminator logit ``f(s, a)`` for real states and one learned logit for the absorbing state.
+    """A discriminator logit that reads DAC's absorbing-state indicator as an input feature.
 
-    The absorbing state is a single point whose action does not matter, so its output is one
-    parameter, selected by the indicator feature ``absorbing`` (the paper appends the indicator
-    to the network's input to the same effect).
+    ``logit(s, i, a) = f(s, a) + w * i`` with ``i`` the indicator (0 for real states, 1 for the
+    absorbing state, whose samples carry the placeholder observation and a zero action, see
+    :func:`~torchrl_csirl.transforms.absorbing_states.absorbing_self_loops`): the paper appends
+    the indicator to the network's input; here it enters linearly through the learned weight
+    ``w``, so that ``f`` keeps the critic's architecture. The absorbing state's logit
+    ``f(s_a, 0) + w`` is regularised like any other output: the gradient penalty of
+    :class:`DACDiscriminatorLoss` interpolates the indicator too and so bounds ``w``.
 
     Args:
         network: ``network(observation, action) -> [B, 1]`` (e.g. a critic's ``ConcatMLP``).
@@ -67,19 +71,20 @@ class AbsorbingLogit(nn.Module):
         >>> import torch
         >>> from torchrl_csirl.modules import ConcatMLP
         >>> m = AbsorbingLogit(ConcatMLP(4, (8,)))
+        >>> _ = torch.nn.init.constant_(m.indicator_weight, 2.0)
         >>> out = m(torch.zeros(2, 3), torch.tensor([[False], [True]]), torch.zeros(2, 1))
-        >>> out.shape, float(out[1])
-        (torch.Size([2, 1]), 0.0)
+        >>> out.shape, round(float(out[1] - out[0]), 4)
+        (torch.Size([2, 1]), 2.0)
     """
 
     def __init__(self, network: nn.Module) -> None:
         super().__init__()
         self.network = network
-        self.absorbing_logit = nn.Parameter(torch.zeros(1))
+        self.indicator_weight = nn.Parameter(torch.zeros(1))
 
     def forward(self, observation: torch.Tensor, absorbing: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
         logit = self.network(observation, action)
-        return torch.where(absorbing.reshape(logit.shape).bool(), self.absorbing_logit.expand_as(logit), logit)
+        return logit + self.indicator_weight * absorbing.reshape(logit.shape).to(logit.dtype)
 
 
 def make_dac_discriminator(qvalue: TensorDictModule, absorbing_states: bool = True,
@@ -125,8 +130,8 @@ class DACDiscriminatorLoss(LossModule):
     transition entering the absorbing state adds one absorbing self-loop sample to its side
     (:func:`~torchrl_csirl.transforms.absorbing_states.absorbing_self_loops`), as the paper's
     replay buffer holds one absorbing transition per terminated episode. The penalty is taken at
-    ``x = eps * x_E + (1 - eps) * x_agent`` with ``eps ~ U[0, 1]`` per sample, over pairs of real
-    expert and agent samples (the absorbing logit has no input to penalise).
+    ``x = eps * x_E + (1 - eps) * x_agent`` with ``eps ~ U[0, 1]`` per sample, over random pairs of
+    expert and agent samples (absorbing ones included, the indicator interpolated as a number).
 
     Args:
         discriminator_network (TensorDictModule): writes the logit (see
@@ -207,18 +212,22 @@ class DACDiscriminatorLoss(LossModule):
         return torch.cat([real, loops.select(*real.keys(True, True))], 0)
 
     def _penalty(self, expert: TensorDictBase, agent: TensorDictBase) -> torch.Tensor:
+        """WGAN-GP at ``eps * x_E + (1 - eps) * x_agent``, one ``eps`` per pair of random partners.
+
+        ``x`` is every discriminator input (observation, action and, with absorbing states, the
+        indicator as a number), so the absorbing state's output is penalised like the others.
+        """
         n = min(expert.numel(), agent.numel())
         if n == 0 or self.gp_lambda == 0:
             return torch.zeros((), device=self._logit_device())
-        keys = (self.tensor_keys.observation, self.tensor_keys.action)
+        keys = list(self.discriminator_network.in_keys)
+        expert = expert[torch.randperm(expert.numel(), device=expert.device)[:n]]
+        agent = agent[torch.randperm(agent.numel(), device=agent.device)[:n]]
         eps = torch.rand(n, 1, device=expert.device)  # one mixing weight per sample
-        mixed = [eps * expert.get(k)[:n] + (1 - eps) * agent.get(k)[:n] for k in keys]
+        mixed = [eps * expert.get(k).float() + (1 - eps) * agent.get(k).float() for k in keys]
 
-        def logit(observation: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
-            td = TensorDict({keys[0]: observation, keys[1]: action}, [n])
-            if self.tensor_keys.absorbing in self.discriminator_network.in_keys:
-                td.set(self.tensor_keys.absorbing, torch.zeros(n, 1, dtype=torch.bool, device=observation.device))
-            return self._logit(td)
+        def logit(*inputs: torch.Tensor) -> torch.Tensor:
+            return self._logit(TensorDict(dict(zip(keys, inputs)), [n]))
 
         return self.gp_lambda * gradient_penalty(logit, mixed)
 
@@ -230,8 +239,8 @@ class DACDiscriminatorLoss(LossModule):
         agent = tensordict.get(self.tensor_keys.collector)
         require_keys(expert, self.discriminator_network.in_keys, "DAC discriminator, expert samples")
         require_keys(agent, self.discriminator_network.in_keys, "DAC discriminator, agent samples")
-        expert_logit = self._logit(self._with_self_loops(expert))
-        agent_logit = self._logit(self._with_self_loops(agent))
+        expert, agent = self._with_self_loops(expert), self._with_self_loops(agent)
+        expert_logit, agent_logit = self._logit(expert), self._logit(agent)
         return TensorDict({
             "loss_discriminator": dac_discriminator_loss(expert_logit, agent_logit),
             "loss_gradient_penalty": self._penalty(expert, agent),
