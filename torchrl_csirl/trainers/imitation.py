@@ -11,7 +11,7 @@ docs/BASELINES.md describes every method, its hyperparameters and their sources.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -206,7 +206,8 @@ def _resolve(cls: type, hyperparameters: Any) -> Any:
         return cls()
     if isinstance(hyperparameters, cls):
         return hyperparameters
-    if isinstance(hyperparameters, dict):
+    if isinstance(hyperparameters, Mapping):  # a dict, or an OmegaConf DictConfig
+        hyperparameters = dict(hyperparameters)
         known = {f.name for f in dataclasses.fields(cls)}
         unknown = sorted(set(hyperparameters) - known)
         if unknown:
@@ -230,8 +231,8 @@ def make_imitation_method(name: str, actor: nn.Module, make_qvalue: Callable[[],
     Keyword Args:
         obs_dim: observation size (checked against the critic).
         action_dim: action size (checked against the actor's action spec).
-        hyperparameters: the method's dataclass (:func:`hyperparameters_class`), a dict of its
-            fields, or None for the published defaults.
+        hyperparameters: the method's dataclass (:func:`hyperparameters_class`), a mapping of
+            (some of) its fields (a dict, an OmegaConf ``DictConfig``), or None for the defaults.
         device: where the networks live.
 
     Examples:
