@@ -77,6 +77,9 @@ def test_unknown_method_and_bad_hyperparameters():
         build("dagger")
     with pytest.raises(ValueError, match="no field"):
         build("sqil", {"learning_rate": 1e-3})
+    from omegaconf import OmegaConf
+
+    assert build("dac", OmegaConf.create({"gp_lambda": 5})).hyperparameters.gp_lambda == 5  # a recipe's config node
     with pytest.raises(ValueError, match="action_dim"):
         make_imitation_method("sqil", make_actor(OBS, 2, hidden=HIDDEN), lambda: make_qvalue(OBS, 2), obs_dim=OBS,
                               action_dim=ACT)

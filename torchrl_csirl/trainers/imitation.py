@@ -161,9 +161,9 @@ def _make_iqlearn(actor, make_qvalue, hp: IQLearnHyperparameters, device, **_dim
 
 # ------------------------------------------------------------------------------ ValueDICE
 def _make_valuedice(actor, make_qvalue, hp: ValueDICEHyperparameters, device, **_dims: int) -> ImitationMethod:
-    nu = logit_network(make_qvalue(), "nu").to(device)
+    nu = logit_network(make_qvalue(), "nu")
     loss = ValueDICELoss(actor, nu, gamma=hp.gamma, replay_regularization=hp.replay_regularization,
-                         orthogonal_regularization=hp.orthogonal_regularization, gp_lambda=hp.gp_lambda)
+                         orthogonal_regularization=hp.orthogonal_regularization, gp_lambda=hp.gp_lambda).to(device)
     nu_optimizer, actor_optimizer = _adam(nu, hp.nu_lr), _adam(actor, hp.actor_lr)
 
     def make_update_step(online: TensorDictReplayBuffer, expert: TensorDictReplayBuffer) -> UpdateStep:
