@@ -77,6 +77,9 @@ def test_unknown_method_and_bad_hyperparameters():
         build("dagger")
     with pytest.raises(ValueError, match="no field"):
         build("sqil", {"learning_rate": 1e-3})
+    with pytest.raises(ValueError, match="observations of size 4"):
+        make_imitation_method("gail", make_actor(OBS, ACT, hidden=HIDDEN), lambda: make_qvalue(OBS, ACT), obs_dim=4,
+                              action_dim=ACT)
     from omegaconf import OmegaConf
 
     assert build("dac", OmegaConf.create({"gp_lambda": 5})).hyperparameters.gp_lambda == 5  # a recipe's config node
