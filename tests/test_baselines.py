@@ -80,6 +80,14 @@ def test_unknown_method_and_bad_hyperparameters():
     with pytest.raises(ValueError, match="observations of size 4"):
         make_imitation_method("gail", make_actor(OBS, ACT, hidden=HIDDEN), lambda: make_qvalue(OBS, ACT), obs_dim=4,
                               action_dim=ACT)
+    method = build("valuedice")
+    online, expert = buffers(method, transitions(10, 0.0, 0.0), transitions(10, 1.0, 0.5))
+    with pytest.raises(ValueError, match="valuedice needs expert demonstrations: the expert buffer is empty"):
+        method.make_update_step(online, TensorDictReplayBuffer(storage=LazyTensorStorage(10)))
+    no_done = TensorDictReplayBuffer(storage=LazyTensorStorage(10))
+    no_done.extend(transitions(10, 1.0, 0.5).exclude(("next", "done")))
+    with pytest.raises(ValueError, match=r"lack the keys \[\('next', 'done'\)\]"):
+        method.make_update_step(online, no_done)
     from omegaconf import OmegaConf
 
     assert build("dac", OmegaConf.create({"gp_lambda": 5})).hyperparameters.gp_lambda == 5  # a recipe's config node

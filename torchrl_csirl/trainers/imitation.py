@@ -253,7 +253,28 @@ def make_imitation_method(name: str, actor: nn.Module, make_qvalue: Callable[[],
     if spec is not None and "action" in spec.keys() and spec["action"].shape[-1] != action_dim:
         raise ValueError(f"the actor's actions have size {spec['action'].shape[-1]}, expected action_dim={action_dim}.")
     _check_qvalue(make_qvalue, obs_dim, action_dim)
-    return builder(actor, make_qvalue, hp, torch.device(device))
+    method = builder(actor, make_qvalue, hp, torch.device(device))
+    method.make_update_step = _checking_demonstrations(name, method.make_update_step)
+    return method
+
+
+#: what every method reads from an expert transition
+DEMONSTRATION_KEYS = ("observation", "action", ("next", "observation"), ("next", "terminated"), ("next", "done"))
+
+
+def _checking_demonstrations(name: str, make_update_step: Callable) -> Callable:
+    """``make_update_step`` that first checks the expert buffer: not empty, with :data:`DEMONSTRATION_KEYS`."""
+
+    def checked(online: TensorDictReplayBuffer, expert: TensorDictReplayBuffer) -> UpdateStep:
+        if expert is None or not len(expert):
+            raise ValueError(f"{name} needs expert demonstrations: the expert buffer is empty.")
+        present = set(expert.storage[0].keys(True, True))
+        missing = [key for key in DEMONSTRATION_KEYS if key not in present]
+        if missing:
+            raise ValueError(f"{name}: the expert transitions lack the keys {missing}.")
+        return make_update_step(online, expert)
+
+    return checked
 
 
 def _check_qvalue(make_qvalue: Callable[[], nn.Module], obs_dim: int, action_dim: int) -> None:
