@@ -282,7 +282,12 @@ def test_valuedice_update_moves_each_network_by_its_own_objective():
                                                       allow_unused=True, retain_graph=True))
     assert all(g is None for g in torch.autograd.grad(out["loss_orthogonal"], nu_params, allow_unused=True))
     step = method.make_update_step(online, expert)
-    assert len(step.initial_observations) == 1  # one expert trajectory: one initial state
+    batch = step.batch()  # default: every expert state is an initial state (the authors' code)
+    assert step.initial_observations is None and torch.equal(batch["initial", "observation"], batch["expert", "observation"])
+    starts = build("valuedice", {"batch_size": 16, "initial_states": "episode_starts"}).make_update_step(online, expert)
+    assert len(starts.initial_observations) == 1  # one expert trajectory: one episode start
+    with pytest.raises(ValueError, match="initial_states must be one of"):
+        build("valuedice", {"initial_states": "first"})
     with pytest.raises(KeyError, match="initial states"):
         loss(td.exclude("initial").set("initial", TensorDict({}, [1])))
 

@@ -4,16 +4,18 @@ Adversarial imitation made sample efficient and unbiased:
 
 * **off-policy**: the discriminator compares expert pairs with pairs from the replay buffer,
   and the policy is learned by an off-policy actor-critic on the discriminator reward
-  ``r(s, a) = log D(s, a) - log(1 - D(s, a))`` (the logit; Sec. 4.1);
-* **absorbing states** (Sec. 4.2): terminal transitions lead to an absorbing state whose
+  ``r(s, a) = log D(s, a) - log(1 - D(s, a))`` (the logit);
+* **absorbing states**: terminal transitions lead to an absorbing state whose
   reward is learned (:class:`~torchrl_csirl.transforms.AbsorbingStates` on both buffers;
-  :class:`AbsorbingLogit` gives the discriminator its own output for that state);
+  :class:`AbsorbingLogit` reads the absorbing indicator as an input feature);
 * **gradient penalty** (Gulrajani et al. 2017, weight 10): at points interpolated between an
   expert pair and an agent pair with *one mixing weight per sample* (TorchRL's ``GAILLoss`` draws
   one per element, which is why this loss is written here).
 
-The learner is SAC (the paper uses TD3; the brief of this project allows either and SAC keeps
-every SAC-based method on the same learner).
+The learner is SAC (the paper uses TD3): every SAC-based baseline, and CSIRL, then share one learner.
+
+Section and equation numbers are deliberately not quoted: they were not re-checked against the
+paper when this module was written (docs/BASELINES.md lists the values to re-check).
 """
 from __future__ import annotations
 
@@ -39,11 +41,11 @@ class DACHyperparameters(SACHyperparameters):
 
     Attributes:
         discriminator_lr: Adam learning rate of the discriminator (1e-3, Kostrikov et al. 2019,
-            Appendix).
+            experimental details; to re-check).
         discriminator_batch_size: expert and agent transitions per discriminator step (each).
         discriminator_every: a discriminator step every this many actor-critic updates.
-        gp_lambda: gradient-penalty weight (10, Sec. 4.1 after Gulrajani et al. 2017).
-        absorbing_states: the absorbing-state treatment of terminal transitions (Sec. 4.2).
+        gp_lambda: gradient-penalty weight (10, after Gulrajani et al. 2017).
+        absorbing_states: the absorbing-state treatment of terminal transitions.
     """
 
     discriminator_lr: float = 1e-3
@@ -110,7 +112,7 @@ def make_dac_discriminator(qvalue: TensorDictModule, absorbing_states: bool = Tr
 
 
 def dac_discriminator_loss(expert_logit: torch.Tensor, agent_logit: torch.Tensor) -> torch.Tensor:
-    """Binary cross-entropy of ``D = sigmoid(logit)``: expert pairs labelled 1, agent pairs 0 (Eq. 1).
+    """Binary cross-entropy of ``D = sigmoid(logit)``: expert pairs labelled 1, agent pairs 0.
 
     Examples:
         >>> import torch

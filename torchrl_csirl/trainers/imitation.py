@@ -167,8 +167,8 @@ def _make_valuedice(actor, make_qvalue, hp: ValueDICEHyperparameters, device) ->
     nu_optimizer, actor_optimizer = _adam(nu, hp.nu_lr), _adam(actor, hp.actor_lr)
 
     def make_update_step(online: TensorDictReplayBuffer, expert: TensorDictReplayBuffer) -> UpdateStep:
-        starts = initial_observations(expert.storage[:]).to(device)
-        return ValueDICEUpdate(loss, nu_optimizer, actor_optimizer, online, expert, starts, hp.batch_size,
+        starts = None if hp.initial_states == "expert" else initial_observations(expert.storage[:]).to(device)
+        return ValueDICEUpdate(loss, nu_optimizer, actor_optimizer, online, expert, hp.batch_size, starts,
                                hp.max_grad_norm)
 
     states = {"loss": loss, "optim_nu": nu_optimizer, "optim_actor": actor_optimizer}  # the loss holds actor and nu

@@ -111,8 +111,9 @@ class ValueDICEUpdate:
         actor_optimizer: over the actor's parameters.
         online: the replay buffer.
         expert: the expert replay buffer.
-        initial_observations: ``[N, D]`` initial observations (e.g. the expert trajectories' first states).
-        batch_size: samples of each kind per step.
+        batch_size: expert and replay samples per step (and initial states).
+        initial_observations: ``[N, D]`` initial observations to sample from (e.g. the expert
+            trajectories' first states); None: the expert batch's own states, as the authors' code.
         max_grad_norm: gradient-norm clipping of each network (None: none).
     """
 
@@ -120,9 +121,9 @@ class ValueDICEUpdate:
     ACTOR_KEYS = ("loss_actor", "loss_orthogonal")
 
     def __init__(self, loss: nn.Module, nu_optimizer: torch.optim.Optimizer, actor_optimizer: torch.optim.Optimizer,
-                 online: Any, expert: Any, initial_observations: torch.Tensor, batch_size: int,
+                 online: Any, expert: Any, batch_size: int, initial_observations: torch.Tensor | None = None,
                  max_grad_norm: float | None = None) -> None:
-        if initial_observations.ndim != 2 or not len(initial_observations):
+        if initial_observations is not None and (initial_observations.ndim != 2 or not len(initial_observations)):
             raise ValueError(f"initial_observations must be a non-empty [N, D] tensor, got {tuple(initial_observations.shape)}.")
         self.loss = loss
         self.nu_optimizer = nu_optimizer
@@ -135,10 +136,16 @@ class ValueDICEUpdate:
 
     def batch(self) -> TensorDictBase:
         """Expert, replay and initial-state samples, as :class:`ValueDICELoss` reads them."""
-        index = torch.randint(len(self.initial_observations), (self.batch_size,), device=self.initial_observations.device)
-        initial = TensorDict({self.loss.tensor_keys.observation: self.initial_observations[index]}, [self.batch_size])
-        return TensorDict({"expert": sample(self.expert, self.batch_size), "collector": sample(self.online, self.batch_size),
-                           "initial": initial}, [])
+        expert = sample(self.expert, self.batch_size)
+        obs_key = self.loss.tensor_keys.observation
+        if self.initial_observations is None:
+            starts = expert.get(obs_key)
+        else:
+            index = torch.randint(len(self.initial_observations), (self.batch_size,),
+                                  device=self.initial_observations.device)
+            starts = self.initial_observations[index]
+        initial = TensorDict({obs_key: starts}, starts.shape[:1])
+        return TensorDict({"expert": expert, "collector": sample(self.online, self.batch_size), "initial": initial}, [])
 
     def __call__(self, trainer: CSIRLTrainer) -> dict[str, torch.Tensor]:
         out = self.loss(self.batch())
