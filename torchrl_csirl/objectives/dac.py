@@ -14,8 +14,8 @@ Adversarial imitation made sample efficient and unbiased:
 
 The learner is SAC (the paper uses TD3): every SAC-based baseline, and CSIRL, then share one learner.
 
-Section and equation numbers are deliberately not quoted: they were not re-checked against the
-paper when this module was written (docs/BASELINES.md lists the values to re-check).
+The values were checked against the authors' published code (``google-research/dac``); section and
+equation numbers of the paper are not quoted (docs/BASELINES.md gives every source).
 """
 from __future__ import annotations
 
@@ -40,8 +40,8 @@ class DACHyperparameters(SACHyperparameters):
     """DAC's settings: the SAC learner's (:class:`SACHyperparameters`) plus the discriminator's.
 
     Attributes:
-        discriminator_lr: Adam learning rate of the discriminator (1e-3, Kostrikov et al. 2019,
-            experimental details; to re-check).
+        discriminator_lr: Adam learning rate of the discriminator (1e-3: Adam's default, used by
+            the authors' code, ``google-research/dac``).
         discriminator_batch_size: expert and agent transitions per discriminator step (each).
         discriminator_every: a discriminator step every this many actor-critic updates.
         gp_lambda: gradient-penalty weight (10, after Gulrajani et al. 2017).
