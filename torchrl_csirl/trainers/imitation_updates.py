@@ -27,13 +27,28 @@ def _where(trainer: CSIRLTrainer) -> str:
     return f"update {trainer.updates + 1} (frames {trainer.frames})"
 
 
-def _apply(losses: dict[str, torch.Tensor], optimizer: torch.optim.Optimizer, max_grad_norm: float | None) -> None:
-    optimizer.zero_grad(set_to_none=True)
-    sum(losses.values()).backward()
+def _parameters(optimizer: torch.optim.Optimizer) -> list[torch.Tensor]:
+    return [p for group in optimizer.param_groups for p in group["params"]]
+
+
+def _gradients(loss: torch.Tensor, optimizer: torch.optim.Optimizer, retain_graph: bool = False) -> list:
+    """The gradient of ``loss`` with respect to the parameters of ``optimizer`` (None where unused)."""
+    return list(torch.autograd.grad(loss, _parameters(optimizer), retain_graph=retain_graph, allow_unused=True))
+
+
+def _step(grads: list, optimizer: torch.optim.Optimizer, max_grad_norm: float | None) -> None:
+    """Sets ``grads`` on the optimiser's parameters, clips their norm, steps."""
+    params = _parameters(optimizer)
+    for param, grad in zip(params, grads):
+        param.grad = grad
     if max_grad_norm is not None:
-        params = [p for group in optimizer.param_groups for p in group["params"]]
         torch.nn.utils.clip_grad_norm_(params, max_grad_norm)
     optimizer.step()
+
+
+def _apply(losses: dict[str, torch.Tensor], optimizer: torch.optim.Optimizer, max_grad_norm: float | None) -> None:
+    """One optimiser step on the sum of ``losses``."""
+    _step(_gradients(sum(losses.values()), optimizer), optimizer, max_grad_norm)
 
 
 class DiscriminatorStep:
@@ -154,17 +169,8 @@ class ValueDICEUpdate:
         nu_loss = losses["loss_nu"] + losses["loss_gradient_penalty"]
         actor_loss = losses["loss_actor"] + losses["loss_orthogonal"]
         # both gradients are taken before either network moves
-        self.nu_optimizer.zero_grad(set_to_none=True)
-        self.actor_optimizer.zero_grad(set_to_none=True)
-        nu_params = [p for g in self.nu_optimizer.param_groups for p in g["params"]]
-        actor_params = [p for g in self.actor_optimizer.param_groups for p in g["params"]]
-        nu_grads = torch.autograd.grad(nu_loss, nu_params, retain_graph=True, allow_unused=True)
-        actor_grads = torch.autograd.grad(actor_loss, actor_params, allow_unused=True)
-        for params, grads, optimizer in ((nu_params, nu_grads, self.nu_optimizer),
-                                         (actor_params, actor_grads, self.actor_optimizer)):
-            for param, grad in zip(params, grads):
-                param.grad = grad
-            if self.max_grad_norm is not None:
-                torch.nn.utils.clip_grad_norm_(params, self.max_grad_norm)
-            optimizer.step()
+        nu_grads = _gradients(nu_loss, self.nu_optimizer, retain_graph=True)
+        actor_grads = _gradients(actor_loss, self.actor_optimizer)
+        for grads, optimizer in ((nu_grads, self.nu_optimizer), (actor_grads, self.actor_optimizer)):
+            _step(grads, optimizer, self.max_grad_norm)
         return {key: value.detach() for key, value in losses.items()}
