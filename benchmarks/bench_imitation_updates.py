@@ -32,13 +32,15 @@ from torchrl_csirl.modules import EgoRelativeFeatures, make_actor, make_qvalue
 from torchrl_csirl.trainers import IMITATION_METHODS, make_imitation_method
 
 
-def build(name: str):
+def build(name: str, hyperparameters: dict | None = None):
+    """``(method, update_step, trainer stand-in, demonstrations)`` on merge, the online buffer holding
+    the demonstrations' transitions with uniformly random actions."""
     spec = SCENARIOS["merge"]
     features = EgoRelativeFeatures.from_scenario(spec)
     method = make_imitation_method(
         name, make_actor(spec.obs_dim, spec.action_dim, input_features=features),
         lambda: make_qvalue(spec.obs_dim, spec.action_dim, input_features=features),
-        obs_dim=spec.obs_dim, action_dim=spec.action_dim)
+        obs_dim=spec.obs_dim, action_dim=spec.action_dim, hyperparameters=hyperparameters)
     demos = load_expert_demonstrations("merge", 25)
     expert = demos.as_replay_buffer(batch_size=256, transform=Compose(*method.expert_transforms))
     online = TensorDictReplayBuffer(storage=LazyTensorStorage(100_000), batch_size=256,
@@ -47,7 +49,7 @@ def build(name: str):
     transitions["action"] = torch.rand_like(transitions["action"]) * 2 - 1
     online.extend(transitions)
     trainer = SimpleNamespace(updates=0, frames=0, online_buffer=online)
-    return method.make_update_step(online, expert), trainer
+    return method, method.make_update_step(online, expert), trainer, demos
 
 
 def main() -> None:
@@ -58,7 +60,7 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     torch.manual_seed(0)
-    steps = {name: build(name) for name in IMITATION_METHODS}
+    steps = {name: build(name)[1:3] for name in IMITATION_METHODS}
     times: dict[str, list[float]] = {name: [] for name in steps}
     for i in range(args.warmup + args.iters):
         for name, (step, trainer) in steps.items():

@@ -22,17 +22,11 @@ from __future__ import annotations
 import argparse
 import json
 import time
-from types import SimpleNamespace
-
 import torch
-from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
-from torchrl.envs import Compose
+from bench_imitation_updates import build  # benchmarks/ is on the path when run as a script
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
-from torchrl_csirl.data import load_expert_demonstrations
-from torchrl_csirl.envs import SCENARIOS
-from torchrl_csirl.modules import EgoRelativeFeatures, make_actor, make_qvalue
-from torchrl_csirl.trainers import IMITATION_METHODS, make_imitation_method
+from torchrl_csirl.trainers import IMITATION_METHODS
 
 
 def action_mse(actor, transitions) -> float:
@@ -46,27 +40,13 @@ OVERRIDES = {"valuedice": {"actor_lr": 1e-4}, "sqil-control": {"expert_reward": 
 
 
 def check(name: str, updates: int) -> dict[str, float]:
-    spec = SCENARIOS["merge"]
-    features = EgoRelativeFeatures.from_scenario(spec)
-    demos = load_expert_demonstrations("merge", 25)
     torch.manual_seed(0)
-    actor = make_actor(spec.obs_dim, spec.action_dim, input_features=features)
-    method = make_imitation_method(
-        name.removesuffix("-control"), actor, lambda: make_qvalue(spec.obs_dim, spec.action_dim, input_features=features),
-        obs_dim=spec.obs_dim, action_dim=spec.action_dim, hyperparameters=OVERRIDES.get(name))
-    expert = demos.as_replay_buffer(batch_size=256, transform=Compose(*method.expert_transforms))
-    online = TensorDictReplayBuffer(storage=LazyTensorStorage(100_000), batch_size=256,
-                                    transform=Compose(*method.online_transforms))
-    random_actions = demos.transitions().clone()
-    random_actions["action"] = torch.rand_like(random_actions["action"]) * 2 - 1
-    online.extend(random_actions)
-    step = method.make_update_step(online, expert)
-    trainer = SimpleNamespace(updates=0, frames=0, online_buffer=online)
-    before, start = action_mse(actor, demos.transitions()), time.perf_counter()
+    method, step, trainer, demos = build(name.removesuffix("-control"), OVERRIDES.get(name))
+    before, start = action_mse(method.policy, demos.transitions()), time.perf_counter()
     for _ in range(updates):
         step(trainer)
         trainer.updates += 1
-    return {"mse_before": round(before, 3), "mse_after": round(action_mse(actor, demos.transitions()), 3),
+    return {"mse_before": round(before, 3), "mse_after": round(action_mse(method.policy, demos.transitions()), 3),
             "seconds": round(time.perf_counter() - start, 1)}
 
 
