@@ -1,0 +1,93 @@
+"""The robotics tasks (AntMaze U-maze, Adroit Relocate): envs, specs, the DAPG expert, Minari interop."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from torchrl.envs.utils import check_env_specs
+
+from torchrl_csirl.envs import TASKS, TaskSpec, make_env, make_gym_env, resolve_scenario
+from torchrl_csirl.envs.metrics import accomplish_rate_from_rollout, success_from_rollout
+from torchrl_csirl.envs.robotics import ROBOTICS_TASKS, maze_cell_route, route_remaining_length
+
+ROBOTICS = ("antmaze-umaze", "relocate")
+
+
+@pytest.mark.parametrize("name", ROBOTICS)
+def test_env_specs_and_layout(name):
+    spec = resolve_scenario(name)
+    assert isinstance(spec, TaskSpec) and spec.family == "robotics" and TASKS[name] is spec
+    env = make_env(name, seed=0)
+    check_env_specs(env)
+    assert env.observation_spec["observation"].shape == (spec.obs_dim,)
+    assert env.full_action_spec["action"].shape == (spec.action_dim,)
+    # the layout covers the observation exactly, in order
+    stops = [stop for _, stop in spec.observation_layout.values()]
+    starts = [start for start, _ in spec.observation_layout.values()]
+    assert starts[0] == 0 and stops[-1] == spec.obs_dim and starts[1:] == stops[:-1]
+
+
+def test_spec_dimensions_and_matching_features():
+    ant, relocate = ROBOTICS_TASKS["antmaze-umaze"], ROBOTICS_TASKS["relocate"]
+    assert (ant.obs_dim, ant.action_dim, ant.max_steps) == (29, 8, 700)
+    assert (relocate.obs_dim, relocate.action_dim, relocate.max_steps) == (39, 30, 200)
+    assert ant.matching_features == ("x", "y")
+    assert relocate.matching_features == tuple(
+        f"{part}[{k}]" for part in ("palm_to_object", "object_to_target") for k in range(3)
+    )
+    # the driving scenarios are TaskSpecs too
+    assert resolve_scenario("merge").matching_features == ("x",)
+    with pytest.raises(ValueError, match="unknown environment options"):
+        make_gym_env("relocate", lanes_count=3)
+
+
+def test_antmaze_state_is_observation_plus_position():
+    env = make_gym_env("antmaze-umaze")
+    obs, info = env.reset(seed=3)
+    np.testing.assert_allclose(obs[27:], env.position(), atol=1e-6)
+    assert np.linalg.norm(obs[27:] - np.array([-4.0, 4.0])) <= 0.15  # D4RL's start cell, small noise
+    assert np.linalg.norm(env.goal - np.array(ROBOTICS_TASKS["antmaze-umaze"].finish_position)) <= 0.15
+    assert info["progress"] == 0.0 and not info["success"]
+    assert info["distance_to_finish"] == pytest.approx(24.0, abs=0.5)  # along the U, not 8 m across
+
+
+def test_maze_route_and_remaining_length():
+    route = maze_cell_route([[1, 1, 1], [1, 0, 1], [1, 0, 1], [1, 1, 1]], (1, 1), (2, 1))
+    assert route == [(1, 1), (2, 1)]
+    with pytest.raises(ValueError, match="No route"):
+        maze_cell_route([[0, 1, 0]], (0, 0), (0, 2))
+    line = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, -4.0]])
+    assert route_remaining_length(line, np.array([4.0, -4.0])) == 0.0
+    assert route_remaining_length(line, np.array([0.0, 0.0])) == 8.0
+
+
+@pytest.mark.parametrize("name", ROBOTICS)
+def test_seeded_determinism(name):
+    def roll(seed):
+        env = make_env(name, seed=seed)
+        torch.manual_seed(0)
+        return env.rollout(30, break_when_any_done=False)
+
+    a, b, c = roll(5), roll(5), roll(6)
+    for key in ("observation", ("next", "observation"), ("next", "reward"), ("next", "distance_to_finish")):
+        torch.testing.assert_close(a[key], b[key], rtol=0, atol=0)
+    assert not torch.equal(a["observation"][0], c["observation"][0])
+
+
+@pytest.mark.parametrize("name", ROBOTICS)
+def test_progress_and_success_hooks(name):
+    env = make_env(name, seed=0)
+    td = env.rollout(20, break_when_any_done=False)
+    progress = td["next", "progress"]
+    assert ((progress >= 0) & (progress <= 1)).all()
+    assert 0.0 <= float(accomplish_rate_from_rollout(td)) <= 1.0
+    assert not bool(success_from_rollout(td))  # random actions do not solve either task in 20 steps
+    assert not td["next", "crashed"].any() and not td["next", "offroad"].any()
+
+
+def test_headless_rendering():
+    env = make_gym_env("relocate", render_mode="rgb_array")
+    env.reset(seed=0)
+    frame = env.render()
+    env.close()
+    assert frame.ndim == 3 and frame.shape[-1] == 3 and frame.std() > 0
