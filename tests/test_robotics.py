@@ -91,3 +91,47 @@ def test_headless_rendering():
     frame = env.render()
     env.close()
     assert frame.ndim == 3 and frame.shape[-1] == 3 and frame.std() > 0
+
+
+# ---------------------------------------------------------------------------------------------- DAPG expert
+def test_dapg_expert_solves_relocate_in_torchrl_rollouts():
+    from torchrl_csirl.envs.robotics.expert import DAPGRelocatePolicy
+
+    policy = DAPGRelocatePolicy().as_tensordict_module()
+    for seed in (10000, 10001):
+        env = make_env("relocate", seed=seed)
+        with torch.no_grad():
+            td = env.rollout(200, policy)
+        assert td.shape[-1] == 200 and bool(td["next", "truncated"][-1])
+        assert bool(success_from_rollout(td))
+        assert int(td["next", "success"].sum()) > 25  # D4RL's criterion: at the target > 25 steps
+        assert float(td["next", "reward"].sum()) > 1000.0
+
+
+def test_dapg_weights_checked(tmp_path):
+    from torchrl_csirl.envs.robotics.expert import DAPG_POLICY_PATH, DAPGRelocatePolicy
+
+    arrays = dict(np.load(DAPG_POLICY_PATH))
+    arrays["w0"] = arrays["w0"][:, :20]
+    np.savez(tmp_path / "bad.npz", **arrays)
+    with pytest.raises(ValueError, match="'w0' of shape"):
+        DAPGRelocatePolicy(tmp_path / "bad.npz")
+
+
+def test_shipped_relocate_dataset_is_reproduced(tmp_path):
+    from generate_experts import main
+
+    from torchrl_csirl.data import load_expert_demonstrations
+
+    demos = load_expert_demonstrations("relocate", 25)
+    assert demos.num_trajectories == 25 and demos.observation_dim == 39 and demos.action_dim == 30
+    assert demos.lengths.tolist() == [200] * 25
+    assert demos.transitions()["observation"].dtype == torch.float32
+    assert demos.metadata["generator"].endswith("DAPGRelocateExpert")
+    assert all(e["success"] for e in demos.metadata["episodes"])
+    # the first trajectory again, with the command that wrote the file (seed 0)
+    result = main(["--scenario", "relocate", "--episodes", "1", "--seed", "0", "--out", str(tmp_path / "one.npz")])
+    assert result["success_rate"] == 1.0
+    again = type(demos).load(tmp_path / "one.npz")
+    for key in ("observation", "action", ("next", "observation"), ("next", "reward")):
+        torch.testing.assert_close(again.trajectory(0)[key], demos.trajectory(0)[key], rtol=0, atol=0)
