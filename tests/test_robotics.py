@@ -135,3 +135,109 @@ def test_shipped_relocate_dataset_is_reproduced(tmp_path):
     again = type(demos).load(tmp_path / "one.npz")
     for key in ("observation", "action", ("next", "observation"), ("next", "reward")):
         torch.testing.assert_close(again.trajectory(0)[key], demos.trajectory(0)[key], rtol=0, atol=0)
+
+
+# ---------------------------------------------------------------------------------------------- Minari interop
+def _ant_like_minari_dataset(root, dataset_id, episodes=2, steps=5):
+    """A goal-conditioned Minari dataset shaped like D4RL's successors' AntMaze (dict observations)."""
+    import gymnasium as gym
+    import minari
+    from minari.data_collector import EpisodeBuffer
+
+    from torchrl_csirl.data.minari import _minari_root
+
+    rng = np.random.default_rng(0)
+    box = lambda n: gym.spaces.Box(-np.inf, np.inf, (n,), np.float64)  # noqa: E731
+    space = gym.spaces.Dict({"observation": box(27), "achieved_goal": box(2), "desired_goal": box(2)})
+    buffers = [
+        EpisodeBuffer(
+            id=i,
+            observations={k: rng.normal(size=(steps + 1, s.shape[0])) for k, s in space.spaces.items()},
+            actions=rng.uniform(-1, 1, (steps, 8)).astype(np.float32),
+            rewards=np.zeros(steps),
+            terminations=np.zeros(steps, bool),
+            truncations=np.arange(steps) == steps - 1,
+            infos={},
+        )
+        for i in range(episodes)
+    ]
+    with _minari_root(root):
+        minari.create_dataset_from_buffers(
+            dataset_id, buffers, observation_space=space,
+            action_space=gym.spaces.Box(-1, 1, (8,), np.float32), data_format="hdf5",
+        )
+    return buffers
+
+
+def test_minari_round_trip_and_torchrl_replay(tmp_path):
+    from torchrl_csirl.data import load_expert_demonstrations
+    from torchrl_csirl.data.minari import load_minari_dataset, minari_experience_replay, save_minari_dataset
+
+    demos = load_expert_demonstrations("relocate", 25).subset(2)
+    save_minari_dataset(demos, "csirl/relocate/expert-v0", root=tmp_path, task="relocate")
+    back = load_minari_dataset("csirl/relocate/expert-v0", root=tmp_path, task="relocate")
+    assert back == demos and back.metadata["generator"].endswith("DAPGRelocateExpert")
+    with pytest.raises(ValueError, match="already exists"):
+        save_minari_dataset(demos, "csirl/relocate/expert-v0", root=tmp_path)
+    one = demos.subset(1)
+    save_minari_dataset(one, "csirl/relocate/expert-v0", root=tmp_path, overwrite=True)
+    assert load_minari_dataset("csirl/relocate/expert-v0", root=tmp_path).num_trajectories == 1
+    with pytest.raises(ValueError, match="needs at least 2"):  # TorchRL 0.14.1 cannot read one episode
+        minari_experience_replay("csirl/relocate/expert-v0", 4, root=tmp_path, torchrl_root=tmp_path / "torchrl")
+    save_minari_dataset(demos, "csirl/relocate/expert-v0", root=tmp_path, overwrite=True)
+
+    buffer = minari_experience_replay(
+        "csirl/relocate/expert-v0", 16, root=tmp_path, torchrl_root=tmp_path / "torchrl", task="relocate"
+    )
+    data = buffer[:]
+    flat = demos.transitions()
+    assert len(buffer) == len(flat) == 400
+    for key in ("observation", "action", ("next", "observation"), ("next", "reward"), ("next", "truncated")):
+        torch.testing.assert_close(data[key], flat[key], rtol=0, atol=0, check_dtype=False)
+    assert buffer.sample()["observation"].shape == (16, 39)
+
+
+def test_minari_dict_observations_and_dimension_mismatch(tmp_path):
+    from torchrl_csirl.data import load_expert_demonstrations
+    from torchrl_csirl.data.minari import load_minari_dataset, minari_experience_replay, save_minari_dataset
+
+    buffers = _ant_like_minari_dataset(tmp_path, "d4rl-like/antmaze/umaze-v0")
+    demos = load_minari_dataset("d4rl-like/antmaze/umaze-v0", root=tmp_path, task="antmaze-umaze")
+    assert demos.observation_dim == 29 and demos.num_trajectories == 2  # observation + achieved_goal
+    expected = np.concatenate([buffers[1].observations["observation"], buffers[1].observations["achieved_goal"]], 1)
+    np.testing.assert_allclose(demos.trajectory(1)["observation"].numpy(), expected[:-1], rtol=1e-6)
+    assert demos.metadata == {"source": "minari", "dataset_id": "d4rl-like/antmaze/umaze-v0"}
+    buffer = minari_experience_replay(
+        "d4rl-like/antmaze/umaze-v0", 4, root=tmp_path, torchrl_root=tmp_path / "torchrl", task="antmaze-umaze"
+    )
+    data = buffer[:]
+    np.testing.assert_allclose(data["next", "observation", "achieved_goal"][5:].numpy(), expected[1:, 27:], rtol=1e-6)
+    np.testing.assert_allclose(data["action"][5:].numpy(), buffers[1].actions)
+
+    message = "observations of size 29 and actions of size 8, but task 'relocate' has 39 and 30"
+    with pytest.raises(ValueError, match=message):
+        load_minari_dataset("d4rl-like/antmaze/umaze-v0", root=tmp_path, task="relocate")
+    with pytest.raises(ValueError, match="size 39 and actions of size 30, but task 'merge' has 25 and 2"):
+        save_minari_dataset(load_expert_demonstrations("relocate", 1), "x/y-v0", root=tmp_path, task="merge")
+    save_minari_dataset(load_expert_demonstrations("merge", 5), "csirl/merge/expert-v0", root=tmp_path)
+    with pytest.raises(ValueError, match="size 25 and actions of size 2, but task 'antmaze-umaze' has 29 and 8"):
+        minari_experience_replay(
+            "csirl/merge/expert-v0", 4, root=tmp_path, torchrl_root=tmp_path / "torchrl", task="antmaze-umaze"
+        )
+
+
+def test_torchrl_minari_replay_drops_contents_pinned(tmp_path, monkeypatch):
+    """TorchRL 0.14.1's MinariExperienceReplay keeps a contentless memmap copy (all zeros).
+
+    ``minari_experience_replay`` writes the transitions back; when this test fails after a
+    TorchRL upgrade, the bug is fixed and ``_restore_minari_contents`` can go.
+    """
+    from torchrl.data.datasets.minari_data import MinariExperienceReplay
+
+    from torchrl_csirl.data import load_expert_demonstrations
+    from torchrl_csirl.data.minari import save_minari_dataset
+
+    save_minari_dataset(load_expert_demonstrations("merge", 5), "csirl/merge/expert-v0", root=tmp_path)
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path))
+    raw = MinariExperienceReplay("csirl/merge/expert-v0", 4, root=str(tmp_path / "raw"), load_from_local_minari=True)
+    assert len(raw) > 0 and not raw[:]["action"].any() and not raw[:]["observation"].any()
