@@ -241,3 +241,25 @@ def test_torchrl_minari_replay_drops_contents_pinned(tmp_path, monkeypatch):
     monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path))
     raw = MinariExperienceReplay("csirl/merge/expert-v0", 4, root=str(tmp_path / "raw"), load_from_local_minari=True)
     assert len(raw) > 0 and not raw[:]["action"].any() and not raw[:]["observation"].any()
+
+
+@pytest.mark.parametrize("name", ROBOTICS)
+def test_trajectories_are_the_raw_gymnasium_robotics_ones(name):
+    """Our env steps exactly as the gymnasium-robotics env it wraps (same seed, same actions)."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from bench_envs import raw_robotics_env
+
+    ours, raw = make_gym_env(name), raw_robotics_env(name)
+    rng = np.random.default_rng(0)
+    obs, _ = ours.reset(seed=7)
+    raw_obs, _ = raw.reset(seed=7)
+    for t in range(60):
+        flat = np.concatenate([raw_obs["observation"], raw_obs["achieved_goal"]]) if isinstance(raw_obs, dict) else raw_obs
+        np.testing.assert_allclose(obs, flat.astype(np.float32), rtol=0, atol=0, err_msg=f"step {t}")
+        action = rng.uniform(-1, 1, ours.action_space.shape).astype(np.float32)
+        obs, reward, terminated, _, info = ours.step(action)
+        raw_obs, raw_reward, raw_terminated, _, raw_info = raw.step(action)
+        assert (reward, terminated, info["success"]) == (raw_reward, raw_terminated, raw_info["success"])

@@ -22,6 +22,7 @@ See ``docs/SCENARIOS.md``.
 """
 from __future__ import annotations
 
+import math
 import os
 from collections import deque
 from dataclasses import dataclass
@@ -40,6 +41,7 @@ __all__ = [
     "ROBOTICS_TASKS",
     "RelocateEnv",
     "RoboticsTaskSpec",
+    "Route",
     "maze_cell_route",
     "route_remaining_length",
 ]
@@ -93,29 +95,52 @@ def maze_cell_route(maze_map: Sequence[Sequence[Any]], start: tuple[int, int], g
     raise ValueError(f"No route from cell {start} to cell {goal} in the maze.")
 
 
-def route_remaining_length(route: np.ndarray, position: np.ndarray) -> float:
-    """Remaining length of a polyline route from a position to its end.
+class Route:
+    """A polyline route; :meth:`remaining` is the length left from a position to its end.
 
-    The position is projected on the nearest segment; the result is the distance to that
-    projection plus the route length from it to the last point.
+    The position is projected on the nearest segment; the remaining length is the distance to
+    that projection plus the route length from it to the last point. Segments are precomputed:
+    this runs every step (plain Python: a route has a handful of segments).
 
     Examples:
-        >>> route = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, -4.0]])
-        >>> route_remaining_length(route, np.array([1.0, 0.5]))
+        >>> Route([(0.0, 0.0), (4.0, 0.0), (4.0, -4.0)]).remaining(1.0, 0.5)
         7.5
     """
-    route = np.asarray(route, dtype=np.float64)
-    p = np.asarray(position, dtype=np.float64)
-    a, b = route[:-1], route[1:]
-    seg = b - a
-    seg_len = np.linalg.norm(seg, axis=1)
-    t = np.clip(np.einsum("ij,ij->i", p - a, seg) / np.maximum(seg_len**2, 1e-12), 0.0, 1.0)
-    proj = a + t[:, None] * seg
-    off = np.linalg.norm(p - proj, axis=1)
-    after = np.concatenate([np.cumsum(seg_len[::-1])[::-1][1:], [0.0]])  # length of later segments
-    remaining = off + (1.0 - t) * seg_len + after
-    k = int(np.argmin(off))
-    return float(remaining[k])
+
+    def __init__(self, points: Sequence[Sequence[float]]) -> None:
+        points = [(float(x), float(y)) for x, y in points]
+        if len(points) < 2:
+            raise ValueError(f"a route needs at least 2 points, got {len(points)}.")
+        self.points = points
+        segments = []
+        after = 0.0
+        for (ax, ay), (bx, by) in zip(points[-2::-1], points[:0:-1]):  # from the last segment back
+            sx, sy = bx - ax, by - ay
+            length = math.hypot(sx, sy)
+            segments.append((ax, ay, sx, sy, length, max(length * length, 1e-12), after))
+            after += length
+        self._segments = segments[::-1]
+        self.length = after
+
+    def remaining(self, x: float, y: float) -> float:
+        best_off, best = math.inf, 0.0
+        for ax, ay, sx, sy, length, length2, after in self._segments:
+            t = ((x - ax) * sx + (y - ay) * sy) / length2
+            t = 0.0 if t < 0.0 else (1.0 if t > 1.0 else t)
+            off = math.hypot(x - ax - t * sx, y - ay - t * sy)
+            if off < best_off:  # ties (a shared corner) give the same remaining length
+                best_off, best = off, off + (1.0 - t) * length + after
+        return best
+
+
+def route_remaining_length(route: Sequence[Sequence[float]], position: Sequence[float]) -> float:
+    """Remaining length of a polyline route from a position to its end (see :class:`Route`).
+
+    Examples:
+        >>> route_remaining_length([(0.0, 0.0), (4.0, 0.0), (4.0, -4.0)], (1.0, 0.5))
+        7.5
+    """
+    return Route(route).remaining(float(position[0]), float(position[1]))
 
 
 class _RoboticsTaskEnv(gym.Env):
@@ -132,12 +157,11 @@ class _RoboticsTaskEnv(gym.Env):
         self._steps = 0
         self._initial_distance = 0.0
 
-    # subclasses: _inner, _flatten(raw_obs), _distance(), _success()
+    # subclasses: _inner, _flatten(raw_obs) and _distance_and_success() -> (d, goal reached)
     def _info(self) -> dict[str, Any]:
-        distance = self._distance()
+        distance, success = self._distance_and_success()
         d0 = self._initial_distance
-        progress = float(np.clip(1.0 - distance / d0, 0.0, 1.0)) if d0 > 0 else 1.0
-        success = self._success()
+        progress = min(max(1.0 - distance / d0, 0.0), 1.0) if d0 > 0 else 1.0
         return {"distance_to_finish": distance, "progress": progress, "arrived": success, "success": success}
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
@@ -145,7 +169,7 @@ class _RoboticsTaskEnv(gym.Env):
         raw, _ = self._inner.reset(seed=seed, options=options)
         self._steps = 0
         self._on_reset()
-        self._initial_distance = self._distance()
+        self._initial_distance = self._distance_and_success()[0]
         self._observation = self._flatten(raw)
         return self._observation.astype(np.float32), self._info()
 
@@ -156,8 +180,12 @@ class _RoboticsTaskEnv(gym.Env):
     def _on_reset(self) -> None:
         pass
 
+    def _inner_step(self, action) -> tuple[Any, float, bool]:
+        raw, reward, terminated, _, _ = self._inner.step(action)
+        return raw, reward, terminated
+
     def step(self, action):
-        raw, reward, terminated, _, _ = self._inner.step(np.asarray(action, dtype=np.float64))
+        raw, reward, terminated = self._inner_step(action)
         self._steps += 1
         truncated = self._steps >= self.max_steps and not terminated
         self._observation = self._flatten(raw)
@@ -203,7 +231,8 @@ class AntMazeUMazeEnv(_RoboticsTaskEnv):
         maze = self._inner.maze
         cells = maze_cell_route(ANTMAZE_UMAZE_MAP, self.start_cell, self.goal_cell)
         self.route_cells = cells
-        self._route = np.stack([maze.cell_rowcol_to_xy(np.array(c)) for c in cells])
+        self._route_points = [tuple(maze.cell_rowcol_to_xy(np.array(c)).tolist()) for c in cells]
+        self._route = Route(self._route_points)
 
     start_cell = (1, 1)
     goal_cell = (3, 1)
@@ -218,16 +247,33 @@ class AntMazeUMazeEnv(_RoboticsTaskEnv):
         return np.asarray(self._inner.ant_env.data.qpos[:2], dtype=np.float64)
 
     def _on_reset(self) -> None:
-        self._route[-1] = self.goal  # the route ends at the (noisy) goal itself
+        # the route ends at the (noisy) goal itself
+        self._route = Route([*self._route_points[:-1], tuple(self.goal.tolist())])
 
-    def _flatten(self, raw: dict) -> np.ndarray:
-        return np.concatenate([raw["observation"], raw["achieved_goal"]]).astype(np.float64)
+    def _flatten(self, raw: dict | np.ndarray) -> np.ndarray:
+        if isinstance(raw, dict):  # reset: AntMazeEnv's dict observation
+            return np.concatenate([raw["observation"], raw["achieved_goal"]]).astype(np.float64)
+        return raw  # _inner_step's, already flat
 
-    def _distance(self) -> float:
-        return route_remaining_length(self._route, self.position())
+    def _inner_step(self, action) -> tuple[np.ndarray, float, bool]:
+        """``AntMazeEnv.step`` for the episodic, fixed-goal task, with one distance per step.
 
-    def _success(self) -> bool:
-        return bool(np.linalg.norm(self.position() - self.goal) <= ANTMAZE_SUCCESS_RADIUS)
+        The ant steps exactly as in ``AntMazeEnv.step``; the sparse reward (1 within 0.45 m of
+        the goal) and the termination there are computed from one ``hypot`` instead of three
+        ``np.linalg.norm`` calls (``tests/test_robotics.py`` checks the trajectories are the
+        raw environment's). The goal never moves (``continuing_task=False``).
+        """
+        ant_obs, _, _, _, _ = self._inner.ant_env.step(action)
+        x, y = ant_obs[0], ant_obs[1]
+        gx, gy = self._inner.goal
+        reached = math.hypot(x - gx, y - gy) <= ANTMAZE_SUCCESS_RADIUS
+        return np.concatenate([ant_obs[2:], ant_obs[:2]]), 1.0 if reached else 0.0, reached
+
+    def _distance_and_success(self) -> tuple[float, bool]:
+        x, y = self._inner.ant_env.data.qpos[:2]
+        gx, gy = self._inner.goal
+        success = math.hypot(x - gx, y - gy) <= ANTMAZE_SUCCESS_RADIUS
+        return self._route.remaining(float(x), float(y)), bool(success)
 
 
 class RelocateEnv(_RoboticsTaskEnv):
@@ -253,20 +299,14 @@ class RelocateEnv(_RoboticsTaskEnv):
         self.action_space = self._inner.action_space
         self.observation_space = spaces.Box(-np.inf, np.inf, (39,), np.float32)
 
-    def _object_to_target(self) -> np.ndarray:
-        inner = self._inner
-        obj = inner.data.xpos[inner.obj_body_id]
-        target = inner.data.site_xpos[inner.target_obj_site_id]
-        return np.asarray(obj - target, dtype=np.float64)
-
     def _flatten(self, raw: np.ndarray) -> np.ndarray:
         return np.asarray(raw, dtype=np.float64)
 
-    def _distance(self) -> float:
-        return float(np.linalg.norm(self._object_to_target()))
-
-    def _success(self) -> bool:
-        return self._distance() < RELOCATE_SUCCESS_RADIUS
+    def _distance_and_success(self) -> tuple[float, bool]:
+        inner = self._inner
+        dx, dy, dz = inner.data.xpos[inner.obj_body_id] - inner.data.site_xpos[inner.target_obj_site_id]
+        distance = math.sqrt(dx * dx + dy * dy + dz * dz)
+        return distance, distance < RELOCATE_SUCCESS_RADIUS
 
 
 @dataclass(frozen=True, kw_only=True)
