@@ -316,6 +316,10 @@ class RoboticsTaskSpec(TaskSpec):
     Attributes (besides :class:`~torchrl_csirl.envs.spec.TaskSpec`'s):
         base_env: the gymnasium-robotics environment wrapped.
         env_options: the constructor keywords accepted as overrides.
+        maze_map: the maze (rows of cells, ``1`` a wall; AntMaze) or ``None``; cell ``(row, col)``
+            is centred at ``((col + 0.5) s - W s / 2, H s / 2 - (row + 0.5) s)`` with ``s`` =
+            :attr:`maze_cell_size` [m] and ``H x W`` cells.
+        maze_cell_size: the side of a maze cell [m].
 
     Examples:
         >>> from torchrl_csirl.envs.robotics import ROBOTICS_TASKS
@@ -328,6 +332,8 @@ class RoboticsTaskSpec(TaskSpec):
 
     base_env: str = ""
     env_options: tuple[str, ...] = ()
+    maze_map: tuple[tuple[Any, ...], ...] | None = None
+    maze_cell_size: float = 4.0
 
     def gym_make_kwargs(self, render_mode: str | None = None, **overrides: Any) -> dict[str, Any]:
         allowed = set(self.env_options)
@@ -360,6 +366,7 @@ def _antmaze_spec() -> RoboticsTaskSpec:
         gym_id="csirl/antmaze-umaze-v0",
         base_env="AntMaze_UMaze-v5",
         env_options=("position_noise",),
+        maze_map=ANTMAZE_UMAZE_MAP,
         entry_point=f"{__name__}:AntMazeUMazeEnv",
         obs_dim=29,
         action_dim=8,
