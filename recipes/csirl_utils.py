@@ -42,7 +42,7 @@ from common.registry import register_recipe
 from common.run import ExpertDataError, resolve_device
 from torchrl_csirl.curriculum import SubgoalCurriculum
 from torchrl_csirl.data import DemonstrationMixer
-from torchrl_csirl.envs import FAILURE_KEYS, SCENARIOS, ScenarioSpec
+from torchrl_csirl.envs import FAILURE_KEYS, SCENARIOS, ScenarioSpec, resolve_scenario  # noqa: F401 - SCENARIOS: used by tests
 from torchrl_csirl.data import ExpertDemonstrations
 from torchrl_csirl.modules import (
     EgoRelativeFeatures,
@@ -267,7 +267,7 @@ def make_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume_fra
     """
     torch.manual_seed(cfg.seed)
     device = resolve_device(cfg.device)
-    spec = SCENARIOS[cfg.env.scenario]
+    spec = resolve_scenario(cfg.env.scenario)  # a driving scenario or a robotics task
     demos = load_experts(cfg.expert, spec)
     curriculum_obs = demos.trajectory_observations(0, include_final=True).to(device)
     modules = make_loss_modules(cfg, spec, device, demos)
