@@ -32,9 +32,12 @@ from csirl_utils import CSIRLHighwayConfig, load_config, load_run_config, make_t
 from torchrl_csirl.trainers import load_checkpoint  # noqa: E402
 
 
-def build(argv: list[str]) -> Run:
-    """Configuration, run directory and all the pieces; restores the checkpoint when resuming."""
-    cfg = load_config(argv)
+def build(argv: list[str], load=load_config, load_run=load_run_config) -> Run:
+    """Configuration, run directory and all the pieces; restores the checkpoint when resuming.
+
+    ``load`` / ``load_run`` read the configuration (another recipe's schema, e.g. csirl_robotics.py).
+    """
+    cfg = load(argv)
     if cfg.checkpoint.resume is None:
         run_dir = make_run_dir(cfg.logger.output_dir, cfg.logger.exp_name,
                                default_run_name(cfg.env.scenario, method_name(cfg), cfg.seed), cfg.logger.overwrite)
@@ -46,7 +49,7 @@ def build(argv: list[str]) -> Run:
             raise
     run_dir, checkpoint = resolve_resume(cfg.checkpoint.resume)
     # the saved configuration, updated by this command line (e.g. a larger total_frames)
-    cfg = load_run_config(run_dir, [a for a in argv if not a.startswith("checkpoint.resume=")])
+    cfg = load_run(run_dir, [a for a in argv if not a.startswith("checkpoint.resume=")])
     counters = torch.load(os.path.join(checkpoint, "state.pt"), weights_only=False, map_location="cpu")["counters"]
     run = make_trainer(cfg, run_dir, frames_done=counters["frames"], resume_frames=counters["frames"])
     try:
@@ -58,39 +61,47 @@ def build(argv: list[str]) -> Run:
     return run
 
 
-def curriculum_plots(run: Run) -> list[str]:
-    """The subgoal curriculum with its uncertainty profiles, and the scene with the selected subgoals."""
+def curriculum_plots(run: Run, picture=None) -> list[str]:
+    """The subgoal curriculum with its uncertainty profiles, and the task with the selected subgoals.
+
+    ``picture(spec, curriculum_observations, subgoals, path)`` draws the task (default: the driving
+    scene, :func:`~torchrl_csirl.visualization.render_curriculum`).
+    """
     from torchrl_csirl.visualization import plot_subgoal_curriculum, render_curriculum
 
     history = run.selection.history
+    picture = picture or render_curriculum
     paths = [
         plot_subgoal_curriculum(history, os.path.join(run.run_dir, "subgoals.png"),
                                 curriculum_length=run.curriculum.length, delta=run.curriculum.delta),
-        render_curriculum(run.spec.name, run.curriculum.expert_observations.cpu(),
-                          sorted({h["subgoal"] for h in history} | {run.curriculum.subgoal}),
-                          os.path.join(run.run_dir, "curriculum.png")),
+        picture(run.spec, run.curriculum.expert_observations.cpu(),
+                sorted({h["subgoal"] for h in history} | {run.curriculum.subgoal}),
+                os.path.join(run.run_dir, "curriculum.png")),
     ]
     return [os.fspath(p) for p in paths]
 
 
-def finish(run: Run) -> dict[str, object]:
-    """Final evaluation, checkpoint, policy, plots and the summary."""
+def finish(run: Run, picture=None) -> dict[str, object]:
+    """Final evaluation, checkpoint, policy, plots and the summary (``picture``: see :func:`curriculum_plots`)."""
     summary = final_summary(run, method_name(run.cfg), title=f"CSIRL on {run.spec.name}")
     summary.update(final_subgoal=run.curriculum.subgoal, curriculum_length=run.curriculum.length)
-    summary["plots"] += curriculum_plots(run)
+    summary["plots"] += curriculum_plots(run, picture)
     return summary
 
 
-def main(argv: list[str] | None = None) -> dict[str, object]:
+def main(argv: list[str] | None = None, *, schema: type = CSIRLHighwayConfig, doc: str | None = None,
+         build_run=build, finish_run=finish) -> dict[str, object]:
+    """Build, train, finish; ``schema``, ``doc``, ``build_run`` and ``finish_run`` are another recipe's
+    when it reuses this one (csirl_robotics.py)."""
     argv = sys.argv[1:] if argv is None else list(argv)
     if "--help" in argv or "-h" in argv:
-        print(__doc__ + "\nKeys (key, default, what it accepts, meaning):\n  " + "\n  ".join(describe(CSIRLHighwayConfig)))
+        print((doc or __doc__) + "\nKeys (key, default, what it accepts, meaning):\n  " + "\n  ".join(describe(schema)))
         return {}
     start = time.perf_counter()
-    run = build(argv)
+    run = build_run(argv)
     train(run)
     try:
-        summary = finish(run)
+        summary = finish_run(run)
     finally:
         run.logger.close()
         run.eval_env.close()

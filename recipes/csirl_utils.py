@@ -42,8 +42,16 @@ from common.registry import register_recipe
 from common.run import ExpertDataError, resolve_device
 from torchrl_csirl.curriculum import SubgoalCurriculum
 from torchrl_csirl.data import DemonstrationMixer
-from torchrl_csirl.envs import FAILURE_KEYS, SCENARIOS, ScenarioSpec
-from torchrl_csirl.modules import EgoRelativeFeatures, make_actor, make_qvalue, make_reward_network
+from torchrl_csirl.envs import FAILURE_KEYS, SCENARIOS, ScenarioSpec, resolve_scenario  # noqa: F401 - SCENARIOS: used by tests
+from torchrl_csirl.data import ExpertDemonstrations
+from torchrl_csirl.modules import (
+    EgoRelativeFeatures,
+    ExpertCenteredReward,
+    expert_reference_states,
+    make_actor,
+    make_qvalue,
+    make_reward_network,
+)
 from torchrl_csirl.objectives import ActorBehaviourCloning, EnsembleSACLoss, MetaRewardLoss
 from torchrl_csirl.trainers import MetaRewardUpdate, SACUpdate, SubgoalSelectionHook
 from torchrl_csirl.transforms import CombineRewards, IntrinsicReward, SubgoalMatchingReward
@@ -66,6 +74,11 @@ class CSIRLConfig:
     lr_inner: float = option(0.01, above=0.0, help="inner SGD step of the meta-gradient")
     meta_scale: float = option(100.0, above=0.0, help="multiplies the meta-objective")
     reward_l1_coef: float = option(1.0, minimum=0.0, help="weight of mean |r_w| in the meta-objective")
+    reward_reference: str = option(
+        "none", choices=("none", "expert"),
+        help="expert: r_w measured against its mean over 256 expert states (no constant shift can be learned; "
+             "ExpertCenteredReward); none: the paper")
+    reward_scale: float = option(1.0, above=0.0, help="multiplies the expert-centred r_w (reward_reference=expert)")
     matching_target: str = option("final", choices=("final", "next"),
                                   help="final (the paper's text) | next (published code)")
     matching_features: str = option("position", choices=("ego", "position"),
@@ -144,11 +157,14 @@ class LossModules:
     meta: MetaRewardLoss | None
 
 
-def make_loss_modules(cfg: DictConfig, spec: ScenarioSpec, device: torch.device | str = "cpu") -> LossModules:
+def make_loss_modules(cfg: DictConfig, spec: ScenarioSpec, device: torch.device | str = "cpu",
+                      demos: ExpertDemonstrations | None = None) -> LossModules:
     """Actor, ensemble SAC loss, target updater, reward network and meta-loss (None for CSIRL-B), on ``device``.
 
     With ``model.ego_relative_features`` every network reads the observation through
-    :class:`~torchrl_csirl.modules.EgoRelativeFeatures` (a fixed map, no parameters).
+    :class:`~torchrl_csirl.modules.EgoRelativeFeatures` (a fixed map, no parameters). With
+    ``csirl.reward_reference=expert`` the reward network is wrapped in
+    :class:`~torchrl_csirl.modules.ExpertCenteredReward` over 256 states of ``demos``.
     """
     features = EgoRelativeFeatures.from_scenario(spec) if cfg.model.ego_relative_features else None
     actor = make_actor(spec.obs_dim, spec.action_dim, input_features=features)
@@ -162,7 +178,13 @@ def make_loss_modules(cfg: DictConfig, spec: ScenarioSpec, device: torch.device 
         dispersion=cfg.csirl.dispersion,
     ).to(device)
     target_updater = SoftUpdate(sac, tau=cfg.optim.tau)
-    reward_network = make_reward_network(spec.obs_dim, input_features=features).to(device)
+    reward_network = make_reward_network(spec.obs_dim, input_features=features)
+    if cfg.csirl.reward_reference == "expert":
+        if demos is None:
+            raise ValueError("csirl.reward_reference=expert needs the demonstrations (demos=).")
+        reference = expert_reference_states(demos.transitions()["observation"], seed=cfg.seed)
+        reward_network = ExpertCenteredReward(reward_network, reference, scale=cfg.csirl.reward_scale)
+    reward_network = reward_network.to(device)
     meta = None
     if cfg.csirl.intrinsic:
         meta = MetaRewardLoss(sac, reward_network, lr_inner=cfg.csirl.lr_inner, scale=cfg.csirl.meta_scale,
@@ -245,10 +267,10 @@ def make_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume_fra
     """
     torch.manual_seed(cfg.seed)
     device = resolve_device(cfg.device)
-    spec = SCENARIOS[cfg.env.scenario]
+    spec = resolve_scenario(cfg.env.scenario)  # a driving scenario or a robotics task
     demos = load_experts(cfg.expert, spec)
     curriculum_obs = demos.trajectory_observations(0, include_final=True).to(device)
-    modules = make_loss_modules(cfg, spec, device)
+    modules = make_loss_modules(cfg, spec, device, demos)
     optimizers = make_optimizers(cfg, modules)
     curriculum = SubgoalCurriculum(curriculum_obs, modules.sac, modules.actor, delta=cfg.csirl.delta,
                                    sigma=cfg.csirl.sigma, dispersion=cfg.csirl.dispersion, seed=cfg.seed)

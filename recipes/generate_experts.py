@@ -1,11 +1,15 @@
-"""Roll the privileged expert driver and write expert demonstrations (``ExpertDemonstrations`` ``.npz``).
+"""Roll a task's expert and write expert demonstrations (``ExpertDemonstrations`` ``.npz``).
+
+Experts: the privileged expert driver on the driving scenarios, the DAPG policy on ``relocate``.
 
 Episode ``i`` is reset with seed ``--seed + i``; the expert itself is deterministic, so the same
 command writes the same bytes. The script ends with ONE JSON line with the statistics of every
-rolled episode (``success_rate``, ``crash_rate``, ``accomplish_rate``, ``episodes``, ``kept``,
-``rejected``). Recorded episodes (``--out``, ``--shipped``) end at the ego's arrival (last
-transition ``truncated`` where the env does not itself terminate there; ``--full-episodes`` keeps
-recording until the env ends the episode); evaluation without ``--out`` runs full episodes.
+rolled episode (``success_rate``, ``crash_rate``, ``accomplish_rate``, ``return_mean``, ...,
+``episodes``, ``kept``, ``rejected``). Recorded episodes (``--out``, ``--shipped``) end at the
+ego's arrival (last transition ``truncated`` where the env does not itself terminate there;
+``--full-episodes`` keeps recording until the env ends the episode) on tasks whose spec says
+``episode_ends_at_goal``; Relocate episodes always run their 200 steps (the ball must stay at the
+target). Evaluation without ``--out`` runs full episodes.
 
 Examples:
     python recipes/generate_experts.py --scenario merge --episodes 5 --seed 0 --out /tmp/merge_5.npz
@@ -16,6 +20,10 @@ Examples:
     python recipes/generate_experts.py --scenario intersection --episodes 100 --seed 10000
     # the shipped datasets of one scenario (torchrl_csirl/data/experts/<scenario>/)
     python recipes/generate_experts.py --scenario merge --shipped
+    # Relocate (DAPG expert): the shipped 25 trajectories, and an evaluation on unseen seeds
+    python recipes/generate_experts.py --scenario relocate --episodes 25 --seed 0 --only-successful \
+        --out torchrl_csirl/data/experts/relocate/expert_25.npz
+    python recipes/generate_experts.py --scenario relocate --episodes 20 --seed 10000
 """
 from __future__ import annotations
 
@@ -29,7 +37,26 @@ import numpy as np
 
 SHIPPED_SEED = 20230608
 """Base seed of the shipped datasets (trajectory 0 of the empty-road curriculum uses this seed)."""
+SHIPPED_SCENARIOS = ("highway-fast", "merge", "roundabout", "intersection")
+"""The scenarios of ``--shipped`` (empty-road and traffic curricula)."""
 SHIPPED_TRAJECTORIES = 25
+ACTION_UNITS = {
+    "driving": "normalised: [acceleration / 15 m/s^2, steering / (pi/2) rad]",
+    "robotics": "the gymnasium-robotics action in [-1, 1] (mapped by the env to actuator ranges)",
+}
+"""What an action means, per task family (recorded in the datasets' metadata)."""
+
+
+def expert_metadata(scenario: str) -> dict[str, str]:
+    """The ``generator`` (the expert's class) and ``action_units`` entries of a task's datasets."""
+    from torchrl_csirl.envs import resolve_scenario
+    from torchrl_csirl.envs.expert import make_expert
+
+    expert_class = type(make_expert(scenario))
+    return {
+        "generator": f"{expert_class.__module__}.{expert_class.__qualname__}",
+        "action_units": ACTION_UNITS[resolve_scenario(scenario).family],
+    }
 
 
 def _progress(iterable: Any, total: int, desc: str) -> Any:
@@ -58,9 +85,10 @@ def roll_episodes(
     With ``only_successful``, rolls until ``episodes`` successful ones are collected (at most
     ``max_attempts`` episodes, default ``4 * episodes``). Returns (kept episodes, all episodes).
     """
-    from torchrl_csirl.envs import make_gym_env
+    from torchrl_csirl.envs import make_gym_env, resolve_scenario
     from torchrl_csirl.envs.expert import make_expert, rollout_expert
 
+    end_at_arrival = end_at_arrival and resolve_scenario(scenario).episode_ends_at_goal
     env = make_gym_env(scenario)
     expert = make_expert(scenario)
     attempts = episodes if not only_successful else (max_attempts or 4 * episodes)
@@ -99,6 +127,11 @@ def summarize(rolled: list[dict], kept: list[dict]) -> dict[str, Any]:
         "accomplish_rate": float(np.mean([e["accomplish_rate"] for e in rolled])),
         "accomplish_rate_min": float(np.min([e["accomplish_rate"] for e in rolled])),
         "mean_length": float(np.mean([e["length"] for e in rolled])),
+        "return_mean": float(np.mean([e["return"] for e in rolled])),
+        "return_min": float(np.min([e["return"] for e in rolled])),
+        "return_max": float(np.max([e["return"] for e in rolled])),
+        "success_steps_mean": float(np.mean([e["success_steps"] for e in rolled])),
+        "success_steps_min": int(np.min([e["success_steps"] for e in rolled])),
     }
 
 
@@ -156,10 +189,9 @@ def generate_shipped(scenario: str, out_dir: str, seed: int = SHIPPED_SEED) -> d
     stats = summarize(rolled, traffic)
     base_meta = {
         "scenario": scenario,
-        "generator": "torchrl_csirl.envs.expert.ExpertDriver",
+        **expert_metadata(scenario),
         "command": f"python recipes/generate_experts.py --scenario {scenario} --shipped --seed {seed}",
         "base_seed": seed,
-        "action_units": "normalised: [acceleration / 15 m/s^2, steering / (pi/2) rad]",
     }
     os.makedirs(out_dir, exist_ok=True)
     written = {}
@@ -174,7 +206,9 @@ def generate_shipped(scenario: str, out_dir: str, seed: int = SHIPPED_SEED) -> d
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--scenario", required=True, choices=["highway-fast", "merge", "roundabout", "intersection"])
+    from torchrl_csirl.envs.expert import expert_tasks
+
+    parser.add_argument("--scenario", required=True, choices=list(expert_tasks()))
     parser.add_argument("--episodes", type=int, default=25, help="episodes to roll (kept ones with --only-successful)")
     parser.add_argument("--seed", type=int, default=None, help="seed of the first episode (then +1 per episode)")
     parser.add_argument("--out", default=None, help="output .npz (omit to only evaluate)")
@@ -194,6 +228,11 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     if args.shipped:
         from torchrl_csirl.data.shipped import EXPERTS_DIR
 
+        if args.empty_road or args.scenario not in SHIPPED_SCENARIOS:
+            parser.error(
+                f"--shipped writes the driving scenarios' curriculum datasets ({', '.join(SHIPPED_SCENARIOS)}); "
+                "for relocate use --out (docs/EXPERTS.md gives the command)"
+            )
         out_dir = args.shipped_dir or os.path.join(EXPERTS_DIR, args.scenario)
         result = generate_shipped(args.scenario, out_dir, SHIPPED_SEED if args.seed is None else args.seed)
     else:
@@ -209,13 +248,12 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
                 raise SystemExit("no episode kept: nothing written")
             meta = {
                 "scenario": args.scenario,
-                "generator": "torchrl_csirl.envs.expert.ExpertDriver",
+                **expert_metadata(args.scenario),
                 "base_seed": seed,
                 "empty_road": bool(args.empty_road),
                 "only_successful": bool(args.only_successful),
-                "end_at_arrival": not args.full_episodes,
+                "end_at_arrival": bool(kept[0]["end_at_arrival"]),
                 "num_trajectories": len(kept),
-                "action_units": "normalised: [acceleration / 15 m/s^2, steering / (pi/2) rad]",
             }
             result["out"] = build_demonstrations(kept, meta).save(args.out)
         if args.only_successful:

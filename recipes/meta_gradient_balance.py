@@ -51,7 +51,7 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     torch.manual_seed(cfg.seed)
     spec = SCENARIOS[cfg.env.scenario]
     demos = load_experts(cfg.expert, spec)
-    modules = make_loss_modules(cfg, spec)
+    modules = make_loss_modules(cfg, spec, demos=demos)
     if resume:
         load_trained(modules, resume)
     curriculum_obs = demos.trajectory_observations(0, include_final=True)

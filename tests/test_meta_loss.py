@@ -287,3 +287,44 @@ def test_joint_sac_update_matches_separate_losses():
     assert all(p.grad is not None for p in sac.actor_network_params.values(True, True))
     assert all(p.grad is None for p in sac.qvalue_network_params.values(True, True))
     assert torch.isclose(out["alpha"], torch.tensor(0.01, dtype=out["alpha"].dtype))
+
+
+class _Shifted(nn.Module):
+    """A reward network with a trainable constant added to its output."""
+
+    def __init__(self, net: nn.Module) -> None:
+        super().__init__()
+        self.net = net
+        self.offset = nn.Parameter(torch.tensor(0.3, dtype=torch.float64))
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        return self.net(obs) + self.offset
+
+
+def test_expert_centred_reward_has_no_constant_shift_direction():
+    """ExpertCenteredReward: a constant added to r_w changes nothing, so the meta-gradient never
+    moves it, while the state-dependent parameters still receive a meta-gradient."""
+    from torchrl_csirl.modules import ExpertCenteredReward
+
+    sac, reward, _, online, expert, regularizer = _setup(reward_l1_coef=0.0)
+    shifted = TensorDictModule(_Shifted(reward.module), in_keys=["observation"], out_keys=["intrinsic_reward"])
+    centred = ExpertCenteredReward(shifted, expert["observation"], scale=2.0)
+    before = centred(online.select("observation").clone())["intrinsic_reward"]
+    with torch.no_grad():
+        shifted.module.offset += 5.0
+    after = centred(online.select("observation").clone())["intrinsic_reward"]
+    torch.testing.assert_close(before, after)
+    torch.testing.assert_close(centred(expert.select("observation").clone())["intrinsic_reward"].mean(),
+                               torch.zeros((), dtype=torch.float64), atol=1e-12, rtol=0)
+
+    for l1 in (0.0, 1.0):
+        meta = MetaRewardLoss(sac, centred, reward_l1_coef=l1)
+        centred.zero_grad()
+        meta(online, expert, regularizer)["loss_meta"].backward()
+        assert abs(shifted.module.offset.grad.item()) < 1e-10
+        assert sum(p.grad.abs().sum() for p in reward.parameters()) > 0
+
+    with pytest.raises(ValueError, match="state-only"):
+        ExpertCenteredReward(make_reward_network(OBS, action_dim=ACT), expert["observation"])
+    with pytest.raises(ValueError, match="non-empty"):
+        ExpertCenteredReward(shifted, torch.zeros(0, OBS))

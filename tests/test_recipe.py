@@ -328,6 +328,21 @@ def test_ego_relative_features_switch_reaches_every_network(enabled):
         assert len(found) == (1 if enabled else 0)
 
 
+def test_reward_reference_switch_wraps_the_reward_network_around_expert_states():
+    from torchrl_csirl.modules import ExpertCenteredReward
+
+    cfg = csirl_utils.load_config(["csirl.reward_reference=expert", "csirl.reward_scale=0.5"])
+    spec = csirl_utils.SCENARIOS[cfg.env.scenario]
+    demos = builders.load_experts(cfg.expert, spec)
+    reward = csirl_utils.make_loss_modules(cfg, spec, demos=demos).reward_network
+    assert isinstance(reward, ExpertCenteredReward) and reward.scale == 0.5
+    assert reward.reference_observations.shape == (256, spec.obs_dim)
+    assert not isinstance(csirl_utils.make_loss_modules(csirl_utils.load_config([]), spec).reward_network,
+                          ExpertCenteredReward)
+    with pytest.raises(ValueError, match="needs the demonstrations"):
+        csirl_utils.make_loss_modules(cfg, spec)
+
+
 @pytest.mark.parametrize(
     "scenario, overrides, expected",
     [

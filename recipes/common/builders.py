@@ -28,7 +28,7 @@ from torchrl.envs import Compose, EnvBase, Transform
 from common.config import ConfigError
 from common.run import ExpertDataError
 from torchrl_csirl.data import ExpertDemonstrations, import_published, load_expert_demonstrations
-from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, make_serial_env
+from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, make_serial_env, resolve_scenario
 from torchrl_csirl.envs import make_env as make_scenario_env
 from torchrl_csirl.trainers import (
     CheckpointHook,
@@ -184,7 +184,7 @@ def make_worker_env_fn(scenario: str, collector: DictConfig) -> Callable[[], Env
         >>> make_worker_env_fn("merge", c)().batch_size
         torch.Size([2])
     """
-    return partial(make_serial_env, scenario, envs_per_worker(collector, SCENARIOS[scenario]))
+    return partial(make_serial_env, scenario, envs_per_worker(collector, resolve_scenario(scenario)))
 
 
 def make_eval_env(scenario: str) -> EnvBase:
@@ -472,6 +472,7 @@ def final_summary(run: Run, method: str, title: str) -> dict[str, Any]:
         "accomplish_rate_std": final["accomplish_rate_std"],
         "success_rate": final["success_rate"],
         "crash_rate": final["crash_rate"],
+        "return": final["env_return"],  # the env's own reward (robotics: the paper's metric; driving: reference)
         "normalized_accomplish_rate": (
             float(normalized_accomplish_rate(final["accomplish_rate"], expert_rate)) if expert_rate else None),
         "auc": sum(h["accomplish_rate"] for h in history) / len(history) if history else None,

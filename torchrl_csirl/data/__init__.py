@@ -1,7 +1,9 @@
-"""Expert demonstrations: the :class:`ExpertDemonstrations` container, its ``.npz`` format and importers."""
+"""Expert demonstrations: the :class:`ExpertDemonstrations` container, its ``.npz`` format, importers
+and Minari interop (:mod:`torchrl_csirl.data.minari`)."""
 from __future__ import annotations
 
 from torchrl_csirl.data.expert import FORMAT_VERSION, ExpertDemonstrations
+from torchrl_csirl.data.minari import load_minari_dataset, minari_experience_replay, save_minari_dataset
 from torchrl_csirl.data.mixing import DemonstrationMixer
 from torchrl_csirl.data.published import RestrictedUnpickler, import_published, load_published_dict
 from torchrl_csirl.data.shipped import (
@@ -21,5 +23,8 @@ __all__ = [
     "expert_dataset_path",
     "import_published",
     "load_expert_demonstrations",
+    "load_minari_dataset",
     "load_published_dict",
+    "minari_experience_replay",
+    "save_minari_dataset",
 ]

@@ -1,9 +1,9 @@
-"""Expert demonstrations shipped with the package (recorded with our own expert driver).
+"""Expert demonstrations shipped with the package (recorded with our own experts).
 
-Layout: ``torchrl_csirl/data/experts/<scenario>/<curriculum>_25.npz`` with ``curriculum`` in
-``"empty"`` (trajectory 0 recorded on an empty road, as in the paper) and ``"traffic"``
-(trajectory 0 recorded with traffic). Both files share trajectories 1..24 (successful expert
-episodes with traffic). The paper's dataset sizes N in {1, 5, 10, 15, 20, 25} are the nested
+Layout: ``torchrl_csirl/data/experts/<task>/<curriculum>_25.npz``. Driving scenarios (our expert
+driver): ``curriculum`` in ``"empty"`` (trajectory 0 recorded on an empty road, as in the paper)
+and ``"traffic"`` (trajectory 0 recorded with traffic); both files share trajectories 1..24
+(successful expert episodes with traffic). Relocate (the DAPG policy): one file, ``"expert"``. The paper's dataset sizes N in {1, 5, 10, 15, 20, 25} are the nested
 prefixes: the dataset of size N is the first N trajectories, so every size contains the
 curriculum trajectory. See ``docs/EXPERTS.md`` for how the files were generated.
 
@@ -38,20 +38,26 @@ EXPERTS_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "experts"
 DATASET_SIZES = (1, 5, 10, 15, 20, 25)
 """The paper's dataset sizes."""
 CURRICULA = ("empty", "traffic")
+"""The driving scenarios' curricula."""
 SCENARIO_NAMES = ("highway-fast", "merge", "roundabout", "intersection")
+TASK_CURRICULA: dict[str, tuple[str, ...]] = {
+    **{name: CURRICULA for name in SCENARIO_NAMES},
+    "relocate": ("expert",),
+}
+"""Task -> the curricula of its shipped files (the first is the default)."""
 _FILE_SIZE = 25
 
 
 def available_expert_datasets() -> dict[str, list[str]]:
-    """Scenario -> curricula for which a shipped file exists.
+    """Task -> curricula for which a shipped file exists.
 
     Examples:
         >>> sorted(available_expert_datasets())
-        ['highway-fast', 'intersection', 'merge', 'roundabout']
+        ['highway-fast', 'intersection', 'merge', 'relocate', 'roundabout']
     """
     found: dict[str, list[str]] = {}
-    for scenario in SCENARIO_NAMES:
-        curricula = [c for c in CURRICULA if os.path.exists(_path(scenario, c))]
+    for scenario, task_curricula in TASK_CURRICULA.items():
+        curricula = [c for c in task_curricula if os.path.exists(_path(scenario, c))]
         if curricula:
             found[scenario] = curricula
     return found
@@ -61,33 +67,43 @@ def _path(scenario: str, curriculum: str) -> str:
     return os.path.join(EXPERTS_DIR, scenario, f"{curriculum}_{_FILE_SIZE}.npz")
 
 
-def expert_dataset_path(scenario: str, curriculum: str = "empty") -> str:
-    """Path of the shipped file of a scenario (raises a clear error when unknown/missing)."""
-    if scenario not in SCENARIO_NAMES:
-        raise ValueError(f"Unknown scenario {scenario!r}; expected one of {list(SCENARIO_NAMES)}.")
-    if curriculum not in CURRICULA:
-        raise ValueError(f"Unknown curriculum {curriculum!r}; expected one of {list(CURRICULA)}.")
+def expert_dataset_path(scenario: str, curriculum: str | None = None) -> str:
+    """Path of the shipped file of a task (raises a clear error when unknown/missing).
+
+    ``curriculum=None`` picks the task's default (driving ``"empty"``, Relocate ``"expert"``).
+
+    Examples:
+        >>> os.path.basename(expert_dataset_path("relocate"))
+        'expert_25.npz'
+    """
+    if scenario not in TASK_CURRICULA:
+        raise ValueError(f"Unknown scenario {scenario!r}; expected one of {list(TASK_CURRICULA)}.")
+    curricula = TASK_CURRICULA[scenario]
+    curriculum = curricula[0] if curriculum is None else curriculum
+    if curriculum not in curricula:
+        raise ValueError(f"Unknown curriculum {curriculum!r} for {scenario!r}; expected one of {list(curricula)}.")
     path = _path(scenario, curriculum)
     if not os.path.exists(path):
         raise FileNotFoundError(
             f"No shipped expert dataset for {scenario!r} ({curriculum}); available: "
-            f"{available_expert_datasets()}. Regenerate it with "
-            f"`python recipes/generate_experts.py --scenario {scenario} --shipped`."
+            f"{available_expert_datasets()}. Regenerate it with the command in docs/EXPERTS.md."
         )
     return path
 
 
 def load_expert_demonstrations(
-    scenario: str, num_trajectories: int = 25, curriculum: str = "empty"
+    scenario: str, num_trajectories: int = 25, curriculum: str | None = None
 ) -> ExpertDemonstrations:
     """Load the shipped expert demonstrations of a scenario.
 
     Args:
-        scenario: ``"highway-fast"``, ``"merge"``, ``"roundabout"`` or ``"intersection"``.
+        scenario: ``"highway-fast"``, ``"merge"``, ``"roundabout"``, ``"intersection"`` or
+            ``"relocate"``.
         num_trajectories: one of the paper's sizes ``(1, 5, 10, 15, 20, 25)``; the dataset of size N
             is the first N trajectories of the file (nested prefixes).
-        curriculum: ``"empty"`` (trajectory 0 recorded on an empty road, the paper's setting) or
-            ``"traffic"`` (trajectory 0 recorded with traffic).
+        curriculum: driving: ``"empty"`` (trajectory 0 recorded on an empty road, the paper's
+            setting; the default) or ``"traffic"`` (trajectory 0 recorded with traffic);
+            Relocate: ``"expert"`` (the default).
 
     Returns:
         the demonstrations; ``metadata`` records the scenario, curriculum, seeds and per-episode stats.
@@ -114,7 +130,7 @@ def load_expert_demonstrations(
     return demos.with_metadata(**updates)
 
 
-def curriculum_trajectory(scenario: str, curriculum: str = "empty") -> TensorDictBase:
+def curriculum_trajectory(scenario: str, curriculum: str | None = None) -> TensorDictBase:
     """The single curriculum trajectory (trajectory 0) of a scenario's shipped dataset.
 
     Examples:

@@ -1,10 +1,13 @@
-"""The paper's driving scenarios (highway-env based) and the accomplish-rate metric.
+"""The paper's tasks: driving scenarios (highway-env based), robotics tasks, the metrics.
 
 Importing this package registers the gymnasium ids ``csirl/highway-fast-v0``,
-``csirl/merge-v0``, ``csirl/roundabout-v0`` and ``csirl/intersection-v0``.
+``csirl/merge-v0``, ``csirl/roundabout-v0``, ``csirl/intersection-v0`` and the robotics tasks'
+``csirl/antmaze-umaze-v0`` and ``csirl/relocate-v0`` (:mod:`torchrl_csirl.envs.robotics`).
 
-* :data:`SCENARIOS` / :class:`ScenarioSpec`: what each scenario is (observation layout,
-  episode limit, finish position, matching-reward scale).
+* :class:`TaskSpec`: what every task is (observation layout, matching features, finish/goal,
+  episode limit); :data:`TASKS` all of them by name.
+* :data:`SCENARIOS` / :class:`ScenarioSpec`: the driving scenarios (plus the Kinematics feature
+  ranges, the highway-env config, the published matching-reward scale).
 * :func:`make_gym_env` (gymnasium), :func:`make_env` (TorchRL ``GymEnv``) and
   :func:`make_serial_env` (several copies in one process, e.g. per collector worker).
 * :class:`YieldingParallelEnv`: a ``ParallelEnv`` whose main process sleeps while the workers step.
@@ -22,12 +25,14 @@ from torchrl_csirl.envs.metrics import (
 from torchrl_csirl.envs.parallel import YieldingParallelEnv
 from torchrl_csirl.envs.scenarios import (
     SCENARIOS,
+    TASKS,
     ScenarioSpec,
     make_gym_env,
     register_scenarios,
     resolve_scenario,
     scenario_config_overrides,
 )
+from torchrl_csirl.envs.spec import TaskSpec
 from torchrl_csirl.envs.torchrl_env import FAILURE_KEYS, INFO_KEYS, info_spec, make_env, make_serial_env
 
 register_scenarios()
@@ -37,6 +42,8 @@ __all__ = [
     "INFO_KEYS",
     "SCENARIOS",
     "ScenarioSpec",
+    "TASKS",
+    "TaskSpec",
     "accomplish_rate",
     "accomplish_rate_from_rollout",
     "area_under_curve",

@@ -50,6 +50,7 @@ __all__ = [
     "ExpertDriver",
     "EXPERT_CONFIGS",
     "clear_traffic",
+    "expert_tasks",
     "make_expert",
     "rollout_expert",
     "normalize_action",
@@ -805,16 +806,43 @@ class ExpertDriver:
         return penalty
 
 
-def make_expert(name: str, **overrides: Any) -> ExpertDriver:
-    """Build the expert driver of a scenario, optionally overriding fields of its :class:`ExpertConfig`.
+def _robotics_experts() -> dict[str, Any]:
+    from torchrl_csirl.envs.robotics.expert import DAPGRelocateExpert
+
+    return {"relocate": DAPGRelocateExpert}
+
+
+def expert_tasks() -> tuple[str, ...]:
+    """The tasks with an expert: the four driving scenarios and Relocate (the DAPG policy).
+
+    Examples:
+        >>> expert_tasks()[-1]
+        'relocate'
+    """
+    return (*EXPERT_CONFIGS, *_robotics_experts())
+
+
+def make_expert(name: str, **overrides: Any) -> Any:
+    """Build the expert of a task: the driver of a driving scenario (optionally overriding
+    fields of its :class:`ExpertConfig`) or a robotics task's policy (``"relocate"``: the DAPG
+    expert, :class:`~torchrl_csirl.envs.robotics.expert.DAPGRelocateExpert`).
+
+    Every expert has ``reset(env)`` and ``act(env) -> action``.
 
     Examples:
         >>> expert = make_expert("roundabout", horizon=10)
         >>> expert.config.horizon
         10
+        >>> type(make_expert("relocate")).__name__
+        'DAPGRelocateExpert'
     """
+    robotics = _robotics_experts()
+    if name in robotics:
+        if overrides:
+            raise ValueError(f"The {name!r} expert takes no options, got {sorted(overrides)}.")
+        return robotics[name]()
     if name not in EXPERT_CONFIGS:
-        raise ValueError(f"Unknown scenario {name!r}; expected one of {sorted(EXPERT_CONFIGS)}.")
+        raise ValueError(f"Unknown scenario {name!r}; expected one of {sorted(expert_tasks())}.")
     config = dataclasses.replace(EXPERT_CONFIGS[name], **overrides) if overrides else None
     return ExpertDriver(name, config=config)
 
@@ -834,7 +862,7 @@ def clear_traffic(env: Any) -> np.ndarray:
 def rollout_expert(
     env: Any,
     seed: int | None = None,
-    expert: ExpertDriver | None = None,
+    expert: Any | None = None,
     scenario: str | None = None,
     empty_road: bool = False,
     max_steps: int | None = None,
@@ -843,11 +871,13 @@ def rollout_expert(
     """Drive one episode with the expert and record it.
 
     Args:
-        env: a gymnasium env of a CSIRL scenario (``make_gym_env(name)``).
+        env: a gymnasium env of a CSIRL task (``make_gym_env(name)``, a driving scenario or a
+            robotics task with an expert, see :func:`expert_tasks`).
         seed: reset seed.
-        expert: the driver (default: ``make_expert`` of the env's scenario).
-        scenario: scenario name, when it cannot be read from the env.
-        empty_road: remove all other vehicles after the reset (see :func:`clear_traffic`).
+        expert: the expert (default: ``make_expert`` of the env's task).
+        scenario: task name, when it cannot be read from the env.
+        empty_road: remove all other vehicles after the reset (see :func:`clear_traffic`;
+            driving scenarios only).
         max_steps: optional cap on the number of steps (default: until terminated/truncated).
         end_at_arrival: end the episode at the first step where the ego has arrived
             (``info["arrived"]``), marking that transition ``truncated`` (unless the env itself
@@ -858,10 +888,12 @@ def rollout_expert(
     Returns:
         a dict with the episode in the layout of
         :meth:`torchrl_csirl.data.ExpertDemonstrations.from_episodes` (``observation`` and
-        ``next_observation`` ``[T, D]``, ``action`` ``[T, 2]``, ``reward``, ``terminated``,
+        ``next_observation`` ``[T, D]``, ``action`` ``[T, A]``, ``reward``, ``terminated``,
         ``truncated`` ``[T]``) and its statistics: ``success`` (the env's ``info["success"]``: finish
-        area reached without crash), ``crashed``, ``offroad``, ``accomplish_rate``
-        (``clip((d0 - d_min) / d0, 0, 1)``), ``distances`` (``d_0..d_T``), ``length``, ``seed``.
+        area reached without crash; Relocate: the ball at the target at some step),
+        ``success_steps`` (steps with ``info["success"]``), ``crashed``, ``offroad``,
+        ``accomplish_rate`` (``clip((d0 - d_min) / d0, 0, 1)``), ``distances`` (``d_0..d_T``),
+        ``return`` (sum of rewards), ``length``, ``seed``.
 
     Examples:
         >>> from torchrl_csirl.envs import make_gym_env
@@ -873,6 +905,8 @@ def rollout_expert(
 
     scenario = scenario or _scenario_of(env)
     expert = expert or make_expert(scenario)
+    if empty_road and scenario not in EXPERT_CONFIGS:
+        raise ValueError(f"empty_road applies to the driving scenarios only, not {scenario!r}.")
     obs, info = env.reset(seed=seed)
     if empty_road:
         obs = clear_traffic(env)
@@ -880,7 +914,7 @@ def rollout_expert(
     distances = [float(info["distance_to_finish"])]
     observations, actions, rewards, terminated, truncated = [np.asarray(obs, dtype=np.float32).ravel()], [], [], [], []
     crashed = offroad = success = False
-    step = 0
+    step = success_steps = 0
     while True:
         action = expert.act(env)
         obs, reward, term, trunc, info = env.step(action)
@@ -892,6 +926,7 @@ def rollout_expert(
         crashed = crashed or bool(info.get("crashed", False))
         offroad = offroad or bool(info.get("offroad", False))
         success = success or bool(info.get("success", False))
+        success_steps += int(bool(info.get("success", False)))
         if max_steps is not None and step >= max_steps:
             trunc = True
         if end_at_arrival and info.get("arrived", False):
@@ -915,6 +950,8 @@ def rollout_expert(
         "empty_road": bool(empty_road),
         "end_at_arrival": bool(end_at_arrival),
         "success": bool(success and not crashed and not offroad),
+        "success_steps": success_steps,
+        "return": float(np.sum(rewards)),
         "crashed": crashed,
         "offroad": offroad,
         "accomplish_rate": float(accomplish_rate(distances)),
@@ -924,7 +961,7 @@ def rollout_expert(
 def _scenario_of(env: Any) -> str:
     spec = getattr(env, "spec", None)
     gym_id = getattr(spec, "id", "") or ""
-    for name in EXPERT_CONFIGS:
+    for name in expert_tasks():
         if gym_id == f"csirl/{name}-v0":
             return name
     raise ValueError(f"Cannot infer the scenario of env {gym_id!r}; pass scenario=...")

@@ -15,6 +15,8 @@ from typing import Mapping
 import gymnasium as gym
 import numpy as np
 
+from torchrl_csirl.envs.robotics.tasks import ROBOTICS_TASKS
+from torchrl_csirl.envs.spec import TaskSpec
 from torchrl_csirl.envs.driving import (
     CSIRLHighwayEnv,
     CSIRLIntersectionEnv,
@@ -25,6 +27,7 @@ from torchrl_csirl.envs.driving import (
 __all__ = [
     "SCENARIOS",
     "ScenarioSpec",
+    "TASKS",
     "make_gym_env",
     "register_scenarios",
     "resolve_scenario",
@@ -32,11 +35,11 @@ __all__ = [
 ]
 
 
-@dataclass(frozen=True)
-class ScenarioSpec:
-    """Static description of a CSIRL driving scenario.
+@dataclass(frozen=True, kw_only=True)
+class ScenarioSpec(TaskSpec):
+    """Static description of a CSIRL driving scenario (a :class:`~torchrl_csirl.envs.spec.TaskSpec`).
 
-    Attributes:
+    Attributes (besides :class:`~torchrl_csirl.envs.spec.TaskSpec`'s):
         name: short name ("highway-fast", "merge", "roundabout", "intersection").
         gym_id: registered gymnasium id ("csirl/<name>-v0").
         base_env: the highway-env scene it derives from.
@@ -64,22 +67,11 @@ class ScenarioSpec:
         [0.8]
     """
 
-    name: str
-    gym_id: str
     base_env: str
-    entry_point: str
     features: tuple[str, ...]
     features_range: Mapping[str, tuple[float, float]]
     vehicles_count: int
-    obs_dim: int
-    action_dim: int
-    max_steps: int
     finish_position: tuple[float, float]
-    ego_feature_indices: tuple[int, ...]
-    position_feature_indices: tuple[int, ...]
-    matching_scale: float
-    dt: float = 0.2
-    description: str = ""
     config: Mapping = field(default_factory=dict, repr=False, compare=False)
 
     @property
@@ -103,6 +95,25 @@ class ScenarioSpec:
     def default_config(self) -> dict:
         """A deep copy of the scenario's full highway-env config."""
         return copy.deepcopy(dict(self.config))
+
+    def feature_name(self, index: int) -> str:
+        """``"x"`` for the ego's x, ``"vehicle<k>.<feature>"`` for the k-th other vehicle."""
+        vehicle, feature = divmod(index, len(self.features))
+        name = self.features[feature]
+        return name if vehicle == 0 else f"vehicle{vehicle}.{name}"
+
+    def gym_make_kwargs(self, render_mode: str | None = None, **config_overrides) -> dict:
+        """``config=`` (overrides merged by :func:`scenario_config_overrides`) and ``render_mode``.
+
+        Headless pictures need ``offscreen_rendering=True``, set for ``"rgb_array"``.
+        """
+        config = scenario_config_overrides(self, **config_overrides)
+        if render_mode == "rgb_array":
+            config.setdefault("offscreen_rendering", True)
+        kwargs: dict = {"config": config}
+        if render_mode is not None:
+            kwargs["render_mode"] = render_mode
+        return kwargs
 
 
 def _spec(
@@ -136,6 +147,10 @@ def _spec(
         position_feature_indices=tuple(features.index(f) for f in position_features),
         matching_scale=float(matching_scale),
         dt=1.0 / config["policy_frequency"],
+        family="driving",
+        observation_layout=MappingProxyType(
+            {"ego": (0, n_features), "others": (n_features, vehicles_count * n_features)}
+        ),
         description=description,
         config=MappingProxyType(config),
     )
@@ -180,9 +195,14 @@ SCENARIOS: dict[str, ScenarioSpec] = {
 }
 
 
+TASKS: dict[str, TaskSpec] = {**SCENARIOS, **ROBOTICS_TASKS}
+"""Every task by name: the driving :data:`SCENARIOS` and the robotics tasks (``"antmaze-umaze"``,
+``"relocate"``), all described by a :class:`~torchrl_csirl.envs.spec.TaskSpec`."""
+
+
 def register_scenarios() -> None:
-    """Register the ``csirl/<name>-v0`` gymnasium ids (idempotent)."""
-    for spec in SCENARIOS.values():
+    """Register the ``csirl/<name>-v0`` gymnasium ids of every task (idempotent)."""
+    for spec in TASKS.values():
         if spec.gym_id not in gym.registry:
             gym.register(
                 id=spec.gym_id,
@@ -193,29 +213,38 @@ def register_scenarios() -> None:
             )
 
 
-def resolve_scenario(name: str | ScenarioSpec) -> ScenarioSpec:
-    """The :class:`ScenarioSpec` for a scenario name, gym id or spec (ValueError if unknown)."""
-    if isinstance(name, ScenarioSpec):
+def resolve_scenario(name: str | TaskSpec) -> TaskSpec:
+    """The spec of a task name, gym id or spec (ValueError if unknown).
+
+    Driving scenarios give a :class:`ScenarioSpec`, robotics tasks a
+    :class:`~torchrl_csirl.envs.robotics.RoboticsTaskSpec`.
+
+    Examples:
+        >>> resolve_scenario("csirl/relocate-v0").name
+        'relocate'
+    """
+    if isinstance(name, TaskSpec):
         return name
-    if name in SCENARIOS:
-        return SCENARIOS[name]
-    for spec in SCENARIOS.values():
+    if name in TASKS:
+        return TASKS[name]
+    for spec in TASKS.values():
         if name == spec.gym_id:
             return spec
-    raise ValueError(f"Unknown scenario {name!r}; expected one of {sorted(SCENARIOS)}.")
+    raise ValueError(f"Unknown scenario {name!r}; expected one of {sorted(TASKS)}.")
 
 
 def make_gym_env(name: str, render_mode: str | None = None, **config_overrides) -> gym.Env:
-    """Create a CSIRL scenario as a gymnasium environment.
+    """Create a CSIRL task (driving scenario or robotics task) as a gymnasium environment.
 
     Args:
-        name: scenario name (key of :data:`SCENARIOS`) or its gym id.
-        render_mode: ``None`` or ``"rgb_array"`` (headless pictures need
-            ``offscreen_rendering=True``, set automatically for "rgb_array").
-        **config_overrides: highway-env config entries replacing the scenario's (top-level
-            keys; nested dicts such as "observation" are merged one level deep so that a
-            partial dict does not drop the other entries). ``fast=False`` selects the
-            stock pandas observation and stock trajectory prediction.
+        name: task name (key of :data:`TASKS`) or its gym id.
+        render_mode: ``None`` or ``"rgb_array"`` (headless pictures: driving sets
+            ``offscreen_rendering=True``, the robotics tasks MuJoCo's EGL backend).
+        **config_overrides: driving: highway-env config entries replacing the scenario's
+            (top-level keys; nested dicts such as "observation" are merged one level deep so
+            that a partial dict does not drop the other entries; ``fast=False`` selects the
+            stock pandas observation and stock trajectory prediction). Robotics: the
+            environment's constructor keywords (``RoboticsTaskSpec.env_options``).
 
     Returns:
         the unwrapped environment (episode limit implemented as truncation inside).
@@ -229,10 +258,7 @@ def make_gym_env(name: str, render_mode: str | None = None, **config_overrides) 
     """
     spec = resolve_scenario(name)
     register_scenarios()
-    config = scenario_config_overrides(spec, **config_overrides)
-    if render_mode == "rgb_array":
-        config.setdefault("offscreen_rendering", True)
-    env = gym.make(spec.gym_id, config=config, render_mode=render_mode)
+    env = gym.make(spec.gym_id, **spec.gym_make_kwargs(render_mode, **config_overrides))
     return env.unwrapped
 
 
@@ -249,6 +275,8 @@ def scenario_config_overrides(name: str | ScenarioSpec, **config_overrides) -> d
         (True, 5)
     """
     spec = resolve_scenario(name)
+    if not isinstance(spec, ScenarioSpec):
+        raise ValueError(f"{spec.name!r} is not a driving scenario: it has no highway-env config.")
     config = {}
     for key, value in config_overrides.items():
         base = spec.config.get(key)

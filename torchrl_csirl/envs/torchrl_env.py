@@ -1,4 +1,4 @@
-"""TorchRL environments for the CSIRL driving scenarios."""
+"""TorchRL environments for the CSIRL tasks (driving scenarios and robotics tasks)."""
 from __future__ import annotations
 
 from functools import partial
@@ -9,11 +9,7 @@ from torchrl.envs import EnvBase, SerialEnv
 from torchrl.envs.gym_like import default_info_dict_reader
 from torchrl.envs.libs.gym import GymEnv
 
-from torchrl_csirl.envs.scenarios import (
-    register_scenarios,
-    resolve_scenario,
-    scenario_config_overrides,
-)
+from torchrl_csirl.envs.scenarios import register_scenarios, resolve_scenario
 
 __all__ = ["FAILURE_KEYS", "INFO_KEYS", "ScenarioInfoReader", "info_spec", "make_env", "make_serial_env"]
 
@@ -74,10 +70,10 @@ def make_env(
     info_keys=INFO_KEYS,
     **overrides,
 ) -> EnvBase:
-    """Create a CSIRL scenario as a TorchRL environment.
+    """Create a CSIRL task (driving scenario or robotics task) as a TorchRL environment.
 
     A :class:`~torchrl.envs.libs.gym.GymEnv` on the registered ``csirl/<name>-v0`` id with the
-    scenario info entries (``"distance_to_finish"``, ``"progress"``, ``"crashed"``,
+    task's info entries (``"distance_to_finish"``, ``"progress"``, ``"crashed"``,
     ``"offroad"``, ``"arrived"``, ``"success"``) read into the TensorDict with fixed specs.
     The episode limit appears as ``"truncated"``; crashes, off-road and the scene's own end
     conditions as ``"terminated"``.
@@ -86,12 +82,15 @@ def make_env(
     picklable factory for :class:`~torchrl.envs.ParallelEnv` and collectors.
 
     Args:
-        name: scenario name ("highway-fast", "merge", "roundabout", "intersection") or gym id.
+        name: task name ("highway-fast", "merge", "roundabout", "intersection",
+            "antmaze-umaze", "relocate") or gym id. The robotics tasks report no
+            ``"crashed"``/``"offroad"`` (always False).
         seed: seed applied with ``env.set_seed`` (None: unseeded).
         device: device of the output TensorDicts.
         info_keys: which info entries to read.
         **overrides: highway-env config entries (see :func:`~torchrl_csirl.envs.make_gym_env`),
-            e.g. ``fast=False`` for the stock observation code.
+            e.g. ``fast=False`` for the stock observation code; for a robotics task its
+            constructor keywords (e.g. ``render_mode="rgb_array"``).
 
     Returns:
         the TorchRL environment.
@@ -105,8 +104,7 @@ def make_env(
     """
     spec = resolve_scenario(name)
     register_scenarios()
-    config = scenario_config_overrides(spec, **overrides)
-    env = GymEnv(spec.gym_id, config=config, device=device)
+    env = GymEnv(spec.gym_id, device=device, **spec.gym_make_kwargs(**overrides))
     reader = ScenarioInfoReader(list(info_keys), spec=info_spec(info_keys))
     env.set_info_dict_reader(reader)
     if seed is not None:

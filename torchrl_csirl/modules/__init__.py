@@ -11,16 +11,18 @@ from torchrl_csirl.modules.actor_critic import (
 from torchrl_csirl.modules.ensemble import FusedCriticEnsemble, fused_critic_ensemble
 from torchrl_csirl.modules.export import load_policy, save_policy
 from torchrl_csirl.modules.features import EgoRelativeFeatures
-from torchrl_csirl.modules.reward import make_reward_network
+from torchrl_csirl.modules.reward import ExpertCenteredReward, expert_reference_states, make_reward_network
 
 __all__ = [
     "BoundedLogStdNormalParams",
     "ConcatMLP",
     "EgoRelativeFeatures",
+    "ExpertCenteredReward",
     "FusedCriticEnsemble",
     "MaskedReLU",
     "fused_critic_ensemble",
     "load_policy",
+    "expert_reference_states",
     "make_actor",
     "make_qvalue",
     "make_reward_network",

@@ -1,17 +1,19 @@
-"""The CSIRL intrinsic reward network r_w: an MLP with a tanh output in (-1, 1)."""
+"""The CSIRL intrinsic reward network r_w: an MLP with a tanh output in (-1, 1), and its
+expert-centred form (an option of ours, not in the paper)."""
 from __future__ import annotations
 
 from collections.abc import Sequence
 
 import torch
-from tensordict.nn import TensorDictModule
+from tensordict import TensorDictBase
+from tensordict.nn import TensorDictModule, TensorDictModuleBase
 from tensordict.utils import NestedKey
 from torch import nn
 from torchrl.modules import MLP
 
 from torchrl_csirl.modules.actor_critic import _input_size
 
-__all__ = ["RewardMLP", "make_reward_network"]
+__all__ = ["ExpertCenteredReward", "RewardMLP", "expert_reference_states", "make_reward_network"]
 
 
 class RewardMLP(nn.Module):
@@ -105,3 +107,84 @@ def make_reward_network(
         )
     in_features = _input_size(obs_dim, input_features) + (action_dim or 0)
     return TensorDictModule(RewardMLP(in_features, hidden, input_features), in_keys=in_keys, out_keys=[out_key])
+
+
+class ExpertCenteredReward(TensorDictModuleBase):
+    r"""``r'(s) = scale * (r_w(s) - mean_{s_e in E} r_w(s_e))``: the learned reward measured against
+    its mean over a fixed set ``E`` of expert states.
+
+    Without it the meta-gradient of ``r_w`` is dominated by a constant shift (a living bonus or
+    penalty that saturates ``tanh`` within a few hundred updates, docs/RESULTS.md), or, with the
+    ``|r_w|`` regulariser, by the regulariser (``r_w`` stays near 0 and inert). Subtracting the mean
+    over expert states removes the constant direction exactly: for any ``c``,
+    ``r_w + c`` gives the same ``r'``, so the meta-gradient can only move ``r_w`` *between* states
+    (above or below how it rates the expert's). ``scale`` puts ``r'`` on the scale of the
+    matching reward. Works per state (an env transform) as well as on batches, since ``E`` is fixed.
+
+    Args:
+        reward_network (TensorDictModule): a state-only ``r_w`` (one in-key, the observation),
+            e.g. :func:`make_reward_network`.
+        reference_observations (torch.Tensor): ``[M, obs_dim]`` expert states ``E`` (e.g. a
+            fixed sample of the demonstrations' observations).
+
+    Keyword Args:
+        scale (float): multiplies the centred reward. Defaults to ``1.0``.
+
+    Examples:
+        >>> import torch
+        >>> from tensordict import TensorDict
+        >>> expert_states = torch.randn(16, 4)
+        >>> r = ExpertCenteredReward(make_reward_network(4), expert_states, scale=2.0)
+        >>> out = r(TensorDict({"observation": expert_states}, [16]))["intrinsic_reward"]
+        >>> bool(out.mean().abs() < 1e-5), out.shape
+        (True, torch.Size([16, 1]))
+    """
+
+    def __init__(self, reward_network: TensorDictModule, reference_observations: torch.Tensor, *,
+                 scale: float = 1.0) -> None:
+        super().__init__()
+        if len(reward_network.in_keys) != 1:
+            raise ValueError(
+                f"ExpertCenteredReward needs a state-only reward network (one in-key), got in_keys "
+                f"{list(reward_network.in_keys)}."
+            )
+        if reference_observations.ndim != 2 or reference_observations.shape[0] == 0:
+            raise ValueError(
+                f"reference_observations must be a non-empty [M, obs_dim] tensor, got shape "
+                f"{tuple(reference_observations.shape)}."
+            )
+        if not torch.isfinite(reference_observations).all():
+            raise ValueError("reference_observations contain NaN or inf.")
+        if not scale > 0:
+            raise ValueError(f"scale must be > 0, got {scale}.")
+        self.reward_network = reward_network
+        self.in_keys = list(reward_network.in_keys)
+        self.out_keys = list(reward_network.out_keys)
+        self.scale = float(scale)
+        self.register_buffer("reference_observations", reference_observations.detach().clone())
+
+    def reference_mean(self) -> torch.Tensor:
+        """``mean_{s_e in E} r_w(s_e)`` (graph kept)."""
+        return self.reward_network.module(self.reference_observations).mean()
+
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        key = self.out_keys[0]
+        tensordict = self.reward_network(tensordict)
+        centred = self.scale * (tensordict.get(key) - self.reference_mean())
+        tensordict.set(key, centred)
+        return tensordict
+
+
+def expert_reference_states(observations: torch.Tensor, size: int = 256, seed: int = 0) -> torch.Tensor:
+    """A fixed, seeded sample of at most ``size`` expert states for :class:`ExpertCenteredReward`.
+
+    Examples:
+        >>> expert_reference_states(torch.arange(10.).reshape(5, 2), size=3).shape
+        torch.Size([3, 2])
+    """
+    if size <= 0:
+        raise ValueError(f"size must be > 0, got {size}.")
+    if observations.shape[0] <= size:
+        return observations.clone()
+    generator = torch.Generator().manual_seed(seed)
+    return observations[torch.randperm(observations.shape[0], generator=generator)[:size]].clone()

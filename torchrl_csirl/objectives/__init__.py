@@ -1,5 +1,5 @@
-"""Losses of the CSIRL learner: ensemble SAC, the meta-gradient reward loss, and the actor's
-behavioural-cloning term (a recipe option)."""
+"""Losses of the CSIRL learner (ensemble SAC, the meta-gradient reward loss, the actor's
+behavioural-cloning term) and of the imitation baselines (docs/BASELINES.md)."""
 from __future__ import annotations
 
 from torchrl_csirl.objectives.behaviour_cloning import ActorBehaviourCloning
@@ -9,5 +9,49 @@ from torchrl_csirl.objectives.ensemble_sac import (
     reinitialize_module,
 )
 from torchrl_csirl.objectives.meta_reward import MetaRewardLoss
+from torchrl_csirl.objectives._imitation import SACHyperparameters, make_sac_learner, orthogonal_regularization
+from torchrl_csirl.objectives.dac import (
+    AbsorbingLogit,
+    DACDiscriminatorLoss,
+    DACHyperparameters,
+    dac_discriminator_loss,
+    make_dac_discriminator,
+)
+from torchrl_csirl.objectives.gail import GAILHyperparameters, gail_discriminator_input, make_gail_discriminator
+from torchrl_csirl.objectives.iq_learn import IQLearnHyperparameters, IQLearnLoss, inverse_soft_q_objective
+from torchrl_csirl.objectives.sqil import SQILHyperparameters, sqil_batch, sqil_reward_labels
+from torchrl_csirl.objectives.valuedice import (
+    ValueDICEHyperparameters,
+    ValueDICELoss,
+    initial_observations,
+    valuedice_objective,
+)
 
-__all__ = ["ActorBehaviourCloning", "EnsembleSACLoss", "MetaRewardLoss", "qvalue_dispersion", "reinitialize_module"]
+__all__ = [
+    "AbsorbingLogit",
+    "ActorBehaviourCloning",
+    "DACDiscriminatorLoss",
+    "DACHyperparameters",
+    "EnsembleSACLoss",
+    "GAILHyperparameters",
+    "IQLearnHyperparameters",
+    "IQLearnLoss",
+    "MetaRewardLoss",
+    "SACHyperparameters",
+    "SQILHyperparameters",
+    "ValueDICEHyperparameters",
+    "ValueDICELoss",
+    "dac_discriminator_loss",
+    "gail_discriminator_input",
+    "initial_observations",
+    "inverse_soft_q_objective",
+    "make_dac_discriminator",
+    "make_gail_discriminator",
+    "make_sac_learner",
+    "orthogonal_regularization",
+    "qvalue_dispersion",
+    "reinitialize_module",
+    "sqil_batch",
+    "sqil_reward_labels",
+    "valuedice_objective",
+]

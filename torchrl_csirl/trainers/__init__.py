@@ -4,22 +4,31 @@ from __future__ import annotations
 from torchrl_csirl.trainers.collection import shutdown_collector
 from torchrl_csirl.trainers.evaluation import evaluate_policy
 from torchrl_csirl.trainers.checkpoint import CheckpointHook, load_checkpoint
+from torchrl_csirl.trainers.imitation import IMITATION_METHODS, ImitationMethod, hyperparameters_class, make_imitation_method
+from torchrl_csirl.trainers.imitation_updates import AdversarialImitationUpdate, DiscriminatorStep, ValueDICEUpdate
 from torchrl_csirl.trainers.hooks import EvaluationHook, SubgoalSelectionHook
 from torchrl_csirl.trainers.metrics_logger import MetricsLogger
 from torchrl_csirl.trainers.trainer import CSIRLTrainer, TrainingDivergedError, check_finite_losses
 from torchrl_csirl.trainers.updates import MetaRewardUpdate, SACUpdate
 
 __all__ = [
+    "AdversarialImitationUpdate",
     "CSIRLTrainer",
     "CheckpointHook",
+    "DiscriminatorStep",
     "EvaluationHook",
+    "IMITATION_METHODS",
+    "ImitationMethod",
     "MetaRewardUpdate",
     "MetricsLogger",
     "SACUpdate",
     "SubgoalSelectionHook",
     "TrainingDivergedError",
+    "ValueDICEUpdate",
     "check_finite_losses",
     "evaluate_policy",
+    "hyperparameters_class",
     "load_checkpoint",
+    "make_imitation_method",
     "shutdown_collector",
 ]

@@ -6,10 +6,13 @@ state, the user's backend is left alone), writes a PNG and returns its :class:`p
 * :func:`plot_learning_curve`: evaluation accomplish / success rate vs environment frames.
 * :func:`plot_subgoal_curriculum`: subgoal index vs frames and the critics' uncertainty profiles.
 * :func:`render_curriculum`: the highway-env scene with the curriculum trajectory and subgoals.
+* :func:`plot_robotics_curriculum`: a robotics task's curriculum (the maze from above, or the
+  matching features along the trajectory) with the subgoals.
 """
 from __future__ import annotations
 
 from torchrl_csirl.visualization.curves import plot_learning_curve, plot_subgoal_curriculum
+from torchrl_csirl.visualization.robotics import plot_robotics_curriculum
 from torchrl_csirl.visualization.scene import render_curriculum
 
-__all__ = ["plot_learning_curve", "plot_subgoal_curriculum", "render_curriculum"]
+__all__ = ["plot_learning_curve", "plot_robotics_curriculum", "plot_subgoal_curriculum", "render_curriculum"]

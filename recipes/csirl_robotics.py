@@ -1,0 +1,119 @@
+"""CSIRL on a robotics task, end to end: ``python recipes/csirl_robotics.py env.scenario=relocate [key=value ...]``.
+
+The driving recipe (``recipes/csirl_highway.py``) on the paper's robotics tasks
+(``env.scenario=relocate | antmaze-umaze``, docs/SCENARIOS.md): the same learner, matching
+reward, curriculum, meta-learned reward, outputs, logging, checkpoints, resume and final JSON
+line; the task's spec supplies the dimensions, the matching features ``h(s)`` and the episode
+limit. Differences from the driving recipe's configuration:
+
+* ``expert.curriculum=expert`` (Relocate's shipped file, 25 DAPG trajectories); AntMaze has no
+  shipped expert data yet (docs/ROBOTICS.md): pass ``expert.path=<ExpertDemonstrations .npz>``;
+* ``model.ego_relative_features=false`` (that input map is the driving scenes');
+* ``collector.frames_per_batch=1400`` so that each of 2 workers' environments runs whole
+  AntMaze episodes (700 steps; collection resets every environment at each batch start);
+* the summary's ``return`` is the paper's metric here (the mean test return); the accomplish
+  rate is the task's progress measure; the curriculum picture is the maze from above with the
+  subgoals (AntMaze) or the matching features along the curriculum trajectory (Relocate).
+
+Budgets are not tuned yet: no result is claimed for these tasks (docs/ROBOTICS.md).
+"""
+from __future__ import annotations
+
+import os
+import sys
+from dataclasses import dataclass, field
+from functools import partial
+
+from omegaconf import DictConfig
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+import csirl_highway  # noqa: E402
+from common import config as config_lib  # noqa: E402
+from common.builders import Run, check_collector  # noqa: E402
+from common.config import CollectorConfig, ConfigError, ExpertConfig, ModelConfig, option  # noqa: E402
+from common.run import ExpertDataError, resolve_device, run_script  # noqa: E402
+from csirl_utils import CSIRLHighwayConfig  # noqa: E402
+
+from torchrl_csirl.data.shipped import TASK_CURRICULA  # noqa: E402
+from torchrl_csirl.envs.robotics import ROBOTICS_TASKS  # noqa: E402
+
+__all__ = ["CSIRLRoboticsConfig", "load_config", "load_run_config", "main"]
+
+
+@dataclass
+class RoboticsEnvConfig:
+    scenario: str = option("relocate", choices=tuple(ROBOTICS_TASKS), help="the robotics task")
+
+
+@dataclass
+class RoboticsExpertConfig(ExpertConfig):
+    curriculum: str = option("expert", choices=("expert",),
+                             help="the shipped file's (Relocate: 25 DAPG trajectories; trajectory 0 is the curriculum)")
+
+
+@dataclass
+class RoboticsModelConfig(ModelConfig):
+    ego_relative_features: bool = option(False, help="must stay false: the other-vehicle offsets are the driving scenes'")
+
+
+@dataclass
+class RoboticsCollectorConfig(CollectorConfig):
+    frames_per_batch: int = option(1400, above=0, help="frames per collected batch (AntMaze: >= 700 per environment)")
+
+
+@dataclass
+class CSIRLRoboticsConfig(CSIRLHighwayConfig):
+    """``recipes/csirl_robotics.py``: the driving recipe's defaults with the robotics sections."""
+
+    env: RoboticsEnvConfig = field(default_factory=RoboticsEnvConfig)
+    expert: RoboticsExpertConfig = field(default_factory=RoboticsExpertConfig)
+    model: RoboticsModelConfig = field(default_factory=RoboticsModelConfig)
+    collector: RoboticsCollectorConfig = field(default_factory=RoboticsCollectorConfig)
+
+
+def _check(cfg: DictConfig) -> DictConfig:
+    check_collector(cfg.collector)
+    resolve_device(cfg.device)
+    if cfg.model.ego_relative_features:
+        raise ConfigError("model.ego_relative_features=true: the other-vehicle offsets exist in driving scenes only")
+    if cfg.expert.path is None and cfg.env.scenario not in TASK_CURRICULA:
+        raise ExpertDataError(
+            f"env.scenario={cfg.env.scenario}: no shipped expert data for this task yet (docs/ROBOTICS.md); "
+            "pass expert.path=<ExpertDemonstrations .npz>")
+    return cfg
+
+
+def load_config(overrides: list[str] | None = None) -> DictConfig:
+    """Defaults and ``key=value`` overrides (``preset=default`` only).
+
+    Examples:
+        >>> cfg = load_config(["env.scenario=relocate", "seed=2"])
+        >>> cfg.env.scenario, cfg.expert.curriculum, cfg.model.ego_relative_features
+        ('relocate', 'expert', False)
+    """
+    return _check(config_lib.load_config(CSIRLRoboticsConfig, overrides))
+
+
+def load_run_config(run_dir: str, overrides: list[str] | None = None) -> DictConfig:
+    """The configuration saved in ``run_dir/config.yaml``, updated by ``overrides`` (resume)."""
+    return _check(config_lib.load_run_config(CSIRLRoboticsConfig, run_dir, overrides))
+
+
+def build(argv: list[str]) -> Run:
+    """As the driving recipe's, with this recipe's configuration."""
+    return csirl_highway.build(argv, load=load_config, load_run=load_run_config)
+
+
+def finish(run: Run) -> dict[str, object]:
+    """As the driving recipe's, with the task's curriculum picture (the maze, or the matching features)."""
+    from torchrl_csirl.visualization import plot_robotics_curriculum
+
+    return csirl_highway.finish(run, picture=plot_robotics_curriculum)
+
+
+main = partial(csirl_highway.main, schema=CSIRLRoboticsConfig, doc=__doc__, build_run=build, finish_run=finish)
+
+
+if __name__ == "__main__":
+    run_script(main)

@@ -1,0 +1,29 @@
+"""The paper's robotics tasks on gymnasium-robotics: AntMaze U-maze and Adroit Relocate.
+
+* :data:`ROBOTICS_TASKS` / :class:`RoboticsTaskSpec`: the tasks' specs (the same
+  :class:`~torchrl_csirl.envs.spec.TaskSpec` as the driving scenarios), reached through
+  :func:`torchrl_csirl.envs.make_env` (``"antmaze-umaze"``, ``"relocate"``).
+* :class:`AntMazeUMazeEnv`, :class:`RelocateEnv`: the gymnasium environments.
+* :class:`DAPGRelocatePolicy`: the shipped DAPG expert of Relocate.
+"""
+from __future__ import annotations
+
+from torchrl_csirl.envs.robotics.tasks import (
+    ANTMAZE_UMAZE_MAP,
+    ROBOTICS_TASKS,
+    AntMazeUMazeEnv,
+    RelocateEnv,
+    RoboticsTaskSpec,
+    maze_cell_route,
+    route_remaining_length,
+)
+
+__all__ = [
+    "ANTMAZE_UMAZE_MAP",
+    "ROBOTICS_TASKS",
+    "AntMazeUMazeEnv",
+    "RelocateEnv",
+    "RoboticsTaskSpec",
+    "maze_cell_route",
+    "route_remaining_length",
+]
