@@ -37,6 +37,7 @@ from __future__ import annotations
 
 from torchrl_csirl.transforms.combine_rewards import CombineRewards
 from torchrl_csirl.transforms.intrinsic_reward import IntrinsicReward
+from torchrl_csirl.transforms.progress_reward import ProgressReward, progress_reward
 from torchrl_csirl.transforms.subgoal_matching import (
     SubgoalMatchingReward,
     failed_termination_potential,
@@ -49,10 +50,12 @@ from torchrl_csirl.transforms.subgoal_matching import (
 __all__ = [
     "CombineRewards",
     "IntrinsicReward",
+    "ProgressReward",
     "SubgoalMatchingReward",
     "failed_termination_potential",
     "matching_potential",
     "matching_reward",
     "matching_target_index",
     "nearest_expert_index",
+    "progress_reward",
 ]
