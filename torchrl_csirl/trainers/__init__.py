@@ -4,6 +4,7 @@ from __future__ import annotations
 from torchrl_csirl.trainers.collection import shutdown_collector
 from torchrl_csirl.trainers.evaluation import evaluate_policy
 from torchrl_csirl.trainers.checkpoint import CheckpointHook, load_checkpoint
+from torchrl_csirl.trainers.imitation import IMITATION_METHODS, ImitationMethod, hyperparameters_class, make_imitation_method
 from torchrl_csirl.trainers.hooks import EvaluationHook, SubgoalSelectionHook
 from torchrl_csirl.trainers.metrics_logger import MetricsLogger
 from torchrl_csirl.trainers.trainer import CSIRLTrainer, TrainingDivergedError, check_finite_losses
@@ -14,6 +15,8 @@ __all__ = [
     "CSIRLTrainer",
     "CheckpointHook",
     "EvaluationHook",
+    "IMITATION_METHODS",
+    "ImitationMethod",
     "MetaRewardUpdate",
     "MetricsLogger",
     "SACUpdate",
@@ -21,6 +24,8 @@ __all__ = [
     "TrainingDivergedError",
     "check_finite_losses",
     "evaluate_policy",
+    "hyperparameters_class",
     "load_checkpoint",
+    "make_imitation_method",
     "shutdown_collector",
 ]

@@ -35,7 +35,10 @@ serial or parallel env) to get the rewards at collection time.
 """
 from __future__ import annotations
 
+from torchrl_csirl.transforms.absorbing_states import AbsorbingStates, absorbing_self_loops, absorbing_value
 from torchrl_csirl.transforms.combine_rewards import CombineRewards
+from torchrl_csirl.transforms.constant_reward import ConstantReward
+from torchrl_csirl.transforms.discriminator_reward import DiscriminatorReward, discriminator_reward
 from torchrl_csirl.transforms.intrinsic_reward import IntrinsicReward
 from torchrl_csirl.transforms.progress_reward import ProgressReward, progress_reward
 from torchrl_csirl.transforms.subgoal_matching import (
@@ -48,10 +51,16 @@ from torchrl_csirl.transforms.subgoal_matching import (
 )
 
 __all__ = [
+    "AbsorbingStates",
     "CombineRewards",
+    "ConstantReward",
+    "DiscriminatorReward",
     "IntrinsicReward",
     "ProgressReward",
     "SubgoalMatchingReward",
+    "absorbing_self_loops",
+    "absorbing_value",
+    "discriminator_reward",
     "failed_termination_potential",
     "matching_potential",
     "matching_reward",

@@ -1,0 +1,193 @@
+"""The imitation baselines (docs/BASELINES.md): each loss's defining property on a tiny problem."""
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import pytest
+import torch
+from tensordict import TensorDict
+from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
+from torchrl.envs import Compose
+
+from torchrl_csirl.data import ExpertDemonstrations
+from torchrl_csirl.modules import make_actor, make_qvalue
+from torchrl_csirl.trainers.imitation import _IMPLEMENTED, make_imitation_method
+
+OBS, ACT, HIDDEN = 3, 1, (32, 32)
+
+
+def transitions(n: int, obs: torch.Tensor | float, action: torch.Tensor | float, terminated_every: int = 0) -> TensorDict:
+    """``n`` transitions; ``obs``/``action`` are broadcast; every ``terminated_every``-th one terminates."""
+    obs = torch.as_tensor(obs, dtype=torch.float32).expand(n, OBS).clone()
+    action = torch.as_tensor(action, dtype=torch.float32).expand(n, ACT).clone()
+    terminated = torch.zeros(n, 1, dtype=torch.bool)
+    if terminated_every:
+        terminated[terminated_every - 1::terminated_every] = True
+    return TensorDict({
+        "observation": obs, "action": action,
+        "next": {"observation": obs + 0.1, "terminated": terminated, "truncated": torch.zeros_like(terminated),
+                 "done": terminated.clone(), "reward": torch.zeros(n, 1)}}, [n])
+
+
+def buffers(method, online_data: TensorDict, expert_data: TensorDict):
+    online = TensorDictReplayBuffer(storage=LazyTensorStorage(10_000), batch_size=64,
+                                    transform=Compose(*method.online_transforms))
+    online.extend(online_data)
+    episodes = [{"observation": expert_data["observation"], "action": expert_data["action"],
+                 "next_observation": expert_data["next", "observation"],
+                 "terminated": expert_data["next", "terminated"].squeeze(-1)}]
+    expert = ExpertDemonstrations.from_episodes(episodes).as_replay_buffer(
+        batch_size=64, transform=Compose(*method.expert_transforms))
+    return online, expert
+
+
+def trainer(online) -> SimpleNamespace:
+    return SimpleNamespace(updates=0, frames=0, online_buffer=online)
+
+
+def build(name: str, hyperparameters=None, obs=OBS, act=ACT):
+    torch.manual_seed(0)
+    actor = make_actor(obs, act, hidden=HIDDEN)
+    return make_imitation_method(name, actor, lambda: make_qvalue(obs, act, hidden=HIDDEN), obs_dim=obs,
+                                 action_dim=act, hyperparameters=hyperparameters)
+
+
+def run_updates(step, t, n: int) -> dict:
+    out = {}
+    for _ in range(n):
+        out = step(t)
+        t.updates += 1
+    return out
+
+
+# ------------------------------------------------------------------------------ interface
+def test_unknown_method_and_bad_hyperparameters():
+    with pytest.raises(ValueError, match="unknown imitation method 'dagger'"):
+        build("dagger")
+    with pytest.raises(ValueError, match="no field"):
+        build("sqil", {"learning_rate": 1e-3})
+    with pytest.raises(ValueError, match="action_dim"):
+        make_imitation_method("sqil", make_actor(OBS, 2, hidden=HIDDEN), lambda: make_qvalue(OBS, 2), obs_dim=OBS,
+                              action_dim=ACT)
+
+
+@pytest.mark.parametrize("name", _IMPLEMENTED)
+def test_every_method_updates_and_checkpoints(name):
+    method = build(name, {"batch_size": 16})
+    online, expert = buffers(method, transitions(40, torch.randn(40, OBS), torch.rand(40, ACT) * 2 - 1, 10),
+                             transitions(30, torch.randn(30, OBS), 0.5, 15))
+    step = method.make_update_step(online, expert)
+    losses = run_updates(step, trainer(online), 2)
+    assert losses and all(torch.isfinite(v).all() and not v.requires_grad for v in losses.values())
+    for state in method.states.values():
+        state.load_state_dict(state.state_dict())
+
+
+# ------------------------------------------------------------------------------ SQIL
+def test_sqil_labels_and_balanced_batches():
+    method = build("sqil", {"batch_size": 32})
+    online, expert = buffers(method, transitions(50, 0.0, 0.0), transitions(20, 1.0, 0.5))
+    assert online.sample()["next", "reward"].eq(0).all() and expert.sample()["next", "reward"].eq(1).all()
+    step = method.make_update_step(online, expert)
+    batch = step.sample(trainer(online))
+    is_expert = batch["observation"][:, 0].eq(1.0)
+    assert int(is_expert.sum()) == 16  # 50/50
+    torch.testing.assert_close(batch["next", "reward"].squeeze(-1), is_expert.float())
+
+
+# ------------------------------------------------------------------------------ GAIL, DAC
+def expert_vs_random(n: int = 200):
+    """Expert: action 0.8 everywhere; agent: uniform random actions, same states."""
+    gen = torch.Generator().manual_seed(1)
+    obs = torch.randn(n, OBS, generator=gen)
+    return (transitions(n, torch.randn(n, OBS, generator=gen), torch.rand(n, ACT, generator=gen) * 2 - 1),
+            transitions(n, obs, 0.8))
+
+
+@pytest.mark.parametrize("name", ["gail", "dac"])
+def test_discriminator_separates_expert_from_random(name):
+    method = build(name, {"batch_size": 32, "discriminator_batch_size": 64, "discriminator_lr": 1e-3})
+    online_data, expert_data = expert_vs_random()
+    online, expert = buffers(method, online_data, expert_data)
+    step = method.make_update_step(online, expert)
+    t = trainer(online)
+    reward = [tr for tr in method.online_transforms if type(tr).__name__ == "DiscriminatorReward"][0]
+
+    def reward_gap():
+        return float(reward(expert.sample())["next", "reward"].mean() - reward(online.sample())["next", "reward"].mean())
+
+    gap_before = reward_gap()
+    for _ in range(100):
+        step.discriminator_step(t)
+    probability = method.states["discriminator"](online_data.select("observation", "action").update(
+        {"absorbing": torch.zeros(200, 1, dtype=torch.bool)}))
+    assert abs(gap_before) < 0.2 and reward_gap() > 0.3  # DAC: a 1-Lipschitz logit (GP) caps the gap near 0.8
+    if name == "gail":  # D(s, a) -> 1 on expert pairs, lower on random ones
+        d_agent = probability["d_logits"].mean()
+        d_expert = method.states["discriminator"](expert_data.select("observation", "action"))["d_logits"].mean()
+        assert d_expert > d_agent + 0.2
+
+
+@pytest.mark.parametrize("name", ["gail", "dac"])
+def test_discriminator_step_touches_only_the_discriminator(name):
+    method = build(name, {"batch_size": 16, "discriminator_batch_size": 16})
+    online, expert = buffers(method, *expert_vs_random(50))
+    step = method.make_update_step(online, expert)
+    sac, discriminator = method.states["loss"], method.states["discriminator"]
+    before = {n: p.detach().clone() for n, p in sac.named_parameters()}
+    step.discriminator_step(trainer(online))
+    assert all(torch.equal(p, before[n]) for n, p in sac.named_parameters())
+    assert all(p.grad is None or p.grad.abs().sum() == 0 for p in sac.parameters())
+    assert any(p.grad is not None and p.grad.abs().sum() > 0 for p in discriminator.parameters())
+
+
+def test_dac_absorbing_states_on_expert_and_online_batches():
+    from torchrl_csirl.objectives._imitation import sample
+
+    hp = {"batch_size": 16, "gamma": 0.9}
+    method = build("dac", hp)
+    online, expert = buffers(method, transitions(40, 0.0, 0.0, terminated_every=4), transitions(40, 1.0, 0.8, 10))
+    for data, transforms in ((transitions(40, 1.0, 0.0, 4), method.online_transforms[:1]),
+                             (expert.storage[:], method.expert_transforms)):
+        into = Compose(*transforms)(data.clone())["next", "absorbing"].squeeze(-1)
+        torch.testing.assert_close(into, data["next", "terminated"].squeeze(-1))
+    for buffer in (online, expert):
+        batch = sample(buffer, 40)
+        into = batch["next", "absorbing"].squeeze(-1)
+        assert not batch["absorbing"].any() and batch["next", "observation"][into].eq(0).all()
+    # the absorbing state has its own learned reward r_a; entering it pays r + gamma r_a / (1 - gamma)
+    discriminator, loss = method.states["discriminator"], method.make_update_step(online, expert).discriminator_step.loss
+    with torch.no_grad():
+        discriminator.module.absorbing_logit.fill_(3.0)
+    batch = sample(online, 40)
+    into = batch["next", "absorbing"].squeeze(-1)
+    real = discriminator(batch.select("observation", "absorbing", "action"))["discriminator_logit"].squeeze(-1)
+    torch.testing.assert_close(batch["next", "reward"].squeeze(-1), real + into.float() * 3.0 * 0.9 / 0.1)
+    # the discriminator sees one absorbing sample per terminal transition, on both sides
+    td = TensorDict({"expert": sample(expert, 40), "collector": batch}, [])
+    logits = [loss._logit(loss._with_self_loops(td[side])) for side in ("expert", "collector")]
+    n_into = [int(td[side]["next", "absorbing"].sum()) for side in ("expert", "collector")]
+    assert [len(x) for x in logits] == [40 + n_into[0], 40 + n_into[1]] and logits[1][40:].eq(3.0).all()
+    grads = torch.autograd.grad(loss(td)["loss_discriminator"], discriminator.module.absorbing_logit)
+    assert grads[0].abs().item() > 0
+
+
+def test_dac_gradient_penalty_one_weight_per_sample():
+    from torchrl_csirl.objectives import DACDiscriminatorLoss
+
+    class Linear(torch.nn.Module):  # logit = w . [obs, act]: its input gradient is w everywhere
+        def __init__(self):
+            super().__init__()
+            self.w = torch.nn.Parameter(torch.tensor([3.0, 0.0, 0.0, 4.0]))
+
+        def forward(self, observation, action):
+            return (torch.cat([observation, action], -1) * self.w).sum(-1, keepdim=True)
+
+    from tensordict.nn import TensorDictModule
+    disc = TensorDictModule(Linear(), in_keys=["observation", "action"], out_keys=["discriminator_logit"])
+    loss = DACDiscriminatorLoss(disc, gp_lambda=10.0)
+    td = TensorDict({"expert": transitions(8, 1.0, 0.5).select("observation", "action"),
+                     "collector": transitions(8, 0.0, 0.0).select("observation", "action")}, [])
+    torch.testing.assert_close(loss(td)["loss_gradient_penalty"], torch.tensor(10.0 * (5.0 - 1.0) ** 2))
+    with pytest.raises(KeyError, match="lacks the keys"):
+        loss(TensorDict({"expert": td["expert"].exclude("action"), "collector": td["collector"]}, []))

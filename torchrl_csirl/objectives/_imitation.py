@@ -1,0 +1,168 @@
+"""Plumbing shared by the imitation baselines (private): sampling, batch assembly, regularisers."""
+from __future__ import annotations
+
+import warnings
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import torch
+from tensordict import TensorDictBase
+from tensordict.nn import TensorDictModule
+from torch import nn
+
+__all__ = [
+    "SACHyperparameters",
+    "concat_shared",
+    "gradient_penalty",
+    "logit_network",
+    "make_sac_learner",
+    "orthogonal_regularization",
+    "require_keys",
+    "sample",
+]
+
+
+def sample(buffer, batch_size: int) -> TensorDictBase:
+    """``buffer.sample(batch_size)`` without the warning about the buffer's own batch size."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="Got conflicting batch_sizes")
+        return buffer.sample(batch_size)
+
+
+def concat_shared(*tensordicts: TensorDictBase) -> TensorDictBase:
+    """Concatenates ``tensordicts`` along dim 0 on the (leaf) keys they all hold.
+
+    Examples:
+        >>> import torch
+        >>> from tensordict import TensorDict
+        >>> a = TensorDict({"x": torch.zeros(2), "y": torch.zeros(2)}, [2])
+        >>> b = TensorDict({"x": torch.ones(3)}, [3])
+        >>> out = concat_shared(a, b)
+        >>> out.batch_size, sorted(out.keys())
+        (torch.Size([5]), ['x'])
+    """
+    keys = set(tensordicts[0].keys(True, True))
+    for td in tensordicts[1:]:
+        keys &= set(td.keys(True, True))
+    keys = sorted(keys, key=str)
+    return torch.cat([td.select(*keys) for td in tensordicts], 0)
+
+
+def require_keys(tensordict: TensorDictBase, keys: Sequence, where: str) -> None:
+    """Raises one ``KeyError`` naming every key of ``keys`` missing from ``tensordict``."""
+    present = set(tensordict.keys(True, True))
+    missing = [key for key in keys if key not in present]
+    if missing:
+        raise KeyError(f"{where}: the batch lacks the keys {missing} (has {sorted(map(str, present))}).")
+
+
+def logit_network(qvalue: TensorDictModule, out_key: str = "discriminator_logit") -> TensorDictModule:
+    """A network of the critic's architecture (and input map) writing a scalar under ``out_key``.
+
+    The discriminators and ValueDICE's ``nu`` are built from ``make_qvalue()`` so that every method
+    uses the same network sizes and inputs as the critics.
+
+    Examples:
+        >>> import torch
+        >>> from tensordict import TensorDict
+        >>> from torchrl_csirl.modules import make_qvalue
+        >>> d = logit_network(make_qvalue(3, 1, hidden=(8,)))
+        >>> d(TensorDict({"observation": torch.zeros(4, 3), "action": torch.zeros(4, 1)}, [4]))["discriminator_logit"].shape
+        torch.Size([4, 1])
+    """
+    if not isinstance(qvalue, TensorDictModule):
+        raise TypeError(f"make_qvalue() must return a TensorDictModule, got {type(qvalue).__name__}.")
+    return TensorDictModule(qvalue.module, in_keys=list(qvalue.in_keys), out_keys=[out_key])
+
+
+def gradient_penalty(function: Callable[..., torch.Tensor], inputs: Sequence[torch.Tensor], target_norm: float = 1.0) -> torch.Tensor:
+    """WGAN-GP penalty ``mean_i (||grad_x f(x_i)||_2 - target_norm)^2`` (Gulrajani et al., 2017).
+
+    Args:
+        function: maps ``inputs`` to one output per sample (``[B]`` or ``[B, 1]``).
+        inputs: tensors ``[B, *]`` (e.g. observation and action); the gradient norm is taken over
+            all of them together, per sample.
+
+    Examples:
+        >>> import torch
+        >>> x = torch.randn(5, 3)
+        >>> round(float(gradient_penalty(lambda x: (2 * x).sum(-1), [x])), 4)  # (2 sqrt(3) - 1) ** 2
+        6.0718
+    """
+    inputs = [x.detach().requires_grad_(True) for x in inputs]
+    out = function(*inputs)
+    grads = torch.autograd.grad(out.sum(), inputs, create_graph=True)
+    norm = torch.cat([g.flatten(1) for g in grads], -1).norm(dim=-1)
+    return ((norm - target_norm) ** 2).mean()
+
+
+def orthogonal_regularization(module: nn.Module) -> torch.Tensor:
+    """``sum_W || W W^T * (1 - I) ||_F^2`` over the weight matrices of ``module``'s linear layers.
+
+    The orthogonal regulariser of Brock et al. (2019), used on the actor by ValueDICE (Kostrikov
+    et al., 2020, with coefficient 1e-4). ``W`` is ``[out, in]``, so the rows (the output units)
+    are pushed towards orthogonality.
+
+    Examples:
+        >>> import torch
+        >>> lin = torch.nn.Linear(4, 4)
+        >>> _ = torch.nn.init.eye_(lin.weight)
+        >>> float(orthogonal_regularization(lin))
+        0.0
+    """
+    total = None
+    for sub in module.modules():
+        if isinstance(sub, nn.Linear):
+            gram = sub.weight @ sub.weight.T
+            off_diagonal = gram * (1.0 - torch.eye(gram.shape[0], device=gram.device, dtype=gram.dtype))
+            term = off_diagonal.pow(2).sum()
+            total = term if total is None else total + term
+    if total is None:
+        raise ValueError(f"{type(module).__name__} has no nn.Linear layer to regularise.")
+    return total
+
+
+# ------------------------------------------------------------------------------ the SAC learner
+@dataclass
+class SACHyperparameters:
+    """The soft actor-critic learner shared by SQIL, GAIL, DAC and IQ-Learn's actor.
+
+    Defaults are the published SAC defaults for continuous control (Haarnoja et al., 2018,
+    "Soft Actor-Critic Algorithms and Applications", Table 1): Adam with learning rate 3e-4,
+    batches of 256, discount 0.99, Polyak factor 0.005, two critics, a learned temperature with
+    target entropy ``-dim(A)`` (initial value 1).
+
+    Attributes:
+        lr: Adam learning rate of the actor, the critics and the temperature.
+        batch_size: transitions per update.
+        gamma: discount.
+        tau: Polyak factor of the target critics.
+        num_qvalue_nets: critics (clipped double-Q with 2).
+        alpha_init: initial temperature.
+        fixed_alpha: keep the temperature at ``alpha_init``.
+        max_grad_norm: gradient-norm clipping (None: none).
+    """
+
+    lr: float = 3e-4
+    batch_size: int = 256
+    gamma: float = 0.99
+    tau: float = 0.005
+    num_qvalue_nets: int = 2
+    alpha_init: float = 1.0
+    fixed_alpha: bool = False
+    max_grad_norm: float | None = None
+
+
+def make_sac_learner(actor: nn.Module, qvalue: nn.Module, hp: SACHyperparameters):
+    """TorchRL's SAC (as :class:`~torchrl_csirl.objectives.EnsembleSACLoss`, TD(0)) with ``hp``.
+
+    Examples:
+        >>> from torchrl_csirl.modules import make_actor, make_qvalue
+        >>> loss = make_sac_learner(make_actor(3, 1, hidden=(8,)), make_qvalue(3, 1, hidden=(8,)), SACHyperparameters())
+        >>> loss.num_qvalue_nets, float(loss.target_entropy)
+        (2, -1.0)
+    """
+    from torchrl_csirl.objectives.ensemble_sac import EnsembleSACLoss
+
+    return EnsembleSACLoss(actor, qvalue, num_qvalue_nets=hp.num_qvalue_nets, alpha_init=hp.alpha_init,
+                           fixed_alpha=hp.fixed_alpha, gamma=hp.gamma)

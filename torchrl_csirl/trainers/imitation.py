@@ -1,0 +1,218 @@
+"""The imitation baselines as pluggable methods: networks, losses, optimisers, buffer transforms, update step.
+
+:func:`make_imitation_method` builds one baseline around the actor and critic factory of the
+CSIRL recipe (same network sizes and input map for every method) and returns an
+:class:`ImitationMethod`: the policy that acts, the transforms to append to the online and expert
+replay buffers, the states to checkpoint and a factory of the update step that
+:class:`~torchrl_csirl.trainers.CSIRLTrainer` calls once per update. The losses are in
+:mod:`torchrl_csirl.objectives` and the update steps in :mod:`torchrl_csirl.trainers.imitation_updates`;
+docs/BASELINES.md describes every method, its hyperparameters and their sources.
+"""
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import torch
+from tensordict import TensorDict
+from torch import nn
+from torchrl.data import TensorDictReplayBuffer
+from torchrl.envs.transforms import Transform
+from torchrl.objectives import SoftUpdate
+
+from torchrl_csirl.data.mixing import DemonstrationMixer
+from torchrl_csirl.objectives._imitation import SACHyperparameters, make_sac_learner, sample
+from torchrl.objectives import GAILLoss
+
+from torchrl_csirl.objectives.dac import DACDiscriminatorLoss, DACHyperparameters, make_dac_discriminator
+from torchrl_csirl.objectives.gail import GAILHyperparameters, gail_discriminator_input, make_gail_discriminator
+from torchrl_csirl.objectives.sqil import SQILHyperparameters, sqil_reward_labels
+from torchrl_csirl.trainers.imitation_updates import AdversarialImitationUpdate, DiscriminatorStep
+from torchrl_csirl.transforms.absorbing_states import AbsorbingStates
+from torchrl_csirl.transforms.discriminator_reward import DiscriminatorReward
+from torchrl_csirl.trainers.trainer import CSIRLTrainer
+from torchrl_csirl.trainers.updates import SACUpdate
+
+__all__ = ["IMITATION_METHODS", "ImitationMethod", "hyperparameters_class", "make_imitation_method"]
+
+UpdateStep = Callable[[CSIRLTrainer], dict[str, torch.Tensor]]
+
+
+@dataclass
+class ImitationMethod:
+    """One imitation baseline, ready to be driven by :class:`~torchrl_csirl.trainers.CSIRLTrainer`.
+
+    Attributes:
+        name: the method's name (one of :data:`IMITATION_METHODS`).
+        policy: the actor that acts (the one given to :func:`make_imitation_method`).
+        online_transforms: to append to the online replay buffer's transforms (reward labels,
+            discriminator reward, absorbing states), applied at sampling time.
+        expert_transforms: to append to the expert replay buffer's transforms.
+        states: every object with ``state_dict``/``load_state_dict`` to checkpoint (losses,
+            optimisers, discriminators), by name.
+        make_update_step: ``(online_buffer, expert_buffer) -> update_step``; the update step is
+            ``update_step(trainer) -> dict`` of detached losses, one call per update.
+        hyperparameters: the method's hyperparameter dataclass, as used.
+    """
+
+    name: str
+    policy: nn.Module
+    online_transforms: list[Transform]
+    expert_transforms: list[Transform]
+    states: dict[str, Any]
+    make_update_step: Callable[[TensorDictReplayBuffer, TensorDictReplayBuffer], UpdateStep]
+    hyperparameters: Any = None
+
+
+def _adam(module: nn.Module, lr: float) -> torch.optim.Optimizer:
+    return torch.optim.Adam([p for p in module.parameters() if p.requires_grad], lr=lr)
+
+
+def _identity(tensordict):
+    return tensordict
+
+
+def _sac(actor: nn.Module, make_qvalue: Callable[[], nn.Module], hp: SACHyperparameters, device):
+    loss = make_sac_learner(actor, make_qvalue(), hp).to(device)
+    return loss, _adam(loss, hp.lr), SoftUpdate(loss, tau=hp.tau)
+
+
+# ------------------------------------------------------------------------------ SQIL
+def _make_sqil(actor, make_qvalue, hp: SQILHyperparameters, device, **_dims: int) -> ImitationMethod:
+    loss, optimizer, target_updater = _sac(actor, make_qvalue, hp, device)
+    online_label, expert_label = sqil_reward_labels(hp)
+
+    def make_update_step(online: TensorDictReplayBuffer, expert: TensorDictReplayBuffer) -> UpdateStep:
+        # the expert part keeps its own labels: no online transform on it
+        mixer = DemonstrationMixer(online, expert, hp.expert_fraction, batch_size=hp.batch_size, transform=_identity)
+        return SACUpdate(loss, optimizer, target_updater, hp.max_grad_norm, sample=mixer.sample)
+
+    return ImitationMethod("sqil", actor, [online_label], [expert_label], {"loss": loss, "optim_sac": optimizer},
+                           make_update_step, hp)
+
+
+# ------------------------------------------------------------------------------ GAIL, DAC
+def _adversarial(name: str, actor, hp, loss, discriminator_loss, discriminator, optimizer, make_input, loss_keys,
+                 online_transforms, expert_transforms, sac) -> ImitationMethod:
+    sac_optimizer, target_updater = sac
+
+    def make_update_step(online: TensorDictReplayBuffer, expert: TensorDictReplayBuffer) -> UpdateStep:
+        step = DiscriminatorStep(discriminator_loss, optimizer, make_input, online, expert, hp.discriminator_batch_size,
+                                 loss_keys)
+        sac_update = SACUpdate(loss, sac_optimizer, target_updater, hp.max_grad_norm,
+                               sample=lambda: sample(online, hp.batch_size))
+        return AdversarialImitationUpdate(step, sac_update, hp.discriminator_every)
+
+    states = {"loss": loss, "optim_sac": sac_optimizer, "discriminator": discriminator,
+              "optim_discriminator": optimizer}
+    return ImitationMethod(name, actor, online_transforms, expert_transforms, states, make_update_step, hp)
+
+
+def _make_gail(actor, make_qvalue, hp: GAILHyperparameters, device, **_dims: int) -> ImitationMethod:
+    loss, sac_optimizer, target_updater = _sac(actor, make_qvalue, hp, device)
+    discriminator = make_gail_discriminator(make_qvalue()).to(device)
+    discriminator_loss = GAILLoss(discriminator, use_grad_penalty=hp.use_grad_penalty, gp_lambda=hp.gp_lambda)
+    optimizer = _adam(discriminator, hp.discriminator_lr)
+    loss_keys = {"loss": "loss_discriminator"}
+    return _adversarial("gail", actor, hp, loss, discriminator_loss, discriminator, optimizer, gail_discriminator_input,
+                        loss_keys, [DiscriminatorReward(discriminator, "gail")], [], (sac_optimizer, target_updater))
+
+
+def _dac_input(expert, online):
+    return TensorDict({"expert": expert, "collector": online}, [])
+
+
+def _make_dac(actor, make_qvalue, hp: DACHyperparameters, device, **_dims: int) -> ImitationMethod:
+    loss, sac_optimizer, target_updater = _sac(actor, make_qvalue, hp, device)
+    discriminator = make_dac_discriminator(make_qvalue(), hp.absorbing_states).to(device)
+    discriminator_loss = DACDiscriminatorLoss(discriminator, gp_lambda=hp.gp_lambda)
+    optimizer = _adam(discriminator, hp.discriminator_lr)
+    loss_keys = {"loss_discriminator": "loss_discriminator", "loss_gradient_penalty": "loss_gradient_penalty"}
+    online_transforms = [AbsorbingStates()] if hp.absorbing_states else []
+    expert_transforms = [AbsorbingStates()] if hp.absorbing_states else []
+    online_transforms.append(DiscriminatorReward(discriminator, "logit",
+                                                 absorbing_gamma=hp.gamma if hp.absorbing_states else None))
+    return _adversarial("dac", actor, hp, loss, discriminator_loss, discriminator, optimizer, _dac_input, loss_keys,
+                        online_transforms, expert_transforms, (sac_optimizer, target_updater))
+
+
+_BUILDERS: dict[str, tuple[type, Callable[..., ImitationMethod]]] = {
+    "sqil": (SQILHyperparameters, _make_sqil),
+    "gail": (GAILHyperparameters, _make_gail),
+    "dac": (DACHyperparameters, _make_dac),
+}
+IMITATION_METHODS = ("gail", "dac", "valuedice", "sqil", "iqlearn")
+_IMPLEMENTED = tuple(_BUILDERS)
+
+
+def hyperparameters_class(name: str) -> type:
+    """The hyperparameter dataclass of method ``name``.
+
+    Examples:
+        >>> hyperparameters_class("sqil").__name__
+        'SQILHyperparameters'
+    """
+    _check_name(name)
+    return _BUILDERS[name][0]
+
+
+def _check_name(name: str) -> None:
+    if name not in IMITATION_METHODS:
+        raise ValueError(f"unknown imitation method {name!r}; expected one of {IMITATION_METHODS}.")
+    if name not in _BUILDERS:
+        raise NotImplementedError(f"imitation method {name!r} is not implemented yet.")
+
+
+def _resolve(cls: type, hyperparameters: Any) -> Any:
+    if hyperparameters is None:
+        return cls()
+    if isinstance(hyperparameters, cls):
+        return hyperparameters
+    if isinstance(hyperparameters, dict):
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(hyperparameters) - known)
+        if unknown:
+            raise ValueError(f"{cls.__name__} has no field(s) {unknown}; known: {sorted(known)}.")
+        return cls(**hyperparameters)
+    raise TypeError(f"hyperparameters must be a {cls.__name__}, a dict or None, got {type(hyperparameters).__name__}.")
+
+
+def make_imitation_method(name: str, actor: nn.Module, make_qvalue: Callable[[], nn.Module], *, obs_dim: int,
+                          action_dim: int, hyperparameters: Any = None,
+                          device: torch.device | str = "cpu") -> ImitationMethod:
+    """Builds the imitation baseline ``name`` around ``actor`` and critics from ``make_qvalue()``.
+
+    Args:
+        name: one of :data:`IMITATION_METHODS`.
+        actor: the tanh-Gaussian policy (:func:`~torchrl_csirl.modules.make_actor`).
+        make_qvalue: builds one critic ``Q(s, a)`` (:func:`~torchrl_csirl.modules.make_qvalue`, the
+            same sizes and input map as CSIRL's); discriminators and ValueDICE's ``nu`` are built
+            with it too.
+
+    Keyword Args:
+        obs_dim: observation size (checked against the critic).
+        action_dim: action size (checked against the actor's action spec).
+        hyperparameters: the method's dataclass (:func:`hyperparameters_class`), a dict of its
+            fields, or None for the published defaults.
+        device: where the networks live.
+
+    Examples:
+        >>> from torchrl_csirl.modules import make_actor, make_qvalue
+        >>> method = make_imitation_method("sqil", make_actor(3, 1, hidden=(8,)),
+        ...                                lambda: make_qvalue(3, 1, hidden=(8,)), obs_dim=3, action_dim=1)
+        >>> method.name, [t.value for t in method.online_transforms + method.expert_transforms]
+        ('sqil', [0.0, 1.0])
+        >>> make_imitation_method("dagger", None, None, obs_dim=3, action_dim=1)
+        Traceback (most recent call last):
+        ...
+        ValueError: unknown imitation method 'dagger'; expected one of ('gail', 'dac', 'valuedice', 'sqil', 'iqlearn').
+    """
+    _check_name(name)
+    cls, builder = _BUILDERS[name]
+    hp = _resolve(cls, hyperparameters)
+    spec = getattr(actor, "spec", None)
+    if spec is not None and "action" in spec.keys() and spec["action"].shape[-1] != action_dim:
+        raise ValueError(f"the actor's actions have size {spec['action'].shape[-1]}, expected action_dim={action_dim}.")
+    return builder(actor, make_qvalue, hp, torch.device(device), obs_dim=obs_dim, action_dim=action_dim)

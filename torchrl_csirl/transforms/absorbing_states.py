@@ -1,0 +1,113 @@
+"""DAC's absorbing states: terminal transitions lead to an absorbing state that loops on itself."""
+from __future__ import annotations
+
+import torch
+from tensordict import TensorDictBase
+from tensordict.utils import NestedKey
+from torchrl.envs.transforms import Transform
+
+__all__ = ["AbsorbingStates", "absorbing_value", "absorbing_self_loops"]
+
+
+def absorbing_value(absorbing_reward: torch.Tensor, gamma: float) -> torch.Tensor:
+    """The discounted value ``sum_{k >= 1} gamma^k r_a = gamma r_a / (1 - gamma)`` collected after
+    entering the absorbing state, whose self-loop pays ``r_a`` forever.
+
+    Examples:
+        >>> import torch
+        >>> absorbing_value(torch.tensor(1.0), 0.75)
+        tensor(3.)
+    """
+    if not 0.0 <= gamma < 1.0:
+        raise ValueError(f"gamma must be in [0, 1), got {gamma}.")
+    return absorbing_reward * (gamma / (1.0 - gamma))
+
+
+class AbsorbingStates(Transform):
+    """Turns terminal transitions into transitions to an absorbing state, with an indicator feature.
+
+    Kostrikov et al. (2019, Sec. 4.2, "Discriminator-Actor-Critic") show that ending the return at
+    a terminal state biases adversarial imitation (a positive reward favours long episodes, a
+    negative one early termination) and fix it by letting episodes enter an absorbing state
+    ``s_a`` that loops on itself with a *learned* reward ``r_a``. On a batch of transitions this
+    transform writes the indicator features: ``"absorbing"`` (``False``, the state ``s`` is real)
+    and ``("next", "absorbing")`` (``True`` where the transition is terminal), and sets the
+    successor observation of terminal transitions to the placeholder ``absorbing_value`` of ``s_a``.
+
+    The batch keeps its size (TorchRL's replay buffers need that): the absorbing state's self-loop
+    transitions, one per terminal transition as in the paper's replay buffer, are built where
+    they are used (:func:`absorbing_self_loops`, by
+    :class:`~torchrl_csirl.objectives.DACDiscriminatorLoss`), and since their value is the
+    constant ``gamma r_a / (1 - gamma)`` (:func:`absorbing_value`), the critic target of a
+    terminal transition adds it in closed form
+    (:class:`~torchrl_csirl.transforms.DiscriminatorReward` with ``absorbing_gamma``) instead of
+    bootstrapping through a critic evaluated at the placeholder; ``terminated`` therefore stays set.
+    Apply it to the expert and the online replay buffers alike (sampling time). Truncated
+    (time-limit) transitions are not terminal and are left alone.
+
+    Keyword Args:
+        absorbing_key (NestedKey): the indicator entry. Defaults to ``"absorbing"``.
+        observation_key (NestedKey): Defaults to ``"observation"``.
+        absorbing_observation (float): the placeholder observation of ``s_a``. Defaults to ``0.0``.
+
+    Examples:
+        >>> import torch
+        >>> from tensordict import TensorDict
+        >>> term = torch.tensor([[False], [True]])
+        >>> td = TensorDict({"observation": torch.ones(2, 2), "action": torch.ones(2, 1),
+        ...                  "next": {"observation": torch.ones(2, 2), "terminated": term}}, [2])
+        >>> out = AbsorbingStates()(td)
+        >>> out["absorbing"].squeeze(-1).tolist(), out["next", "absorbing"].squeeze(-1).tolist()
+        ([False, False], [False, True])
+        >>> out["next", "observation"][1].tolist()
+        [0.0, 0.0]
+    """
+
+    def __init__(self, *, absorbing_key: NestedKey = "absorbing", observation_key: NestedKey = "observation",
+                 absorbing_observation: float = 0.0) -> None:
+        super().__init__(in_keys=[observation_key], out_keys=[absorbing_key])
+        self.absorbing_key = absorbing_key
+        self.observation_key = observation_key
+        self.absorbing_observation = float(absorbing_observation)
+
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        missing = [key for key in (self.observation_key, ("next", self.observation_key), ("next", "terminated"))
+                   if key not in tensordict.keys(True, True)]
+        if missing:
+            raise KeyError(f"AbsorbingStates: the transitions lack the keys {missing}.")
+        terminated = tensordict.get(("next", "terminated")).bool()
+        tensordict.set(self.absorbing_key, torch.zeros_like(terminated))
+        tensordict.set(("next", self.absorbing_key), terminated)
+        next_obs = tensordict.get(("next", self.observation_key))
+        placeholder = torch.full_like(next_obs, self.absorbing_observation)
+        tensordict.set(("next", self.observation_key), torch.where(terminated, placeholder, next_obs))
+        return tensordict
+
+    def _call(self, next_tensordict: TensorDictBase) -> TensorDictBase:  # pragma: no cover
+        raise RuntimeError("AbsorbingStates works on whole transitions: use it as a replay-buffer transform.")
+
+
+def absorbing_self_loops(transitions: TensorDictBase, *, absorbing_key: NestedKey = "absorbing",
+                         keys: tuple[NestedKey, ...] = ("observation", "action"),
+                         absorbing_observation: float = 0.0) -> TensorDictBase:
+    """One self-loop sample ``(s_a, 0)`` with indicator ``True`` per transition entering ``s_a``.
+
+    Reads ``("next", absorbing_key)`` (written by :class:`AbsorbingStates`); returns the entries
+    ``keys`` (placeholder observation, zero action) and ``absorbing_key``.
+
+    Examples:
+        >>> import torch
+        >>> from tensordict import TensorDict
+        >>> td = TensorDict({"observation": torch.ones(3, 2), "action": torch.ones(3, 1),
+        ...                  "next": {"absorbing": torch.tensor([[True], [False], [True]])}}, [3])
+        >>> loops = absorbing_self_loops(td)
+        >>> loops.batch_size, loops["absorbing"].all().item(), loops["observation"].abs().sum().item()
+        (torch.Size([2]), True, 0.0)
+    """
+    into = transitions.get(("next", absorbing_key)).reshape(transitions.batch_size).bool()
+    loops = transitions.select(*keys)[into].clone()
+    loops.set(keys[0], torch.full_like(loops.get(keys[0]), absorbing_observation))
+    for key in keys[1:]:
+        loops.set(key, torch.zeros_like(loops.get(key)))
+    loops.set(absorbing_key, torch.ones(*loops.batch_size, 1, dtype=torch.bool, device=loops.device))
+    return loops
