@@ -2,14 +2,18 @@
 
 Methods (``method=<name>``):
 
-* ``sac``: SAC (:class:`~torchrl_csirl.objectives.EnsembleSACLoss` with 2 critics, i.e. standard
-  SAC) on the paper's "true distance reward": :class:`~torchrl_csirl.transforms.ProgressReward`
+* ``sac``: SAC on the paper's "true distance reward": :class:`~torchrl_csirl.transforms.ProgressReward`
   toward the scenario's finish, recomputed at sampling time. Uses no demonstrations for training.
+  Its learner is the one every SAC-based baseline uses (``sac.*``: the published SAC defaults,
+  :class:`~torchrl_csirl.objectives._imitation.SACHyperparameters`, two critics).
 * ``bc``: behavioural cloning, TorchRL's :class:`~torchrl.objectives.BCLoss` (``bc.loss_function``)
   on the deterministic action, on expert batches of ``expert.batch_size``. It runs in the same
   loop as every trained method (same frames collected with its own policy, same number of
   updates, same evaluation cadence), so its learning curve sits on the same axis; the collected
   frames are not used by its update.
+* ``gail``, ``dac``, ``valuedice``, ``sqil``, ``iqlearn`` (those implemented): built by
+  :func:`~torchrl_csirl.trainers.imitation.make_imitation_method`; the ``<method>`` section holds
+  the fields of its hyperparameter dataclass (docs/BASELINES.md gives their sources).
 * ``random``, ``expert``: reference rows, no training: uniform random actions, and the expert
   driver (:class:`~torchrl_csirl.envs.expert_policy.ExpertDriverPolicy`), scored on the same
   test episodes.
@@ -27,10 +31,11 @@ Examples:
     >>> load_config(["method=gibberish"])  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    common.config.ConfigError: method=gibberish: must be one of sac, bc, random, expert...
+    common.config.ConfigError: method=gibberish: must be one of sac, bc, ..., random, expert or null
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 from functools import partial
@@ -38,6 +43,7 @@ from typing import Any, Optional
 
 import torch
 from omegaconf import DictConfig, OmegaConf
+from torchrl.envs import Compose
 from torchrl.envs.utils import RandomPolicy
 from torchrl.objectives import BCLoss, SoftUpdate
 
@@ -61,15 +67,31 @@ from common.run import ExpertDataError, expert_accomplish_rate, resolve_device
 from torchrl_csirl.data import ExpertDemonstrations
 from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, normalized_accomplish_rate
 from torchrl_csirl.modules import EgoRelativeFeatures, make_actor, make_qvalue
-from torchrl_csirl.objectives import EnsembleSACLoss
+from torchrl_csirl.objectives._imitation import SACHyperparameters, make_sac_learner
 from torchrl_csirl.trainers import BCUpdate, SACUpdate, evaluate_policy
+from torchrl_csirl.trainers.imitation import (
+    IMITATION_METHODS,
+    ImitationMethod,
+    hyperparameters_class,
+    make_imitation_method,
+)
 from torchrl_csirl.transforms import CombineRewards, ProgressReward
 
 __all__ = ["ImitationHighwayConfig", "METHODS", "REFERENCE_METHODS", "load_config", "load_run_config", "make_trainer",
            "evaluate_reference"]
 
+def _implemented(name: str) -> bool:
+    try:
+        hyperparameters_class(name)
+    except NotImplementedError:
+        return False
+    return True
+
+
+#: the loss-based baselines of :func:`~torchrl_csirl.trainers.imitation.make_imitation_method` (those implemented)
+LOSS_METHODS = tuple(name for name in IMITATION_METHODS if _implemented(name))
 #: methods trained by this recipe's loop
-TRAINED_METHODS = ("sac", "bc")
+TRAINED_METHODS = ("sac", "bc", *LOSS_METHODS)
 #: reference rows: evaluated, not trained
 REFERENCE_METHODS = ("random", "expert")
 METHODS = (*TRAINED_METHODS, *REFERENCE_METHODS)
@@ -80,31 +102,25 @@ CSIRL_METHODS = ("csirl", "csirl-b")
 # ---------------------------------------------------------------------------------------- config
 @dataclass
 class ImitationExpertConfig(ExpertConfig):
-    batch_size: int = option(256, above=0, help="expert transitions per update (as many as online ones)")
+    batch_size: int = option(256, above=0, help="expert pairs per bc update (the other methods set their own sizes)")
 
 
 @dataclass
 class ImitationReplayBufferConfig:
     size: int = option(1_000_000, above=0, help="online buffer capacity")
-    batch_size: int = option(256, above=0, help="online transitions per update")
     clear_each_round: bool = option(False, help="empty the buffer at each round start")
     warmup_frames: int = option(1000, minimum=0, help="transitions in the buffer before the first update of a round")
 
 
 @dataclass
 class ImitationOptimConfig:
-    lr: float = option(3.0e-4, above=0.0, help="every network of the method (Adam)")
-    utd_ratio: float = option(0.5, above=0.0, help="updates per collected frame")
-    tau: float = option(0.005, above=0.0, below=1.0, help="Polyak factor of the target critics")
-    max_grad_norm: Optional[float] = option(None, above=0.0, help="clip the gradient norm (null: no clipping)")
+    utd_ratio: float = option(0.5, above=0.0, help="updates per collected frame (learning rates: each method's section)")
 
 
 @dataclass
-class SACBaselineConfig:
-    num_qvalue_nets: int = option(2, minimum=2, help="critics (2: standard SAC, the minimum of two)")
-    gamma: float = option(0.99, above=0.0, below=1.0, help="discount")
-    alpha: float = option(0.01, above=0.0, help="entropy coefficient (its initial value unless fixed_alpha)")
-    fixed_alpha: bool = option(False, help="false: SAC's automatic temperature")
+class SACBaselineConfig(SACHyperparameters):
+    """The ``sac`` baseline: the SAC learner of every baseline (published SAC defaults) and its reward's scale."""
+
     reward_scale: Optional[float] = option(
         None, above=0.0, help="progress reward per unit of normalised distance (null: the scenario's matching scale)")
 
@@ -112,12 +128,12 @@ class SACBaselineConfig:
 @dataclass
 class BCConfig:
     loss_function: str = option("l2", choices=("l2", "l1"), help="distance of the deterministic action to the expert's")
+    lr: float = option(3.0e-4, above=0.0, help="Adam learning rate")
+    max_grad_norm: Optional[float] = option(None, above=0.0, help="clip the gradient norm (null: no clipping)")
 
 
 @dataclass
-class ImitationHighwayConfig:
-    """``recipes/imitation_highway.py``: one baseline under CSIRL's default budget and evaluation."""
-
+class _ImitationHighwayBase:
     method: Optional[str] = option(None, choices=METHODS, help="the baseline (required)")
     preset: str = option("default", help="default (no other preset)")
     seed: int = option(0, minimum=0, help="random seed")
@@ -129,11 +145,22 @@ class ImitationHighwayConfig:
     replay_buffer: ImitationReplayBufferConfig = field(default_factory=ImitationReplayBufferConfig)
     model: ModelConfig = field(default_factory=ModelConfig)
     optim: ImitationOptimConfig = field(default_factory=ImitationOptimConfig)
-    sac: SACBaselineConfig = field(default_factory=SACBaselineConfig)
-    bc: BCConfig = field(default_factory=BCConfig)
     eval: EvalConfig = field(default_factory=EvalConfig)
     logger: LoggerConfig = field(default_factory=LoggerConfig)
     checkpoint: CheckpointConfig = field(default_factory=CheckpointConfig)
+    sac: SACBaselineConfig = field(default_factory=SACBaselineConfig)
+    bc: BCConfig = field(default_factory=BCConfig)
+
+
+#: ``recipes/imitation_highway.py``'s schema: the shared sections, ``sac``, ``bc`` and one section per
+#: loss-based method, the fields of its hyperparameter dataclass (``hyperparameters_class``)
+ImitationHighwayConfig = dataclasses.make_dataclass(
+    "ImitationHighwayConfig",
+    [(name, hyperparameters_class(name), field(default_factory=hyperparameters_class(name))) for name in LOSS_METHODS],
+    bases=(_ImitationHighwayBase,),
+)
+ImitationHighwayConfig.__doc__ = "``recipes/imitation_highway.py``: one baseline under CSIRL's default budget and evaluation."
+ImitationHighwayConfig.__module__ = __name__
 
 
 def check_method(overrides: list[str]) -> None:
@@ -202,57 +229,76 @@ def input_features(cfg: DictConfig, spec: ScenarioSpec) -> EgoRelativeFeatures |
 
 
 # ---------------------------------------------------------------------------------------- methods
-@dataclass
-class MethodParts:
-    """What a trained method hands to :func:`common.builders.assemble_trainer`."""
-
-    policy: Any
-    online_transforms: list
-    make_update_step: Any  # (online_buffer) -> update step
-    states: dict[str, Any]
+def sac_hyperparameters(section: DictConfig) -> SACHyperparameters:
+    """The SAC learner's settings of the ``sac`` section (its ``reward_scale`` aside)."""
+    values = OmegaConf.to_container(section)
+    values.pop("reward_scale")
+    return SACHyperparameters(**values)
 
 
-def make_sac(cfg: DictConfig, spec: ScenarioSpec, demos: ExpertDemonstrations, device: torch.device) -> MethodParts:
+def make_sac(cfg: DictConfig, spec: ScenarioSpec, device: torch.device) -> ImitationMethod:
     """SAC on the progress reward toward the finish (the paper's "SAC (true distance reward)")."""
+    hp = sac_hyperparameters(cfg.sac)
     features = input_features(cfg, spec)
     actor = make_actor(spec.obs_dim, spec.action_dim, input_features=features)
-    loss = EnsembleSACLoss(actor, make_qvalue(spec.obs_dim, spec.action_dim, input_features=features),
-                           num_qvalue_nets=cfg.sac.num_qvalue_nets, alpha_init=cfg.sac.alpha,
-                           fixed_alpha=cfg.sac.fixed_alpha, gamma=cfg.sac.gamma).to(device)
-    optimizer = torch.optim.Adam([p for p in loss.parameters() if p.requires_grad], lr=cfg.optim.lr)
-    target_updater = SoftUpdate(loss, tau=cfg.optim.tau)
+    loss = make_sac_learner(actor, make_qvalue(spec.obs_dim, spec.action_dim, input_features=features), hp).to(device)
+    optimizer = torch.optim.Adam([p for p in loss.parameters() if p.requires_grad], lr=hp.lr)
+    update = SACUpdate(loss, optimizer, SoftUpdate(loss, tau=hp.tau), hp.max_grad_norm)
     reward = ProgressReward.from_scenario(spec, scale=cfg.sac.reward_scale).to(device)
-    update = SACUpdate(loss, optimizer, target_updater, cfg.optim.max_grad_norm)
-    return MethodParts(actor, [reward, CombineRewards(["progress_reward"])], lambda online: update,
-                       {"loss": loss, "optim_sac": optimizer})
+    return ImitationMethod("sac", actor, [reward, CombineRewards(["progress_reward"])], [],
+                           {"loss": loss, "optim_sac": optimizer}, lambda online, expert: update, hp)
 
 
-def make_bc(cfg: DictConfig, spec: ScenarioSpec, demos: ExpertDemonstrations, device: torch.device) -> MethodParts:
-    """Behavioural cloning (TorchRL's ``BCLoss``) on expert batches."""
+def make_bc(cfg: DictConfig, spec: ScenarioSpec, device: torch.device) -> ImitationMethod:
+    """Behavioural cloning (TorchRL's ``BCLoss``) on expert batches of ``expert.batch_size``."""
     actor = make_actor(spec.obs_dim, spec.action_dim, input_features=input_features(cfg, spec)).to(device)
     loss = BCLoss(actor, loss_function=cfg.bc.loss_function)
-    optimizer = torch.optim.Adam(actor.parameters(), lr=cfg.optim.lr)
-    expert = demos.as_replay_buffer(batch_size=cfg.expert.batch_size, device=device)
-    update = BCUpdate(loss, optimizer, expert, cfg.optim.max_grad_norm)
-    return MethodParts(actor, [], lambda online: update, {"actor": actor, "optim_bc": optimizer})
+    optimizer = torch.optim.Adam(actor.parameters(), lr=cfg.bc.lr)
+
+    def make_update_step(online, expert) -> BCUpdate:
+        return BCUpdate(loss, optimizer, expert, cfg.bc.max_grad_norm)
+
+    return ImitationMethod("bc", actor, [], [], {"actor": actor, "optim_bc": optimizer}, make_update_step)
 
 
-METHOD_BUILDERS = {"sac": make_sac, "bc": make_bc}
+def make_loss_method(cfg: DictConfig, spec: ScenarioSpec, device: torch.device) -> ImitationMethod:
+    """A loss-based baseline (:func:`~torchrl_csirl.trainers.imitation.make_imitation_method`) with
+    the ``<method>`` section as its hyperparameters and CSIRL's actor and critic factory."""
+    features = input_features(cfg, spec)
+    actor = make_actor(spec.obs_dim, spec.action_dim, input_features=features)
+    try:
+        return make_imitation_method(
+            cfg.method, actor, partial(make_qvalue, spec.obs_dim, spec.action_dim, input_features=features),
+            obs_dim=spec.obs_dim, action_dim=spec.action_dim, hyperparameters=OmegaConf.to_object(cfg[cfg.method]),
+            device=device)
+    except (ValueError, TypeError) as err:
+        raise ConfigError(f"{cfg.method}: {err}") from None
+
+
+METHOD_BUILDERS = {"sac": make_sac, "bc": make_bc, **{name: make_loss_method for name in LOSS_METHODS}}
 
 
 def make_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume_frames: int | None = None) -> Run:
-    """Builds the method and the trainer with the shared hooks (``run.parts["method"]`` holds its pieces)."""
+    """Builds the method and the trainer with the shared hooks (``run.method`` is the
+    :class:`~torchrl_csirl.trainers.imitation.ImitationMethod`, ``run.expert_buffer`` its demonstrations).
+
+    The online buffer samples the method's ``batch_size`` (``expert.batch_size`` for ``bc``); the
+    expert buffer holds every demonstrated transition, with the method's expert transforms.
+    """
     torch.manual_seed(cfg.seed)
     device = resolve_device(cfg.device)
     spec = SCENARIOS[cfg.env.scenario]
     demos = load_demonstrations(cfg, spec)
-    parts = METHOD_BUILDERS[cfg.method](cfg, spec, demos, device)
-    online = make_online_buffer(cfg.replay_buffer.size, cfg.replay_buffer.batch_size, parts.online_transforms, device)
+    method = METHOD_BUILDERS[cfg.method](cfg, spec, device)
+    batch_size = getattr(method.hyperparameters, "batch_size", cfg.expert.batch_size)
+    online = make_online_buffer(cfg.replay_buffer.size, batch_size, method.online_transforms, device)
+    expert = demos.as_replay_buffer(batch_size=cfg.expert.batch_size, device=device,
+                                    transform=Compose(*method.expert_transforms) if method.expert_transforms else None)
     return assemble_trainer(
-        cfg, spec, run_dir, device=device, demos=demos, policy=parts.policy, online_buffer=online,
-        update_step=parts.make_update_step(online), total_frames=cfg.collector.total_frames,
-        updates_per_round=cfg.updates_per_round, states=parts.states, frames_done=frames_done,
-        resume_frames=resume_frames, parts={"method": parts},
+        cfg, spec, run_dir, device=device, demos=demos, policy=method.policy, online_buffer=online,
+        update_step=method.make_update_step(online, expert), total_frames=cfg.collector.total_frames,
+        updates_per_round=cfg.updates_per_round, states=method.states, frames_done=frames_done,
+        resume_frames=resume_frames, parts={"method": method, "expert_buffer": expert},
     )
 
 

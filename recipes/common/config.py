@@ -30,6 +30,7 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import os
+import types
 import typing
 from dataclasses import dataclass, field
 from typing import Any, Optional, Union
@@ -289,7 +290,7 @@ def _hints(cls: type) -> dict[str, Any]:
 
 def _optional_inner(tp: Any) -> tuple[Any, bool]:
     """(the type, whether null is allowed) of an annotation."""
-    if typing.get_origin(tp) is Union:
+    if typing.get_origin(tp) in (Union, types.UnionType):  # Optional[X], X | None
         args = [a for a in typing.get_args(tp) if a is not type(None)]
         return args[0], len(args) < len(typing.get_args(tp))
     return tp, False
