@@ -159,3 +159,13 @@ def test_benchmark_resumes_a_killed_cell_from_its_checkpoint(tmp_path):
     assert cell.resumed and f"checkpoint.resume={tmp_path / 'merge-sac-s0'}" in cell.command
     assert "optim.lr=1" not in cell.command
     assert benchmark.main(["--methods", "dqn"]) == 2
+
+
+def test_help_lists_every_key_with_its_help(capsys):
+    from common.config import flatten_config
+
+    assert imitation_highway.main(["--help"]) == {}
+    keys = [line for line in capsys.readouterr().out.splitlines() if " = " in line]
+    assert len(keys) == len(flatten_config(imitation_utils.load_config(["method=bc"])))
+    # sections from a hyperparameter dataclass show the help of its docstring
+    assert any(line.strip().startswith("sac.tau = 0.005  # a number; Polyak") for line in keys)
