@@ -70,6 +70,25 @@ def test_trained_baseline_end_to_end(method, tmp_path):
         assert json.load(f)["accomplish_rate"] == out["accomplish_rate"]
 
 
+def test_progress_reward_is_the_distance_gained_toward_the_finish():
+    from tensordict import TensorDict
+
+    from torchrl_csirl.envs import SCENARIOS
+    from torchrl_csirl.transforms import ProgressReward
+
+    spec = SCENARIOS["roundabout"]  # (x, y) positions, features_range +-100 m
+    reward = ProgressReward.from_scenario(spec, scale=1.0)
+    finish = torch.tensor(spec.normalize_position(spec.finish_position), dtype=torch.float32)
+    obs = torch.zeros(3, spec.obs_dim)
+    obs[:, 1:3] = finish + torch.tensor([[0.3, 0.4], [0.0, 0.1], [0.0, 0.0]])  # 0.5, 0.1, 0 away
+    next_obs = obs.clone()
+    next_obs[:, 1:3] = finish + torch.tensor([[0.0, 0.0], [0.0, 0.3], [0.6, 0.8]])  # 0, 0.3, 1 away
+    td = reward(TensorDict({"observation": obs, "next": {"observation": next_obs}}, [3]))
+    torch.testing.assert_close(td["next", "progress_reward"].squeeze(-1), torch.tensor([0.5, -0.2, -1.0]))
+    with pytest.raises(ValueError, match="one finish coordinate per position feature"):
+        ProgressReward([0.1], [1, 2])
+
+
 def test_sac_trains_on_the_progress_reward(tmp_path):
     cfg = imitation_utils.load_config(["method=sac", *TINY, *small_batches("sac"), "collector.total_frames=200",
                                        "logger.backend=none"])
