@@ -18,20 +18,33 @@ from torchrl_csirl.objectives.dac import (
     make_dac_discriminator,
 )
 from torchrl_csirl.objectives.gail import GAILHyperparameters, gail_discriminator_input, make_gail_discriminator
+from torchrl_csirl.objectives.iq_learn import IQLearnHyperparameters, IQLearnLoss, inverse_soft_q_objective
 from torchrl_csirl.objectives.sqil import SQILHyperparameters, sqil_batch, sqil_reward_labels
+from torchrl_csirl.objectives.valuedice import (
+    ValueDICEHyperparameters,
+    ValueDICELoss,
+    initial_observations,
+    valuedice_objective,
+)
 
 __all__ = [
     "AbsorbingLogit",
     "ActorBehaviourCloning",
     "DACDiscriminatorLoss",
     "DACHyperparameters",
-    "GAILHyperparameters",
     "EnsembleSACLoss",
+    "GAILHyperparameters",
+    "IQLearnHyperparameters",
+    "IQLearnLoss",
     "MetaRewardLoss",
     "SACHyperparameters",
     "SQILHyperparameters",
+    "ValueDICEHyperparameters",
+    "ValueDICELoss",
     "dac_discriminator_loss",
     "gail_discriminator_input",
+    "initial_observations",
+    "inverse_soft_q_objective",
     "make_dac_discriminator",
     "make_gail_discriminator",
     "make_sac_learner",
@@ -40,4 +53,5 @@ __all__ = [
     "reinitialize_module",
     "sqil_batch",
     "sqil_reward_labels",
+    "valuedice_objective",
 ]

@@ -153,6 +153,13 @@ class SACHyperparameters:
     max_grad_norm: float | None = None
 
 
+def _check_num_critics(num_qvalue_nets: int) -> None:
+    # TorchRL's SACLoss stores a single critic's parameters as plain tensors: they would never train
+    if num_qvalue_nets < 2:
+        raise ValueError(f"num_qvalue_nets must be >= 2 (with one critic SACLoss registers no critic parameter), "
+                         f"got {num_qvalue_nets}.")
+
+
 def make_sac_learner(actor: nn.Module, qvalue: nn.Module, hp: SACHyperparameters):
     """TorchRL's SAC (as :class:`~torchrl_csirl.objectives.EnsembleSACLoss`, TD(0)) with ``hp``.
 
@@ -164,5 +171,6 @@ def make_sac_learner(actor: nn.Module, qvalue: nn.Module, hp: SACHyperparameters
     """
     from torchrl_csirl.objectives.ensemble_sac import EnsembleSACLoss
 
+    _check_num_critics(hp.num_qvalue_nets)
     return EnsembleSACLoss(actor, qvalue, num_qvalue_nets=hp.num_qvalue_nets, alpha_init=hp.alpha_init,
                            fixed_alpha=hp.fixed_alpha, gamma=hp.gamma)

@@ -5,15 +5,18 @@ from torchrl_csirl.trainers.collection import shutdown_collector
 from torchrl_csirl.trainers.evaluation import evaluate_policy
 from torchrl_csirl.trainers.checkpoint import CheckpointHook, load_checkpoint
 from torchrl_csirl.trainers.imitation import IMITATION_METHODS, ImitationMethod, hyperparameters_class, make_imitation_method
+from torchrl_csirl.trainers.imitation_updates import AdversarialImitationUpdate, DiscriminatorStep, ValueDICEUpdate
 from torchrl_csirl.trainers.hooks import EvaluationHook, SubgoalSelectionHook
 from torchrl_csirl.trainers.metrics_logger import MetricsLogger
 from torchrl_csirl.trainers.trainer import CSIRLTrainer, TrainingDivergedError, check_finite_losses
 from torchrl_csirl.trainers.updates import BCUpdate, MetaRewardUpdate, SACUpdate
 
 __all__ = [
+    "AdversarialImitationUpdate",
     "BCUpdate",
     "CSIRLTrainer",
     "CheckpointHook",
+    "DiscriminatorStep",
     "EvaluationHook",
     "IMITATION_METHODS",
     "ImitationMethod",
@@ -22,6 +25,7 @@ __all__ = [
     "SACUpdate",
     "SubgoalSelectionHook",
     "TrainingDivergedError",
+    "ValueDICEUpdate",
     "check_finite_losses",
     "evaluate_policy",
     "hyperparameters_class",

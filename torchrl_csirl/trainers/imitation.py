@@ -23,13 +23,15 @@ from torchrl.envs.transforms import Transform
 from torchrl.objectives import SoftUpdate
 
 from torchrl_csirl.data.mixing import DemonstrationMixer
-from torchrl_csirl.objectives._imitation import SACHyperparameters, make_sac_learner, sample
+from torchrl_csirl.objectives._imitation import SACHyperparameters, logit_network, make_sac_learner, sample
 from torchrl.objectives import GAILLoss
 
 from torchrl_csirl.objectives.dac import DACDiscriminatorLoss, DACHyperparameters, make_dac_discriminator
 from torchrl_csirl.objectives.gail import GAILHyperparameters, gail_discriminator_input, make_gail_discriminator
+from torchrl_csirl.objectives.iq_learn import IQLearnHyperparameters, IQLearnLoss
 from torchrl_csirl.objectives.sqil import SQILHyperparameters, sqil_reward_labels
-from torchrl_csirl.trainers.imitation_updates import AdversarialImitationUpdate, DiscriminatorStep
+from torchrl_csirl.objectives.valuedice import ValueDICEHyperparameters, ValueDICELoss, initial_observations
+from torchrl_csirl.trainers.imitation_updates import AdversarialImitationUpdate, DiscriminatorStep, ValueDICEUpdate
 from torchrl_csirl.transforms.absorbing_states import AbsorbingStates
 from torchrl_csirl.transforms.discriminator_reward import DiscriminatorReward
 from torchrl_csirl.trainers.trainer import CSIRLTrainer
@@ -138,13 +140,49 @@ def _make_dac(actor, make_qvalue, hp: DACHyperparameters, device, **_dims: int) 
                         online_transforms, expert_transforms, (sac_optimizer, target_updater))
 
 
+# ------------------------------------------------------------------------------ IQ-Learn
+def _make_iqlearn(actor, make_qvalue, hp: IQLearnHyperparameters, device, **_dims: int) -> ImitationMethod:
+    loss = IQLearnLoss(actor, make_qvalue(), chi2_coefficient=hp.chi2_coefficient, num_qvalue_nets=hp.num_qvalue_nets,
+                       alpha_init=hp.alpha_init, fixed_alpha=hp.fixed_alpha, gamma=hp.gamma).to(device)
+    optimizer, target_updater = _adam(loss, hp.lr), SoftUpdate(loss, tau=hp.tau)
+    num_expert = round(hp.expert_fraction * hp.batch_size)
+    if not 0 < num_expert < hp.batch_size:
+        raise ValueError(f"expert_fraction={hp.expert_fraction} leaves no expert or no replay sample in a batch of {hp.batch_size}.")
+
+    def make_update_step(online: TensorDictReplayBuffer, expert: TensorDictReplayBuffer) -> UpdateStep:
+        def batch():
+            return TensorDict({"expert": sample(expert, num_expert),
+                               "collector": sample(online, hp.batch_size - num_expert)}, [])
+
+        return SACUpdate(loss, optimizer, target_updater, hp.max_grad_norm, sample=batch)
+
+    return ImitationMethod("iqlearn", actor, [], [], {"loss": loss, "optim_sac": optimizer}, make_update_step, hp)
+
+
+# ------------------------------------------------------------------------------ ValueDICE
+def _make_valuedice(actor, make_qvalue, hp: ValueDICEHyperparameters, device, **_dims: int) -> ImitationMethod:
+    nu = logit_network(make_qvalue(), "nu").to(device)
+    loss = ValueDICELoss(actor, nu, gamma=hp.gamma, replay_regularization=hp.replay_regularization,
+                         orthogonal_regularization=hp.orthogonal_regularization, gp_lambda=hp.gp_lambda)
+    nu_optimizer, actor_optimizer = _adam(nu, hp.nu_lr), _adam(actor, hp.actor_lr)
+
+    def make_update_step(online: TensorDictReplayBuffer, expert: TensorDictReplayBuffer) -> UpdateStep:
+        starts = initial_observations(expert.storage[:]).to(device)
+        return ValueDICEUpdate(loss, nu_optimizer, actor_optimizer, online, expert, starts, hp.batch_size,
+                               hp.max_grad_norm)
+
+    states = {"loss": loss, "optim_nu": nu_optimizer, "optim_actor": actor_optimizer}  # the loss holds actor and nu
+    return ImitationMethod("valuedice", actor, [], [], states, make_update_step, hp)
+
+
 _BUILDERS: dict[str, tuple[type, Callable[..., ImitationMethod]]] = {
+    "iqlearn": (IQLearnHyperparameters, _make_iqlearn),
+    "valuedice": (ValueDICEHyperparameters, _make_valuedice),
     "sqil": (SQILHyperparameters, _make_sqil),
     "gail": (GAILHyperparameters, _make_gail),
     "dac": (DACHyperparameters, _make_dac),
 }
 IMITATION_METHODS = ("gail", "dac", "valuedice", "sqil", "iqlearn")
-_IMPLEMENTED = tuple(_BUILDERS)
 
 
 def hyperparameters_class(name: str) -> type:
@@ -161,8 +199,6 @@ def hyperparameters_class(name: str) -> type:
 def _check_name(name: str) -> None:
     if name not in IMITATION_METHODS:
         raise ValueError(f"unknown imitation method {name!r}; expected one of {IMITATION_METHODS}.")
-    if name not in _BUILDERS:
-        raise NotImplementedError(f"imitation method {name!r} is not implemented yet.")
 
 
 def _resolve(cls: type, hyperparameters: Any) -> Any:

@@ -3,22 +3,24 @@
 * SQIL is a :class:`~torchrl_csirl.trainers.SACUpdate` on balanced batches (no class of its own);
 * :class:`AdversarialImitationUpdate`: GAIL and DAC, a discriminator step
   (:class:`DiscriminatorStep`) then a SAC step on the discriminator reward;
-* :class:`ValueDICEUpdate` and :class:`IQLearnUpdate`: their joint objectives.
+* :class:`ValueDICEUpdate`: ``nu`` and the policy on one min-max objective;
+* IQ-Learn is a :class:`~torchrl_csirl.trainers.SACUpdate` whose loss is
+  :class:`~torchrl_csirl.objectives.IQLearnLoss` and whose batch holds expert and replay parts.
 """
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from typing import Any
 
 import torch
-from tensordict import TensorDictBase
+from tensordict import TensorDict, TensorDictBase
 from torch import nn
 
 from torchrl_csirl.objectives._imitation import sample
 from torchrl_csirl.trainers.trainer import CSIRLTrainer, check_finite_losses
 from torchrl_csirl.trainers.updates import SACUpdate
 
-__all__ = ["AdversarialImitationUpdate", "DiscriminatorStep"]
+__all__ = ["AdversarialImitationUpdate", "DiscriminatorStep", "ValueDICEUpdate"]
 
 
 def _where(trainer: CSIRLTrainer) -> str:
@@ -96,14 +98,66 @@ class AdversarialImitationUpdate:
         return out
 
 
-def split_parameters(*groups: Sequence[nn.Parameter]) -> list[list[nn.Parameter]]:
-    """The parameter groups with ``requires_grad``, checked to be disjoint."""
-    seen: set[int] = set()
-    out = []
-    for group in groups:
-        params = [p for p in group if p.requires_grad]
-        if any(id(p) in seen for p in params):
-            raise ValueError("parameter groups overlap.")
-        seen.update(id(p) for p in params)
-        out.append(params)
-    return out
+class ValueDICEUpdate:
+    """One ValueDICE step: expert, replay and initial-state batches; ``nu`` descends ``J``, the actor ascends it.
+
+    The gradients of ``loss_nu + loss_gradient_penalty`` are applied to ``nu``'s parameters only
+    and those of ``loss_actor + loss_orthogonal`` (``-J`` plus the regulariser) to the actor's only;
+    both come from one forward pass.
+
+    Args:
+        loss: the :class:`~torchrl_csirl.objectives.ValueDICELoss`.
+        nu_optimizer: over ``nu``'s parameters.
+        actor_optimizer: over the actor's parameters.
+        online: the replay buffer.
+        expert: the expert replay buffer.
+        initial_observations: ``[N, D]`` initial observations (e.g. the expert trajectories' first states).
+        batch_size: samples of each kind per step.
+        max_grad_norm: gradient-norm clipping of each network (None: none).
+    """
+
+    NU_KEYS = ("loss_nu", "loss_gradient_penalty")
+    ACTOR_KEYS = ("loss_actor", "loss_orthogonal")
+
+    def __init__(self, loss: nn.Module, nu_optimizer: torch.optim.Optimizer, actor_optimizer: torch.optim.Optimizer,
+                 online: Any, expert: Any, initial_observations: torch.Tensor, batch_size: int,
+                 max_grad_norm: float | None = None) -> None:
+        if initial_observations.ndim != 2 or not len(initial_observations):
+            raise ValueError(f"initial_observations must be a non-empty [N, D] tensor, got {tuple(initial_observations.shape)}.")
+        self.loss = loss
+        self.nu_optimizer = nu_optimizer
+        self.actor_optimizer = actor_optimizer
+        self.online = online
+        self.expert = expert
+        self.initial_observations = initial_observations
+        self.batch_size = int(batch_size)
+        self.max_grad_norm = max_grad_norm
+
+    def batch(self) -> TensorDictBase:
+        """Expert, replay and initial-state samples, as :class:`ValueDICELoss` reads them."""
+        index = torch.randint(len(self.initial_observations), (self.batch_size,), device=self.initial_observations.device)
+        initial = TensorDict({self.loss.tensor_keys.observation: self.initial_observations[index]}, [self.batch_size])
+        return TensorDict({"expert": sample(self.expert, self.batch_size), "collector": sample(self.online, self.batch_size),
+                           "initial": initial}, [])
+
+    def __call__(self, trainer: CSIRLTrainer) -> dict[str, torch.Tensor]:
+        out = self.loss(self.batch())
+        losses = {key: out.get(key) for key in self.NU_KEYS + self.ACTOR_KEYS}
+        check_finite_losses(losses, _where(trainer))
+        nu_loss = losses["loss_nu"] + losses["loss_gradient_penalty"]
+        actor_loss = losses["loss_actor"] + losses["loss_orthogonal"]
+        # both gradients are taken before either network moves
+        self.nu_optimizer.zero_grad(set_to_none=True)
+        self.actor_optimizer.zero_grad(set_to_none=True)
+        nu_params = [p for g in self.nu_optimizer.param_groups for p in g["params"]]
+        actor_params = [p for g in self.actor_optimizer.param_groups for p in g["params"]]
+        nu_grads = torch.autograd.grad(nu_loss, nu_params, retain_graph=True, allow_unused=True)
+        actor_grads = torch.autograd.grad(actor_loss, actor_params, allow_unused=True)
+        for params, grads, optimizer in ((nu_params, nu_grads, self.nu_optimizer),
+                                         (actor_params, actor_grads, self.actor_optimizer)):
+            for param, grad in zip(params, grads):
+                param.grad = grad
+            if self.max_grad_norm is not None:
+                torch.nn.utils.clip_grad_norm_(params, self.max_grad_norm)
+            optimizer.step()
+        return {key: value.detach() for key, value in losses.items()}

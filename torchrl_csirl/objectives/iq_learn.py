@@ -1,0 +1,184 @@
+"""IQ-Learn, continuous actions: inverse soft-Q learning (Garg, Chakraborty, Cundy, Song and Ermon, NeurIPS 2021).
+
+Written from the paper only (its official code is under a research-only licence with a patent
+notice and was not read). IQ-Learn learns a single soft Q-function whose *implicit* reward
+``r(s, a) = Q(s, a) - gamma V^pi(s')`` makes the expert optimal, with the soft value
+``V^pi(s) = E_{a ~ pi}[Q(s, a) - alpha log pi(a | s)]``. The critic maximises the inverse soft-Q
+objective
+
+``J(Q) = E_{rho_E}[phi(Q(s, a) - gamma V^pi(s'))] - (1 - gamma) E_{rho_0}[V^pi(s_0)]``,
+
+with the chi-squared divergence's ``phi(x) = x - x^2 / (4 c)``; and the policy is updated as in
+SAC on the learned Q (the actor-critic form of the paper's continuous-action algorithm). Two
+choices of the paper for online imitation are used:
+
+* the **"value" initial-state term**: ``(1 - gamma) E_{rho_0}[V(s_0)] = E_{(s, s') ~ mu}[V(s) - gamma V(s')]``
+  for the occupancy ``mu`` of any policy (a telescoping sum), estimated on the mixture of expert
+  and replay transitions instead of the few expert initial states;
+* the **chi-squared regulariser on the mixture**: the quadratic term of ``phi`` is averaged over
+  expert *and* replay transitions, which bounds the implicit reward on the agent's data as well.
+
+The SAC parts (actor and temperature losses, critic ensemble) are TorchRL's, through
+:class:`~torchrl_csirl.objectives.EnsembleSACLoss`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+from tensordict import TensorDict, TensorDictBase
+from tensordict.utils import NestedKey
+from torchrl.envs.utils import ExplorationType, set_exploration_type
+
+from torchrl_csirl._compat import sac_alpha, sac_reduced_alpha_loss
+from torchrl_csirl.objectives._imitation import SACHyperparameters, _check_num_critics, concat_shared, require_keys
+from torchrl_csirl.objectives.ensemble_sac import EnsembleSACLoss
+
+__all__ = ["IQLearnHyperparameters", "IQLearnLoss", "inverse_soft_q_objective"]
+
+
+@dataclass
+class IQLearnHyperparameters(SACHyperparameters):
+    """IQ-Learn's settings (continuous control).
+
+    Attributes:
+        chi2_coefficient: ``c`` of ``phi(x) = x - x^2 / (4 c)`` (the chi-squared divergence; the
+            paper's ``alpha`` of the regulariser), 0.5 for continuous control in the paper.
+        expert_fraction: share of expert transitions per batch (half, as the paper's batches of
+            expert and policy samples).
+        num_qvalue_nets: soft Q-functions, each trained on its own objective, the actor on their
+            minimum (2, clipped double-Q as in the other SAC-based baselines; the paper describes
+            a single Q-function. :class:`EnsembleSACLoss` needs at least 2: with one critic
+            TorchRL's SACLoss does not register the critic's parameters).
+        alpha_init: SAC temperature, fixed at 0.01 (the paper's small entropy temperature for
+            continuous control).
+        fixed_alpha: keep the temperature fixed.
+    """
+
+    chi2_coefficient: float = 0.5
+    expert_fraction: float = 0.5
+    num_qvalue_nets: int = 2
+    alpha_init: float = 0.01
+    fixed_alpha: bool = True
+
+
+def inverse_soft_q_objective(expert_reward: torch.Tensor, value_difference: torch.Tensor,
+                             mixture_reward: torch.Tensor, chi2_coefficient: float) -> torch.Tensor:
+    """The critic's loss ``-J(Q)``: ``-E_E[r] + E_mu[V(s) - gamma V(s')] + E_mu[r^2] / (4 c)``.
+
+    Args:
+        expert_reward: the implicit rewards ``r = Q(s, a) - gamma V(s')`` on expert transitions ``[..., B_E]``.
+        value_difference: ``V(s) - gamma V(s')`` on the mixture ``mu`` (the "value" initial-state term).
+        mixture_reward: ``r`` on the mixture (the chi-squared regulariser's support).
+        chi2_coefficient: ``c``.
+
+    Examples:
+        >>> import torch
+        >>> inverse_soft_q_objective(torch.ones(4), torch.zeros(6), torch.full((6,), 2.0), 0.5)
+        tensor(1.)
+    """
+    return (-expert_reward.mean(-1) + value_difference.mean(-1)
+            + mixture_reward.pow(2).mean(-1) / (4.0 * chi2_coefficient)).sum()
+
+
+class IQLearnLoss(EnsembleSACLoss):
+    """IQ-Learn's critic objective and SAC's actor/temperature losses on the learned Q.
+
+    The input holds two sub-tensordicts, ``"expert"`` and ``"collector"`` (replay), each with
+    observation, action, ``("next", "observation")`` and ``("next", "terminated")`` (no reward is
+    read). ``V^pi`` is estimated with one action sampled from the policy per state (detached: the
+    critic loss does not reach the actor); ``V(s') = 0`` after a termination. With several critics
+    each one gets its own objective (summed).
+
+    Outputs ``loss_qvalue`` (``-J(Q)``, :func:`inverse_soft_q_objective`), ``loss_actor`` and
+    ``loss_alpha`` (SAC's, on the states of both parts; the actor loss does not reach the critic),
+    and for logging ``expert_reward`` / ``agent_reward`` (mean implicit rewards), ``alpha`` and
+    ``entropy``.
+
+    Args:
+        actor_network: the policy.
+        qvalue_network: one critic.
+
+    Keyword Args:
+        chi2_coefficient (float): ``c`` of the chi-squared regulariser. Defaults to ``0.5``.
+        num_qvalue_nets (int): critics, at least 2. Defaults to ``2``.
+        alpha_init (float): SAC temperature. Defaults to ``0.01``.
+        **kwargs: forwarded to :class:`~torchrl_csirl.objectives.EnsembleSACLoss`.
+
+    Examples:
+        >>> import torch
+        >>> from tensordict import TensorDict
+        >>> from torchrl_csirl.modules import make_actor, make_qvalue
+        >>> loss = IQLearnLoss(make_actor(3, 1, hidden=(8,)), make_qvalue(3, 1, hidden=(8,)))
+        >>> def t(n):
+        ...     return TensorDict({"observation": torch.randn(n, 3), "action": torch.rand(n, 1),
+        ...                        "next": {"observation": torch.randn(n, 3),
+        ...                                 "terminated": torch.zeros(n, 1, dtype=torch.bool)}}, [n])
+        >>> out = loss(TensorDict({"expert": t(4), "collector": t(4)}, []))
+        >>> sorted(k for k in out.keys() if k.startswith("loss"))
+        ['loss_actor', 'loss_alpha', 'loss_qvalue']
+    """
+
+    @dataclass
+    class _AcceptedKeys(EnsembleSACLoss._AcceptedKeys):
+        """SAC's keys plus the two parts of the batch.
+
+        Attributes:
+            expert: sub-tensordict of expert transitions. Defaults to ``"expert"``.
+            collector: sub-tensordict of replay transitions. Defaults to ``"collector"``.
+        """
+
+        expert: NestedKey = "expert"
+        collector: NestedKey = "collector"
+
+    tensor_keys: _AcceptedKeys
+    default_keys = _AcceptedKeys
+
+    def __init__(self, actor_network, qvalue_network, *, chi2_coefficient: float = 0.5, num_qvalue_nets: int = 2,
+                 alpha_init: float = 0.01, **kwargs) -> None:
+        _check_num_critics(num_qvalue_nets)
+        if not chi2_coefficient > 0:
+            raise ValueError(f"chi2_coefficient must be positive, got {chi2_coefficient}.")
+        super().__init__(actor_network, qvalue_network, num_qvalue_nets=num_qvalue_nets, alpha_init=alpha_init,
+                         **kwargs)
+        self.chi2_coefficient = float(chi2_coefficient)
+        self.discount = float(kwargs.get("gamma", 0.99))
+
+    def soft_value(self, observation: torch.Tensor) -> torch.Tensor:
+        """``V(s) = Q_k(s, a) - alpha log pi(a | s)``, ``a ~ pi(s)`` detached, per critic: ``[N, B]``."""
+        obs_key = self.qvalue_network.in_keys[0]
+        td = TensorDict({obs_key: observation}, observation.shape[:1])
+        with torch.no_grad(), set_exploration_type(ExplorationType.RANDOM), \
+                self.actor_network_params.to_module(self.actor_network):
+            dist = self.actor_network.get_dist(td)
+            action = dist.sample()
+            log_prob = dist.log_prob(action)
+        td.set(self.tensor_keys.action, action)
+        return self.qvalues(td) - sac_alpha(self) * log_prob
+
+    def _implicit_reward(self, transitions: TensorDictBase) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(r, V(s) - gamma V(s'))`` per critic, ``[N, B]`` each."""
+        obs_key = self.qvalue_network.in_keys[0]
+        not_done = 1.0 - transitions.get(("next", self.tensor_keys.terminated)).float().reshape(1, -1)
+        next_value = self.discount * not_done * self.soft_value(transitions.get(("next", obs_key)))
+        reward = self.qvalues(transitions) - next_value
+        return reward, self.soft_value(transitions.get(obs_key)) - next_value
+
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        expert = tensordict.get(self.tensor_keys.expert)
+        agent = tensordict.get(self.tensor_keys.collector)
+        obs_key = self.qvalue_network.in_keys[0]
+        needed = [obs_key, self.tensor_keys.action, ("next", obs_key), ("next", self.tensor_keys.terminated)]
+        require_keys(expert, needed, "IQ-Learn expert transitions")
+        require_keys(agent, needed, "IQ-Learn replay transitions")
+        mixture = concat_shared(expert, agent)
+        n_expert = expert.numel()
+        reward, value_difference = self._implicit_reward(mixture)
+        loss_qvalue = inverse_soft_q_objective(reward[:, :n_expert], value_difference, reward, self.chi2_coefficient)
+        loss_actor, metadata = self.actor_loss(mixture)
+        loss_alpha = sac_reduced_alpha_loss(self, metadata["log_prob"], mixture)
+        return TensorDict({
+            "loss_qvalue": loss_qvalue, "loss_actor": loss_actor, "loss_alpha": loss_alpha,
+            "expert_reward": reward[:, :n_expert].mean().detach(), "agent_reward": reward[:, n_expert:].mean().detach(),
+            "alpha": sac_alpha(self), "entropy": -metadata["log_prob"].mean(),
+        }, [])

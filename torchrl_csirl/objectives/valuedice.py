@@ -1,0 +1,252 @@
+"""ValueDICE: imitation learning via off-policy distribution matching (Kostrikov, Nachum and Tompson, ICLR 2020).
+
+ValueDICE minimises the KL divergence between the agent's and the expert's state-action
+occupancies through its Donsker-Varadhan dual, written with a value-like function ``nu(s, a)``
+and its Bellman residual under the policy, ``(nu - B^pi nu)(s, a) = nu(s, a) - gamma nu(s', a')``
+with ``a' ~ pi(s')`` (Eq. 12 of the paper):
+
+``J(pi, nu) = log E_{d_E}[exp(nu - B^pi nu)] - (1 - gamma) E_{s_0, a_0 ~ pi}[nu(s_0, a_0)]``,
+
+minimised over ``nu`` and maximised over ``pi`` (the policy gradient flows through the sampled
+``a'`` and ``a_0``, re-parameterised). The practical algorithm's regularisers, with the paper's
+values (Sec. 5 and Appendix):
+
+* **replay mixing** (Eq. 13), weight ``alpha = 0.1``: the expert distribution is mixed with the
+  replay buffer's, ``log E_{(1-a) d_E + a d_RB}[exp(nu - B^pi nu)] - (1 - a)(1 - gamma) E[nu(s_0, a_0)] - a E_{d_RB}[nu - B^pi nu]``,
+  so that the objective stays informative where the expert data are absent;
+* **orthogonal regularisation** of the actor (Brock et al. 2019), weight 1e-4;
+* **gradient penalty** on ``nu`` (Gulrajani et al. 2017), weight 10, at points interpolated
+  between expert and replay state-action pairs (and between their successors with the policy's
+  actions), one mixing weight per sample.
+
+Initial states ``s_0`` are the first states of the expert trajectories (:func:`initial_observations`).
+The paper uses absorbing states for terminations; here ``B^pi nu = 0`` after a termination instead.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import torch
+from tensordict import TensorDict, TensorDictBase
+from tensordict.nn import TensorDictModule
+from tensordict.utils import NestedKey
+from torch import nn
+from torchrl.envs.utils import ExplorationType, set_exploration_type
+from torchrl.objectives import LossModule
+
+from torchrl_csirl.objectives._imitation import gradient_penalty, orthogonal_regularization, require_keys
+
+__all__ = ["ValueDICEHyperparameters", "ValueDICELoss", "initial_observations", "valuedice_objective"]
+
+
+@dataclass
+class ValueDICEHyperparameters:
+    """ValueDICE's settings (Kostrikov et al. 2020, Appendix, continuous control).
+
+    Attributes:
+        actor_lr: Adam learning rate of the policy (1e-5).
+        nu_lr: Adam learning rate of ``nu`` (1e-3).
+        batch_size: expert, replay and initial samples per update (256, each).
+        gamma: discount (0.99).
+        replay_regularization: ``alpha`` of the replay mixing (0.1).
+        orthogonal_regularization: weight of the actor's orthogonal regulariser (1e-4).
+        gp_lambda: weight of ``nu``'s gradient penalty (10).
+        max_grad_norm: gradient-norm clipping (None: none).
+    """
+
+    actor_lr: float = 1e-5
+    nu_lr: float = 1e-3
+    batch_size: int = 256
+    gamma: float = 0.99
+    replay_regularization: float = 0.1
+    orthogonal_regularization: float = 1e-4
+    gp_lambda: float = 10.0
+    max_grad_norm: float | None = None
+
+
+def initial_observations(transitions: TensorDictBase, observation_key: NestedKey = "observation") -> torch.Tensor:
+    """The first observation of every trajectory of ``transitions`` (stored trajectory by trajectory).
+
+    A transition starts a trajectory when it is the first one or when the previous one is done.
+
+    Examples:
+        >>> import torch
+        >>> from tensordict import TensorDict
+        >>> done = torch.tensor([[False], [True], [False], [True]])
+        >>> td = TensorDict({"observation": torch.arange(4.0).unsqueeze(-1), "next": {"done": done}}, [4])
+        >>> initial_observations(td).squeeze(-1).tolist()
+        [0.0, 2.0]
+    """
+    done = transitions.get(("next", "done")).reshape(-1).bool()
+    starts = torch.cat([torch.ones(1, dtype=torch.bool, device=done.device), done[:-1]])
+    return transitions.get(observation_key)[starts]
+
+
+def valuedice_objective(expert_residual: torch.Tensor, replay_residual: torch.Tensor, initial_nu: torch.Tensor,
+                        gamma: float, alpha: float) -> torch.Tensor:
+    """``J(pi, nu)`` with replay mixing (Eq. 13): the log-sum-exp term minus the linear terms.
+
+    Args:
+        expert_residual: ``nu - B^pi nu`` on expert pairs ``[B_E]``.
+        replay_residual: ``nu - B^pi nu`` on replay pairs ``[B_RB]``.
+        initial_nu: ``nu(s_0, a_0)``, ``a_0 ~ pi(s_0)``, ``[B_0]``.
+        gamma: discount.
+        alpha: replay-mixing weight (0: the plain objective, Eq. 12).
+
+    Examples:
+        >>> import torch
+        >>> z = torch.zeros(4)
+        >>> float(valuedice_objective(z, z, z, 0.99, 0.1))  # log E[exp 0] = 0
+        0.0
+    """
+    terms = [expert_residual + math.log((1 - alpha) / expert_residual.numel())]
+    if alpha > 0:
+        terms.append(replay_residual + math.log(alpha / replay_residual.numel()))
+    log_expectation = torch.logsumexp(torch.cat(terms), 0)
+    linear = (1 - alpha) * (1 - gamma) * initial_nu.mean()
+    if alpha > 0:
+        linear = linear + alpha * replay_residual.mean()
+    return log_expectation - linear
+
+
+class ValueDICELoss(LossModule):
+    """ValueDICE's objective for ``nu`` (minimised) and the policy (maximised), with its regularisers.
+
+    The input holds ``"expert"`` and ``"collector"`` (replay) transitions (observation, action,
+    ``("next", "observation")``, ``("next", "terminated")``) and ``"initial"``, a tensordict of
+    initial observations. Outputs:
+
+    * ``loss_nu``: ``J`` (:func:`valuedice_objective`), and ``loss_gradient_penalty``, for ``nu``;
+    * ``loss_actor``: ``-J``, and ``loss_orthogonal``, for the policy.
+
+    ``loss_nu`` and ``loss_actor`` share one graph and reach both networks: the update applies
+    the gradient of the ``nu`` terms to ``nu`` only and of the actor terms to the actor only
+    (:class:`~torchrl_csirl.trainers.imitation_updates.ValueDICEUpdate`).
+
+    Args:
+        actor_network: the policy (re-parameterised sampling).
+        nu_network: ``nu(s, a)`` writing ``nu_key`` (e.g. built from a critic).
+
+    Keyword Args:
+        gamma (float): Defaults to ``0.99``.
+        replay_regularization (float): ``alpha``. Defaults to ``0.1``.
+        orthogonal_regularization (float): Defaults to ``1e-4``.
+        gp_lambda (float): Defaults to ``10``.
+
+    Examples:
+        >>> import torch
+        >>> from tensordict import TensorDict
+        >>> from torchrl_csirl.modules import make_actor, make_qvalue
+        >>> from torchrl_csirl.objectives._imitation import logit_network
+        >>> loss = ValueDICELoss(make_actor(3, 1, hidden=(8,)), logit_network(make_qvalue(3, 1, hidden=(8,)), "nu"))
+        >>> def t(n):
+        ...     return TensorDict({"observation": torch.randn(n, 3), "action": torch.rand(n, 1),
+        ...                        "next": {"observation": torch.randn(n, 3),
+        ...                                 "terminated": torch.zeros(n, 1, dtype=torch.bool)}}, [n])
+        >>> td = TensorDict({"expert": t(4), "collector": t(4),
+        ...                  "initial": TensorDict({"observation": torch.randn(4, 3)}, [4])}, [])
+        >>> sorted(k for k in loss(td).keys() if k.startswith("loss"))
+        ['loss_actor', 'loss_gradient_penalty', 'loss_nu', 'loss_orthogonal']
+    """
+
+    @dataclass
+    class _AcceptedKeys:
+        """Configurable tensordict keys (``set_keys``).
+
+        Attributes:
+            expert: expert transitions. Defaults to ``"expert"``.
+            collector: replay transitions. Defaults to ``"collector"``.
+            initial: initial observations. Defaults to ``"initial"``.
+            observation: Defaults to ``"observation"``.
+            action: Defaults to ``"action"``.
+            terminated: inside ``"next"``. Defaults to ``"terminated"``.
+            nu: ``nu``'s output. Defaults to ``"nu"``.
+        """
+
+        expert: NestedKey = "expert"
+        collector: NestedKey = "collector"
+        initial: NestedKey = "initial"
+        observation: NestedKey = "observation"
+        action: NestedKey = "action"
+        terminated: NestedKey = "terminated"
+        nu: NestedKey = "nu"
+
+    tensor_keys: _AcceptedKeys
+    default_keys = _AcceptedKeys
+    out_keys = ["loss_nu", "loss_gradient_penalty", "loss_actor", "loss_orthogonal"]
+
+    def __init__(self, actor_network: TensorDictModule, nu_network: TensorDictModule, *, gamma: float = 0.99,
+                 replay_regularization: float = 0.1, orthogonal_regularization: float = 1e-4,
+                 gp_lambda: float = 10.0) -> None:
+        super().__init__()
+        if not 0.0 <= replay_regularization < 1.0:
+            raise ValueError(f"replay_regularization must be in [0, 1), got {replay_regularization}.")
+        if not 0.0 <= gamma < 1.0:
+            raise ValueError(f"gamma must be in [0, 1), got {gamma}.")
+        self.actor_network = actor_network
+        self.nu_network = nu_network
+        self.gamma = float(gamma)
+        self.replay_regularization = float(replay_regularization)
+        self.orthogonal_regularization = float(orthogonal_regularization)
+        self.gp_lambda = float(gp_lambda)
+
+    def _forward_value_estimator_keys(self, **kwargs) -> None:
+        pass
+
+    def _policy_action(self, observation: torch.Tensor) -> torch.Tensor:
+        td = TensorDict({self.tensor_keys.observation: observation}, observation.shape[:1])
+        with set_exploration_type(ExplorationType.RANDOM):
+            return self.actor_network.get_dist(td).rsample()
+
+    def nu(self, observation: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+        """``nu(s, a)``: ``[B]``."""
+        td = TensorDict({self.tensor_keys.observation: observation, self.tensor_keys.action: action},
+                        observation.shape[:1])
+        return self.nu_network(td).get(self.tensor_keys.nu).squeeze(-1)
+
+    def _residual(self, transitions: TensorDictBase) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(nu - B^pi nu)(s, a)`` and the policy's next action ``a'``."""
+        keys = self.tensor_keys
+        next_obs = transitions.get(("next", keys.observation))
+        next_action = self._policy_action(next_obs)
+        not_terminated = 1.0 - transitions.get(("next", keys.terminated)).float().reshape(-1)
+        residual = (self.nu(transitions.get(keys.observation), transitions.get(keys.action))
+                    - self.gamma * not_terminated * self.nu(next_obs, next_action))
+        return residual, next_action
+
+    def _penalty(self, expert: TensorDictBase, replay: TensorDictBase, expert_next_action: torch.Tensor,
+                 replay_next_action: torch.Tensor) -> torch.Tensor:
+        keys = self.tensor_keys
+        n = min(expert.numel(), replay.numel())
+        eps = torch.rand(n, 1, device=expert_next_action.device)  # one mixing weight per sample
+
+        def mix(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+            return eps * a[:n].detach() + (1 - eps) * b[:n].detach()
+
+        observation = torch.cat([mix(expert.get(keys.observation), replay.get(keys.observation)),
+                                 mix(expert.get(("next", keys.observation)), replay.get(("next", keys.observation)))])
+        action = torch.cat([mix(expert.get(keys.action), replay.get(keys.action)),
+                            mix(expert_next_action, replay_next_action)])
+        return self.gp_lambda * gradient_penalty(self.nu, [observation, action])
+
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        keys = self.tensor_keys
+        expert, replay = tensordict.get(keys.expert), tensordict.get(keys.collector)
+        needed = [keys.observation, keys.action, ("next", keys.observation), ("next", keys.terminated)]
+        require_keys(expert, needed, "ValueDICE expert transitions")
+        require_keys(replay, needed, "ValueDICE replay transitions")
+        initial = tensordict.get(keys.initial)
+        require_keys(initial, [keys.observation], "ValueDICE initial states")
+        expert_residual, expert_next_action = self._residual(expert)
+        replay_residual, replay_next_action = self._residual(replay)
+        initial_obs = initial.get(keys.observation)
+        initial_nu = self.nu(initial_obs, self._policy_action(initial_obs))
+        objective = valuedice_objective(expert_residual, replay_residual, initial_nu, self.gamma,
+                                        self.replay_regularization)
+        return TensorDict({
+            "loss_nu": objective,
+            "loss_gradient_penalty": self._penalty(expert, replay, expert_next_action, replay_next_action),
+            "loss_actor": -objective,
+            "loss_orthogonal": self.orthogonal_regularization * orthogonal_regularization(self.actor_network),
+        }, [])
