@@ -11,7 +11,7 @@ Methods (``method=<name>``):
   loop as every trained method (same frames collected with its own policy, same number of
   updates, same evaluation cadence), so its learning curve sits on the same axis; the collected
   frames are not used by its update.
-* ``gail``, ``dac``, ``valuedice``, ``sqil``, ``iqlearn`` (those implemented): built by
+* ``gail``, ``dac``, ``valuedice``, ``sqil``, ``iqlearn``: built by
   :func:`~torchrl_csirl.trainers.imitation.make_imitation_method`; the ``<method>`` section holds
   the fields of its hyperparameter dataclass (docs/BASELINES.md gives their sources).
 * ``random``, ``expert``: reference rows, no training: uniform random actions, and the expert
@@ -80,16 +80,8 @@ from torchrl_csirl.transforms import CombineRewards, ProgressReward
 __all__ = ["ImitationHighwayConfig", "METHODS", "REFERENCE_METHODS", "load_config", "load_run_config", "make_trainer",
            "evaluate_reference"]
 
-def _implemented(name: str) -> bool:
-    try:
-        hyperparameters_class(name)
-    except NotImplementedError:
-        return False
-    return True
-
-
-#: the loss-based baselines of :func:`~torchrl_csirl.trainers.imitation.make_imitation_method` (those implemented)
-LOSS_METHODS = tuple(name for name in IMITATION_METHODS if _implemented(name))
+#: the loss-based baselines of :func:`~torchrl_csirl.trainers.imitation.make_imitation_method`
+LOSS_METHODS = tuple(IMITATION_METHODS)
 #: methods trained by this recipe's loop
 TRAINED_METHODS = ("sac", "bc", *LOSS_METHODS)
 #: reference rows: evaluated, not trained
