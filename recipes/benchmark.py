@@ -8,6 +8,7 @@ Run the sweep (local Ray by default, one trial at a time: sized for a 2-core mac
 Each cell (method, scenario, seed) is one run of its recipe (``recipes/csirl_highway.py`` for
 ``csirl`` and ``csirl-b``, ``recipes/imitation_highway.py method=<name>`` for the others) in its own
 process, in ``<output-dir>/<scenario>-<method>-s<seed>``, its output in ``<output-dir>/logs``. The
+``expert`` row runs for the first seed only (the expert driver is deterministic). The
 sweep is resumable: a cell whose ``summary.json`` exists is not run again, a cell with a checkpoint
 continues from it (``checkpoint.resume``), any other leftover is replaced. ``key=value`` overrides
 go to every cell; ``<method>:key=value``, ``csirl_highway:key=value`` or
@@ -47,6 +48,8 @@ REPO_ROOT = os.path.dirname(RECIPES_DIR)
 METHOD_ORDER = ("expert", "random", "sac", "bc", "gail", "dac", "valuedice", "sqil", "iqlearn", "csirl-b", "csirl")
 CSIRL_RECIPE, IMITATION_RECIPE = "csirl_highway", "imitation_highway"
 REFERENCE_METHODS = ("random", "expert")
+#: methods whose run does not depend on the seed (the expert driver is deterministic): first seed only
+SEED_FREE_METHODS = ("expert",)
 #: the table's columns, in the paper's order
 SCENARIO_ORDER = ("highway-fast", "merge", "intersection", "roundabout")
 
@@ -159,7 +162,7 @@ def plan_cells(methods: list[str], scenarios: list[str], seeds: list[int], outpu
     todo, done = [], []
     for scenario in scenarios:
         for method in methods:
-            for seed in seeds:
+            for seed in seeds[:1] if method in SEED_FREE_METHODS else seeds:
                 cell = make_cell(method, scenario, seed, output_dir, per_method[method])
                 if cell is None:
                     done.append(f"{scenario}-{method}-s{seed}")

@@ -178,6 +178,8 @@ def test_benchmark_resumes_a_killed_cell_from_its_checkpoint(tmp_path):
     assert cell.resumed and f"checkpoint.resume={tmp_path / 'merge-sac-s0'}" in cell.command
     assert "optim.lr=1" not in cell.command
     assert benchmark.main(["--methods", "dqn"]) == 2
+    todo, _ = benchmark.plan_cells(["expert"], ["merge"], [0, 1, 2], str(tmp_path), [])
+    assert [c.name for c in todo] == ["merge-expert-s0"]  # deterministic: one seed
 
 
 def test_help_lists_every_key_with_its_help(capsys):
