@@ -15,18 +15,14 @@ continues a killed run; an existing run is never replaced unless ``logger.overwr
 from __future__ import annotations
 
 import os
-import shutil
 import sys
 import time
 
-import torch
-from omegaconf import OmegaConf
-
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-from common.builders import Run, final_summary, train  # noqa: E402
+from common.builders import final_summary, resume_run, start_run, train  # noqa: E402
 from common.config import describe  # noqa: E402
-from common.run import default_run_name, make_run_dir, resolve_resume, run_script, write_summary  # noqa: E402
+from common.run import resolve_resume, run_script, write_summary  # noqa: E402
 from imitation_utils import (  # noqa: E402
     REFERENCE_METHODS,
     ImitationHighwayConfig,
@@ -36,57 +32,20 @@ from imitation_utils import (  # noqa: E402
     make_trainer,
 )
 
-from torchrl_csirl.trainers import load_checkpoint  # noqa: E402
-
-
-def new_run_dir(cfg) -> str:
-    """The run directory of a new run, with its ``config.yaml``."""
-    run_dir = make_run_dir(cfg.logger.output_dir, cfg.logger.exp_name,
-                           default_run_name(cfg.env.scenario, cfg.method, cfg.seed), cfg.logger.overwrite)
-    OmegaConf.save(cfg, os.path.join(run_dir, "config.yaml"))
-    return run_dir
-
-
-def build(cfg) -> Run:
-    """The run's pieces (a new run, or a resumed one with its checkpoint restored)."""
-    if cfg.checkpoint.resume is None:
-        run_dir = new_run_dir(cfg)
-        try:
-            return make_trainer(cfg, run_dir)
-        except BaseException:  # e.g. bad demonstrations: the new directory holds no run, remove it
-            shutil.rmtree(run_dir, ignore_errors=True)
-            raise
-    run_dir, checkpoint = resolve_resume(cfg.checkpoint.resume)
-    counters = torch.load(os.path.join(checkpoint, "state.pt"), weights_only=False, map_location="cpu")["counters"]
-    run = make_trainer(cfg, run_dir, frames_done=counters["frames"], resume_frames=counters["frames"])
-    try:
-        load_checkpoint(run.trainer, checkpoint, run.online_buffer if cfg.checkpoint.save_buffer else None)
-    except BaseException:
-        run.close()
-        raise
-    print(f"resumed {run_dir} at {counters['frames']} frames, {counters['updates']} updates", file=sys.stderr)
-    return run
-
 
 def train_and_summarize(cfg) -> dict[str, object]:
-    """A trained method: the training loop, then the final evaluation, policy, curve and summary."""
-    run = build(cfg)
+    """A trained method (new or resumed): the training loop, then the final evaluation, policy,
+    curve and summary."""
+    if cfg.checkpoint.resume is None:
+        run = start_run(cfg, cfg.method, make_trainer)
+    else:
+        run = resume_run(cfg, *resolve_resume(cfg.checkpoint.resume), make_trainer)
     train(run)
     try:
         return final_summary(run, run.cfg.method, title=f"{run.cfg.method} on {run.spec.name}")
     finally:
         run.logger.close()
         run.eval_env.close()
-
-
-def reference_row(cfg) -> dict[str, object]:
-    """A reference row (``random``, ``expert``): evaluated on the test episodes, no training."""
-    run_dir = new_run_dir(cfg)
-    try:
-        return evaluate_reference(cfg, run_dir)
-    except BaseException:
-        shutil.rmtree(run_dir, ignore_errors=True)
-        raise
 
 
 def main(argv: list[str] | None = None) -> dict[str, object]:
@@ -103,7 +62,7 @@ def main(argv: list[str] | None = None) -> dict[str, object]:
     else:
         cfg = load_config(argv)
     if cfg.method in REFERENCE_METHODS:
-        summary = reference_row(cfg)
+        summary = start_run(cfg, cfg.method, evaluate_reference)
     else:
         summary = train_and_summarize(cfg)
     summary["total_wall_s"] = round(time.perf_counter() - start, 1)

@@ -48,8 +48,16 @@ from torchrl.envs.utils import RandomPolicy
 from torchrl.objectives import BCLoss, SoftUpdate
 
 from common import config as config_lib
-from common.builders import Run, assemble_trainer, check_collector, load_experts, make_eval_env, make_logger, \
-    make_online_buffer
+from common.builders import (
+    Run,
+    assemble_trainer,
+    check_collector,
+    load_experts,
+    make_eval_env,
+    make_logger,
+    make_online_buffer,
+    evaluation_summary,
+)
 from common.config import (
     DEVICES,
     CheckpointConfig,
@@ -65,7 +73,7 @@ from common.config import (
 from common.registry import register_recipe
 from common.run import ExpertDataError, expert_accomplish_rate, resolve_device
 from torchrl_csirl.data import ExpertDemonstrations
-from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, normalized_accomplish_rate
+from torchrl_csirl.envs import SCENARIOS, ScenarioSpec
 from torchrl_csirl.modules import EgoRelativeFeatures, make_actor, make_qvalue
 from torchrl_csirl.objectives._imitation import SACHyperparameters, make_sac_learner
 from torchrl_csirl.trainers import BCUpdate, SACUpdate, evaluate_policy
@@ -319,25 +327,6 @@ def evaluate_reference(cfg: DictConfig, run_dir: str) -> dict[str, Any]:
     finally:
         logger.close()
         env.close()
-    expert_rate = expert_accomplish_rate(demos.metadata)
-    return {
-        "scenario": spec.name,
-        "method": cfg.method,
-        "preset": cfg.preset,
-        "seed": cfg.seed,
-        "device": "cpu",
-        "accomplish_rate": final["accomplish_rate"],
-        "accomplish_rate_std": final["accomplish_rate_std"],
-        "success_rate": final["success_rate"],
-        "crash_rate": final["crash_rate"],
-        "normalized_accomplish_rate": (
-            float(normalized_accomplish_rate(final["accomplish_rate"], expert_rate)) if expert_rate else None),
-        "auc": None,
-        "eval_episodes": cfg.eval.final_episodes,
-        "frames": 0,
-        "updates": 0,
-        "rounds": 0,
-        "wall_s": round(time.perf_counter() - start, 1),
-        "run_dir": run_dir,
-        "plots": [],
-    }
+    return {**evaluation_summary(cfg, spec, cfg.method, final, expert_accomplish_rate(demos.metadata)), "device": "cpu",
+            "auc": None, "frames": 0, "updates": 0, "rounds": 0, "wall_s": round(time.perf_counter() - start, 1),
+            "run_dir": run_dir, "plots": []}

@@ -23,6 +23,16 @@ if TYPE_CHECKING:
 __all__ = ["BCUpdate", "MetaRewardUpdate", "SACUpdate"]
 
 
+def backward_and_step(loss: torch.Tensor, optimizer: torch.optim.Optimizer, max_grad_norm: float | None) -> None:
+    """Zero the gradients, backpropagate ``loss``, clip the gradient norm (unless None), step."""
+    optimizer.zero_grad(set_to_none=True)
+    loss.backward()
+    if max_grad_norm is not None:
+        params = [p for group in optimizer.param_groups for p in group["params"]]
+        torch.nn.utils.clip_grad_norm_(params, max_grad_norm)
+    optimizer.step()
+
+
 def _detached(out: TensorDictBase, keys: tuple[str, ...]) -> dict[str, torch.Tensor]:
     return {key: out.get(key).detach() for key in keys if key in out.keys()}
 
@@ -77,12 +87,7 @@ class SACUpdate:
     def step(self, losses: dict[str, torch.Tensor], trainer: CSIRLTrainer) -> None:
         """Checks, backpropagates and applies ``losses`` (sum) with the SAC optimiser."""
         check_finite_losses(losses, f"update {trainer.updates + 1} (frames {trainer.frames})")
-        self.optimizer.zero_grad(set_to_none=True)
-        sum(losses.values()).backward()
-        if self.max_grad_norm is not None:
-            params = [p for group in self.optimizer.param_groups for p in group["params"]]
-            torch.nn.utils.clip_grad_norm_(params, self.max_grad_norm)
-        self.optimizer.step()
+        backward_and_step(sum(losses.values()), self.optimizer, self.max_grad_norm)
         self.target_updater.step()
 
     def __call__(self, trainer: CSIRLTrainer) -> dict[str, torch.Tensor]:
@@ -179,10 +184,5 @@ class BCUpdate:
         with set_exploration_type(ExplorationType.DETERMINISTIC):
             loss = self.loss(self.expert_buffer.sample())["loss_bc"]
         check_finite_losses({"loss_bc": loss}, f"update {trainer.updates + 1} (frames {trainer.frames})")
-        self.optimizer.zero_grad(set_to_none=True)
-        loss.backward()
-        if self.max_grad_norm is not None:
-            params = [p for group in self.optimizer.param_groups for p in group["params"]]
-            torch.nn.utils.clip_grad_norm_(params, self.max_grad_norm)
-        self.optimizer.step()
+        backward_and_step(loss, self.optimizer, self.max_grad_norm)
         return {"loss_bc": loss.detach()}

@@ -79,14 +79,19 @@ def plot_learning_curve(
             label=f"expert accomplish rate ({float(expert_accomplish_rate):.2f})",
         )
     if records or expert_accomplish_rate is not None:
-        ax.set_ylim(-0.02, 1.05)
-        ax.set_ylabel("rate")
-        ax.set_xlabel("environment frames")
-        ax.xaxis.set_major_formatter(EngFormatter(sep=""))
-        ax.grid(True, alpha=0.3)
-        ax.legend(loc="lower right", fontsize=9)
+        _rate_axes(ax, "rate", legend_loc="lower right", fontsize=9)
     fig.tight_layout()
     return save_png(fig, path)
+
+
+def _rate_axes(ax, ylabel: str, legend_loc: str, fontsize: int) -> None:
+    """A rate in [0, 1] against environment frames: limits, labels, grid, legend."""
+    ax.set_ylim(-0.02, 1.05)
+    ax.set_ylabel(ylabel)
+    ax.set_xlabel("environment frames")
+    ax.xaxis.set_major_formatter(EngFormatter(sep=""))
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc=legend_loc, fontsize=fontsize)
 
 
 def _draw_rates(ax, records: list[Mapping[str, Any]]) -> None:
@@ -165,12 +170,7 @@ def plot_method_curves(
     if not drawn:
         empty_message(ax, "no finished run")
     else:
-        ax.set_ylim(-0.02, 1.05)
-        ax.set_ylabel(ylabel)
-        ax.set_xlabel("environment frames")
-        ax.xaxis.set_major_formatter(EngFormatter(sep=""))
-        ax.grid(True, alpha=0.3)
-        ax.legend(loc="best", fontsize=8)
+        _rate_axes(ax, ylabel, legend_loc="best", fontsize=8)
     fig.tight_layout()
     return save_png(fig, path)
 
