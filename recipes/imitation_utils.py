@@ -266,13 +266,10 @@ def make_loss_method(cfg: DictConfig, spec: ScenarioSpec, device: torch.device) 
     the ``<method>`` section as its hyperparameters and CSIRL's actor and critic factory."""
     features = input_features(cfg, spec)
     actor = make_actor(spec.obs_dim, spec.action_dim, input_features=features)
-    try:
-        return make_imitation_method(
-            cfg.method, actor, partial(make_qvalue, spec.obs_dim, spec.action_dim, input_features=features),
-            obs_dim=spec.obs_dim, action_dim=spec.action_dim, hyperparameters=OmegaConf.to_object(cfg[cfg.method]),
-            device=device)
-    except (ValueError, TypeError) as err:
-        raise ConfigError(f"{cfg.method}: {err}") from None
+    return make_imitation_method(
+        cfg.method, actor, partial(make_qvalue, spec.obs_dim, spec.action_dim, input_features=features),
+        obs_dim=spec.obs_dim, action_dim=spec.action_dim, hyperparameters=OmegaConf.to_object(cfg[cfg.method]),
+        device=device)
 
 
 METHOD_BUILDERS = {"sac": make_sac, "bc": make_bc, **{name: make_loss_method for name in LOSS_METHODS}}
@@ -289,7 +286,10 @@ def make_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume_fra
     device = resolve_device(cfg.device)
     spec = SCENARIOS[cfg.env.scenario]
     demos = load_demonstrations(cfg, spec)
-    method = METHOD_BUILDERS[cfg.method](cfg, spec, device)
+    try:  # e.g. a negative learning rate of a section read from a hyperparameter dataclass
+        method = METHOD_BUILDERS[cfg.method](cfg, spec, device)
+    except (ValueError, TypeError) as err:
+        raise ConfigError(f"{cfg.method}.*: {err}") from None
     batch_size = getattr(method.hyperparameters, "batch_size", cfg.expert.batch_size)
     online = make_online_buffer(cfg.replay_buffer.size, batch_size, method.online_transforms, device)
     expert = demos.as_replay_buffer(batch_size=cfg.expert.batch_size, device=device,

@@ -140,6 +140,7 @@ def test_resume_gives_the_uninterrupted_metrics(tmp_path):
     (["method=csirl"], "error: method=csirl: CSIRL is trained by recipes/csirl_highway.py"),
     (["method=bc", "expert.num_trajectories=7"], "error: expert.num_trajectories=7: num_trajectories must be one of"),
     (["method=bc", "expert.path=/nonexistent/demos.npz"], "error: expert.path: no such file"),
+    (["method=sac", "sac.lr=-1"], "error: sac.*: Invalid learning rate: -1"),
 ])
 def test_bad_input_is_one_error_line(args, message, tmp_path, capsys):
     with pytest.raises(SystemExit) as exit_info:
@@ -152,13 +153,16 @@ def test_bad_input_is_one_error_line(args, message, tmp_path, capsys):
 
 def test_benchmark_sweeps_on_ray_resumes_and_reports(tmp_path):
     out = str(tmp_path / "bench")
-    args = ["--methods", "random", "bc", "--scenarios", "merge", "--seeds", "0", "--output-dir", out,
-            "--cpus-per-trial", "1", *TINY, "collector.total_frames=200", "logger.backend=csv"]
-    assert benchmark.main(args) == 0
+    args = ["--methods", "random", "bc", "sac", "--scenarios", "merge", "--seeds", "0", "--output-dir", out,
+            "--cpus-per-trial", "1", *TINY, "collector.total_frames=200", "logger.backend=csv", "sac:sac.lr=-1"]
+    assert benchmark.main(args) == 1  # the sac cell fails (bad learning rate), the others finish
+    with open(os.path.join(out, "logs", "merge-sac-s0.log")) as f:
+        assert "error: sac.*: Invalid learning rate" in f.read()
     for cell in ("merge-random-s0", "merge-bc-s0"):
         assert os.path.isfile(os.path.join(out, cell, "summary.json"))
-    todo, done = benchmark.plan_cells(["random", "bc"], ["merge"], [0, 1], out, [])
-    assert sorted(done) == ["merge-bc-s0", "merge-random-s0"] and [c.name for c in todo] == ["merge-random-s1", "merge-bc-s1"]
+    todo, done = benchmark.plan_cells(["random", "bc", "sac"], ["merge"], [0, 1], out, [])
+    assert sorted(done) == ["merge-bc-s0", "merge-random-s0"]
+    assert [c.name for c in todo] == ["merge-random-s1", "merge-bc-s1", "merge-sac-s0", "merge-sac-s1"]
     assert benchmark.main(["report", out]) == 0
     with open(os.path.join(out, "report", "table.csv")) as f:
         rows = {r["method"]: r for r in csv.DictReader(f)}
