@@ -96,12 +96,13 @@ def gradient_penalty(function: Callable[..., torch.Tensor], inputs: Sequence[tor
     return ((norm - target_norm) ** 2).mean()
 
 
-def orthogonal_regularization(module: nn.Module) -> torch.Tensor:
+def orthogonal_regularization(module: nn.Module, skip_last: bool = False) -> torch.Tensor:
     """``sum_W || W W^T * (1 - I) ||_F^2`` over the weight matrices of ``module``'s linear layers.
 
-    The orthogonal regulariser of Brock et al. (2019), used on the actor by ValueDICE (Kostrikov
-    et al., 2020, with coefficient 1e-4). ``W`` is ``[out, in]``, so the rows (the output units)
-    are pushed towards orthogonality.
+    The orthogonal regulariser of Brock et al. (2019, Eq. 3), used on the actor's hidden layers by
+    ValueDICE (Kostrikov et al., 2020, with coefficient 1e-4). ``W`` is ``[out, in]``, so the rows
+    (the output units) are pushed towards orthogonality. ``skip_last`` leaves out the last linear
+    layer (an output head).
 
     Examples:
         >>> import torch
@@ -110,13 +111,15 @@ def orthogonal_regularization(module: nn.Module) -> torch.Tensor:
         >>> float(orthogonal_regularization(lin))
         0.0
     """
+    layers = [sub for sub in module.modules() if isinstance(sub, nn.Linear)]
+    if skip_last:
+        layers = layers[:-1]
     total = None
-    for sub in module.modules():
-        if isinstance(sub, nn.Linear):
-            gram = sub.weight @ sub.weight.T
-            off_diagonal = gram * (1.0 - torch.eye(gram.shape[0], device=gram.device, dtype=gram.dtype))
-            term = off_diagonal.pow(2).sum()
-            total = term if total is None else total + term
+    for layer in layers:
+        gram = layer.weight @ layer.weight.T
+        off_diagonal = gram * (1.0 - torch.eye(gram.shape[0], device=gram.device, dtype=gram.dtype))
+        term = off_diagonal.pow(2).sum()
+        total = term if total is None else total + term
     if total is None:
         raise ValueError(f"{type(module).__name__} has no nn.Linear layer to regularise.")
     return total

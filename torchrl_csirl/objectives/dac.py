@@ -4,16 +4,18 @@ Adversarial imitation made sample efficient and unbiased:
 
 * **off-policy**: the discriminator compares expert pairs with pairs from the replay buffer,
   and the policy is learned by an off-policy actor-critic on the discriminator reward
-  ``r(s, a) = log D(s, a) - log(1 - D(s, a))`` (the logit; Sec. 4.1);
-* **absorbing states** (Sec. 4.2): terminal transitions lead to an absorbing state whose
+  ``r(s, a) = log D(s, a) - log(1 - D(s, a))`` (the logit);
+* **absorbing states**: terminal transitions lead to an absorbing state whose
   reward is learned (:class:`~torchrl_csirl.transforms.AbsorbingStates` on both buffers;
-  :class:`AbsorbingLogit` gives the discriminator its own output for that state);
+  :class:`AbsorbingLogit` reads the absorbing indicator as an input feature);
 * **gradient penalty** (Gulrajani et al. 2017, weight 10): at points interpolated between an
   expert pair and an agent pair with *one mixing weight per sample* (TorchRL's ``GAILLoss`` draws
   one per element, which is why this loss is written here).
 
-The learner is SAC (the paper uses TD3; the brief of this project allows either and SAC keeps
-every SAC-based method on the same learner).
+The learner is SAC (the paper uses TD3): every SAC-based baseline, and CSIRL, then share one learner.
+
+The values were checked against the authors' published code (``google-research/dac``); section and
+equation numbers of the paper are not quoted (docs/BASELINES.md gives every source).
 """
 from __future__ import annotations
 
@@ -38,12 +40,12 @@ class DACHyperparameters(SACHyperparameters):
     """DAC's settings: the SAC learner's (:class:`SACHyperparameters`) plus the discriminator's.
 
     Attributes:
-        discriminator_lr: Adam learning rate of the discriminator (1e-3, Kostrikov et al. 2019,
-            Appendix).
+        discriminator_lr: Adam learning rate of the discriminator (1e-3: Adam's default, used by
+            the authors' code, ``google-research/dac``).
         discriminator_batch_size: expert and agent transitions per discriminator step (each).
         discriminator_every: a discriminator step every this many actor-critic updates.
-        gp_lambda: gradient-penalty weight (10, Sec. 4.1 after Gulrajani et al. 2017).
-        absorbing_states: the absorbing-state treatment of terminal transitions (Sec. 4.2).
+        gp_lambda: gradient-penalty weight (10, after Gulrajani et al. 2017).
+        absorbing_states: the absorbing-state treatment of terminal transitions.
     """
 
     discriminator_lr: float = 1e-3
@@ -54,11 +56,15 @@ class DACHyperparameters(SACHyperparameters):
 
 
 class AbsorbingLogit(nn.Module):
-    """A discriminator logit ``f(s, a)`` for real states and one learned logit for the absorbing state.
+    """A discriminator logit that reads DAC's absorbing-state indicator as an input feature.
 
-    The absorbing state is a single point whose action does not matter, so its output is one
-    parameter, selected by the indicator feature ``absorbing`` (the paper appends the indicator
-    to the network's input to the same effect).
+    ``logit(s, i, a) = f(s, a) + w * i`` with ``i`` the indicator (0 for real states, 1 for the
+    absorbing state, whose samples carry the placeholder observation and a zero action, see
+    :func:`~torchrl_csirl.transforms.absorbing_states.absorbing_self_loops`): the paper appends
+    the indicator to the network's input; here it enters linearly through the learned weight
+    ``w``, so that ``f`` keeps the critic's architecture. The absorbing state's logit
+    ``f(s_a, 0) + w`` is regularised like any other output: the gradient penalty of
+    :class:`DACDiscriminatorLoss` interpolates the indicator too and so bounds ``w``.
 
     Args:
         network: ``network(observation, action) -> [B, 1]`` (e.g. a critic's ``ConcatMLP``).
@@ -67,19 +73,20 @@ class AbsorbingLogit(nn.Module):
         >>> import torch
         >>> from torchrl_csirl.modules import ConcatMLP
         >>> m = AbsorbingLogit(ConcatMLP(4, (8,)))
+        >>> _ = torch.nn.init.constant_(m.indicator_weight, 2.0)
         >>> out = m(torch.zeros(2, 3), torch.tensor([[False], [True]]), torch.zeros(2, 1))
-        >>> out.shape, float(out[1])
-        (torch.Size([2, 1]), 0.0)
+        >>> out.shape, round(float(out[1] - out[0]), 4)
+        (torch.Size([2, 1]), 2.0)
     """
 
     def __init__(self, network: nn.Module) -> None:
         super().__init__()
         self.network = network
-        self.absorbing_logit = nn.Parameter(torch.zeros(1))
+        self.indicator_weight = nn.Parameter(torch.zeros(1))
 
     def forward(self, observation: torch.Tensor, absorbing: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
         logit = self.network(observation, action)
-        return torch.where(absorbing.reshape(logit.shape).bool(), self.absorbing_logit.expand_as(logit), logit)
+        return logit + self.indicator_weight * absorbing.reshape(logit.shape).to(logit.dtype)
 
 
 def make_dac_discriminator(qvalue: TensorDictModule, absorbing_states: bool = True,
@@ -105,7 +112,7 @@ def make_dac_discriminator(qvalue: TensorDictModule, absorbing_states: bool = Tr
 
 
 def dac_discriminator_loss(expert_logit: torch.Tensor, agent_logit: torch.Tensor) -> torch.Tensor:
-    """Binary cross-entropy of ``D = sigmoid(logit)``: expert pairs labelled 1, agent pairs 0 (Eq. 1).
+    """Binary cross-entropy of ``D = sigmoid(logit)``: expert pairs labelled 1, agent pairs 0.
 
     Examples:
         >>> import torch
@@ -125,8 +132,8 @@ class DACDiscriminatorLoss(LossModule):
     transition entering the absorbing state adds one absorbing self-loop sample to its side
     (:func:`~torchrl_csirl.transforms.absorbing_states.absorbing_self_loops`), as the paper's
     replay buffer holds one absorbing transition per terminated episode. The penalty is taken at
-    ``x = eps * x_E + (1 - eps) * x_agent`` with ``eps ~ U[0, 1]`` per sample, over pairs of real
-    expert and agent samples (the absorbing logit has no input to penalise).
+    ``x = eps * x_E + (1 - eps) * x_agent`` with ``eps ~ U[0, 1]`` per sample, over random pairs of
+    expert and agent samples (absorbing ones included, the indicator interpolated as a number).
 
     Args:
         discriminator_network (TensorDictModule): writes the logit (see
@@ -207,18 +214,22 @@ class DACDiscriminatorLoss(LossModule):
         return torch.cat([real, loops.select(*real.keys(True, True))], 0)
 
     def _penalty(self, expert: TensorDictBase, agent: TensorDictBase) -> torch.Tensor:
+        """WGAN-GP at ``eps * x_E + (1 - eps) * x_agent``, one ``eps`` per pair of random partners.
+
+        ``x`` is every discriminator input (observation, action and, with absorbing states, the
+        indicator as a number), so the absorbing state's output is penalised like the others.
+        """
         n = min(expert.numel(), agent.numel())
         if n == 0 or self.gp_lambda == 0:
             return torch.zeros((), device=self._logit_device())
-        keys = (self.tensor_keys.observation, self.tensor_keys.action)
+        keys = list(self.discriminator_network.in_keys)
+        expert = expert[torch.randperm(expert.numel(), device=expert.device)[:n]]
+        agent = agent[torch.randperm(agent.numel(), device=agent.device)[:n]]
         eps = torch.rand(n, 1, device=expert.device)  # one mixing weight per sample
-        mixed = [eps * expert.get(k)[:n] + (1 - eps) * agent.get(k)[:n] for k in keys]
+        mixed = [eps * expert.get(k).float() + (1 - eps) * agent.get(k).float() for k in keys]
 
-        def logit(observation: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
-            td = TensorDict({keys[0]: observation, keys[1]: action}, [n])
-            if self.tensor_keys.absorbing in self.discriminator_network.in_keys:
-                td.set(self.tensor_keys.absorbing, torch.zeros(n, 1, dtype=torch.bool, device=observation.device))
-            return self._logit(td)
+        def logit(*inputs: torch.Tensor) -> torch.Tensor:
+            return self._logit(TensorDict(dict(zip(keys, inputs)), [n]))
 
         return self.gp_lambda * gradient_penalty(logit, mixed)
 
@@ -230,8 +241,8 @@ class DACDiscriminatorLoss(LossModule):
         agent = tensordict.get(self.tensor_keys.collector)
         require_keys(expert, self.discriminator_network.in_keys, "DAC discriminator, expert samples")
         require_keys(agent, self.discriminator_network.in_keys, "DAC discriminator, agent samples")
-        expert_logit = self._logit(self._with_self_loops(expert))
-        agent_logit = self._logit(self._with_self_loops(agent))
+        expert, agent = self._with_self_loops(expert), self._with_self_loops(agent)
+        expert_logit, agent_logit = self._logit(expert), self._logit(agent)
         return TensorDict({
             "loss_discriminator": dac_discriminator_loss(expert_logit, agent_logit),
             "loss_gradient_penalty": self._penalty(expert, agent),

@@ -29,6 +29,7 @@ import torch
 from tensordict import TensorDict, TensorDictBase
 from tensordict.utils import NestedKey
 from torchrl.envs.utils import ExplorationType, set_exploration_type
+from torchrl.objectives.sac import compute_rsample_log_prob
 
 from torchrl_csirl._compat import sac_alpha, sac_reduced_alpha_loss
 from torchrl_csirl.objectives._imitation import SACHyperparameters, _check_num_critics, concat_shared, require_keys
@@ -150,9 +151,8 @@ class IQLearnLoss(EnsembleSACLoss):
         td = TensorDict({obs_key: observation}, observation.shape[:1])
         with torch.no_grad(), set_exploration_type(ExplorationType.RANDOM), \
                 self.actor_network_params.to_module(self.actor_network):
-            dist = self.actor_network.get_dist(td)
-            action = dist.sample()
-            log_prob = dist.log_prob(action)
+            # SACLoss's own sampler: the log-probability of the tanh-squashed sample, computed stably
+            action, log_prob = compute_rsample_log_prob(self.actor_network.get_dist(td))
         td.set(self.tensor_keys.action, action)
         return self.qvalues(td) - sac_alpha(self) * log_prob
 

@@ -25,7 +25,7 @@ class SQILHyperparameters(SACHyperparameters):
 
     Attributes:
         expert_fraction: share of demonstrations in each batch; 0.5 is the paper's balanced
-            batch (``lambda_samp = 1``, Reddy et al. 2020, Sec. 3 and Algorithm 1).
+            batch (``lambda_samp = 1``, Reddy et al. 2020, Algorithm 1).
         expert_reward: reward of a demonstrated transition (1, Algorithm 1).
         online_reward: reward of an agent transition (0, Algorithm 1).
     """

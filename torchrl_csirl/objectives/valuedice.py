@@ -3,15 +3,15 @@
 ValueDICE minimises the KL divergence between the agent's and the expert's state-action
 occupancies through its Donsker-Varadhan dual, written with a value-like function ``nu(s, a)``
 and its Bellman residual under the policy, ``(nu - B^pi nu)(s, a) = nu(s, a) - gamma nu(s', a')``
-with ``a' ~ pi(s')`` (Eq. 12 of the paper):
+with ``a' ~ pi(s')``:
 
 ``J(pi, nu) = log E_{d_E}[exp(nu - B^pi nu)] - (1 - gamma) E_{s_0, a_0 ~ pi}[nu(s_0, a_0)]``,
 
 minimised over ``nu`` and maximised over ``pi`` (the policy gradient flows through the sampled
 ``a'`` and ``a_0``, re-parameterised). The practical algorithm's regularisers, with the paper's
-values (Sec. 5 and Appendix):
+values (its experimental details; the authors' published code uses the same):
 
-* **replay mixing** (Eq. 13), weight ``alpha = 0.1``: the expert distribution is mixed with the
+* **replay mixing**, weight ``alpha = 0.1``: the expert distribution is mixed with the
   replay buffer's, ``log E_{(1-a) d_E + a d_RB}[exp(nu - B^pi nu)] - (1 - a)(1 - gamma) E[nu(s_0, a_0)] - a E_{d_RB}[nu - B^pi nu]``,
   so that the objective stays informative where the expert data are absent;
 * **orthogonal regularisation** of the actor (Brock et al. 2019), weight 1e-4;
@@ -19,8 +19,13 @@ values (Sec. 5 and Appendix):
   between expert and replay state-action pairs (and between their successors with the policy's
   actions), one mixing weight per sample.
 
-Initial states ``s_0`` are the first states of the expert trajectories (:func:`initial_observations`).
-The paper uses absorbing states for terminations; here ``B^pi nu = 0`` after a termination instead.
+Initial states ``s_0``: by default every expert state is used as an initial state, as in the
+authors' published code (``google-research/value_dice``, where the initial-state batch *is* the
+expert batch): the identity behind the linear term holds for any starting distribution whose
+trajectories follow the policy, and expert states cover far more of the state space than the few
+trajectory starts. ``initial_states="episode_starts"`` uses only the first state of each expert
+trajectory (:func:`initial_observations`). The paper and its code use absorbing states for
+terminations; here ``B^pi nu = 0`` after a termination instead.
 """
 from __future__ import annotations
 
@@ -31,7 +36,6 @@ import torch
 from tensordict import TensorDict, TensorDictBase
 from tensordict.nn import TensorDictModule
 from tensordict.utils import NestedKey
-from torch import nn
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 from torchrl.objectives import LossModule
 
@@ -42,16 +46,18 @@ __all__ = ["ValueDICEHyperparameters", "ValueDICELoss", "initial_observations", 
 
 @dataclass
 class ValueDICEHyperparameters:
-    """ValueDICE's settings (Kostrikov et al. 2020, Appendix, continuous control).
+    """ValueDICE's settings (Kostrikov et al. 2020, continuous control).
 
     Attributes:
         actor_lr: Adam learning rate of the policy (1e-5).
         nu_lr: Adam learning rate of ``nu`` (1e-3).
-        batch_size: expert, replay and initial samples per update (256, each).
+        batch_size: expert and replay samples per update (256, each).
         gamma: discount (0.99).
         replay_regularization: ``alpha`` of the replay mixing (0.1).
         orthogonal_regularization: weight of the actor's orthogonal regulariser (1e-4).
         gp_lambda: weight of ``nu``'s gradient penalty (10).
+        initial_states: ``"expert"`` (every expert state, the authors' code) or ``"episode_starts"``
+            (the first state of each expert trajectory).
         max_grad_norm: gradient-norm clipping (None: none).
     """
 
@@ -62,7 +68,15 @@ class ValueDICEHyperparameters:
     replay_regularization: float = 0.1
     orthogonal_regularization: float = 1e-4
     gp_lambda: float = 10.0
+    initial_states: str = "expert"
     max_grad_norm: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.initial_states not in INITIAL_STATES:
+            raise ValueError(f"initial_states must be one of {INITIAL_STATES}, got {self.initial_states!r}.")
+
+
+INITIAL_STATES = ("expert", "episode_starts")
 
 
 def initial_observations(transitions: TensorDictBase, observation_key: NestedKey = "observation") -> torch.Tensor:
@@ -85,14 +99,14 @@ def initial_observations(transitions: TensorDictBase, observation_key: NestedKey
 
 def valuedice_objective(expert_residual: torch.Tensor, replay_residual: torch.Tensor, initial_nu: torch.Tensor,
                         gamma: float, alpha: float) -> torch.Tensor:
-    """``J(pi, nu)`` with replay mixing (Eq. 13): the log-sum-exp term minus the linear terms.
+    """``J(pi, nu)`` with replay mixing: the log-sum-exp term minus the linear terms.
 
     Args:
         expert_residual: ``nu - B^pi nu`` on expert pairs ``[B_E]``.
         replay_residual: ``nu - B^pi nu`` on replay pairs ``[B_RB]``.
         initial_nu: ``nu(s_0, a_0)``, ``a_0 ~ pi(s_0)``, ``[B_0]``.
         gamma: discount.
-        alpha: replay-mixing weight (0: the plain objective, Eq. 12).
+        alpha: replay-mixing weight (0: the plain objective).
 
     Examples:
         >>> import torch
@@ -118,7 +132,8 @@ class ValueDICELoss(LossModule):
     initial observations. Outputs:
 
     * ``loss_nu``: ``J`` (:func:`valuedice_objective`), and ``loss_gradient_penalty``, for ``nu``;
-    * ``loss_actor``: ``-J``, and ``loss_orthogonal``, for the policy.
+    * ``loss_actor``: ``-J``, and ``loss_orthogonal`` (on the actor's hidden layers, as the
+      authors' code regularises the actor's trunk), for the policy.
 
     ``loss_nu`` and ``loss_actor`` share one graph and reach both networks: the update applies
     the gradient of the ``nu`` terms to ``nu`` only and of the actor terms to the actor only
@@ -248,5 +263,6 @@ class ValueDICELoss(LossModule):
             "loss_nu": objective,
             "loss_gradient_penalty": self._penalty(expert, replay, expert_next_action, replay_next_action),
             "loss_actor": -objective,
-            "loss_orthogonal": self.orthogonal_regularization * orthogonal_regularization(self.actor_network),
+            "loss_orthogonal": self.orthogonal_regularization * orthogonal_regularization(self.actor_network,
+                                                                                          skip_last=True),
         }, [])

@@ -11,7 +11,7 @@ docs/BASELINES.md describes every method, its hyperparameters and their sources.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -82,7 +82,7 @@ def _sac(actor: nn.Module, make_qvalue: Callable[[], nn.Module], hp: SACHyperpar
 
 
 # ------------------------------------------------------------------------------ SQIL
-def _make_sqil(actor, make_qvalue, hp: SQILHyperparameters, device, **_dims: int) -> ImitationMethod:
+def _make_sqil(actor, make_qvalue, hp: SQILHyperparameters, device) -> ImitationMethod:
     loss, optimizer, target_updater = _sac(actor, make_qvalue, hp, device)
     online_label, expert_label = sqil_reward_labels(hp)
 
@@ -112,7 +112,7 @@ def _adversarial(name: str, actor, hp, loss, discriminator_loss, discriminator, 
     return ImitationMethod(name, actor, online_transforms, expert_transforms, states, make_update_step, hp)
 
 
-def _make_gail(actor, make_qvalue, hp: GAILHyperparameters, device, **_dims: int) -> ImitationMethod:
+def _make_gail(actor, make_qvalue, hp: GAILHyperparameters, device) -> ImitationMethod:
     loss, sac_optimizer, target_updater = _sac(actor, make_qvalue, hp, device)
     discriminator = make_gail_discriminator(make_qvalue()).to(device)
     discriminator_loss = GAILLoss(discriminator, use_grad_penalty=hp.use_grad_penalty, gp_lambda=hp.gp_lambda)
@@ -126,7 +126,7 @@ def _dac_input(expert, online):
     return TensorDict({"expert": expert, "collector": online}, [])
 
 
-def _make_dac(actor, make_qvalue, hp: DACHyperparameters, device, **_dims: int) -> ImitationMethod:
+def _make_dac(actor, make_qvalue, hp: DACHyperparameters, device) -> ImitationMethod:
     loss, sac_optimizer, target_updater = _sac(actor, make_qvalue, hp, device)
     discriminator = make_dac_discriminator(make_qvalue(), hp.absorbing_states).to(device)
     discriminator_loss = DACDiscriminatorLoss(discriminator, gp_lambda=hp.gp_lambda)
@@ -141,7 +141,7 @@ def _make_dac(actor, make_qvalue, hp: DACHyperparameters, device, **_dims: int) 
 
 
 # ------------------------------------------------------------------------------ IQ-Learn
-def _make_iqlearn(actor, make_qvalue, hp: IQLearnHyperparameters, device, **_dims: int) -> ImitationMethod:
+def _make_iqlearn(actor, make_qvalue, hp: IQLearnHyperparameters, device) -> ImitationMethod:
     loss = IQLearnLoss(actor, make_qvalue(), chi2_coefficient=hp.chi2_coefficient, num_qvalue_nets=hp.num_qvalue_nets,
                        alpha_init=hp.alpha_init, fixed_alpha=hp.fixed_alpha, gamma=hp.gamma).to(device)
     optimizer, target_updater = _adam(loss, hp.lr), SoftUpdate(loss, tau=hp.tau)
@@ -160,15 +160,15 @@ def _make_iqlearn(actor, make_qvalue, hp: IQLearnHyperparameters, device, **_dim
 
 
 # ------------------------------------------------------------------------------ ValueDICE
-def _make_valuedice(actor, make_qvalue, hp: ValueDICEHyperparameters, device, **_dims: int) -> ImitationMethod:
-    nu = logit_network(make_qvalue(), "nu").to(device)
+def _make_valuedice(actor, make_qvalue, hp: ValueDICEHyperparameters, device) -> ImitationMethod:
+    nu = logit_network(make_qvalue(), "nu")
     loss = ValueDICELoss(actor, nu, gamma=hp.gamma, replay_regularization=hp.replay_regularization,
-                         orthogonal_regularization=hp.orthogonal_regularization, gp_lambda=hp.gp_lambda)
+                         orthogonal_regularization=hp.orthogonal_regularization, gp_lambda=hp.gp_lambda).to(device)
     nu_optimizer, actor_optimizer = _adam(nu, hp.nu_lr), _adam(actor, hp.actor_lr)
 
     def make_update_step(online: TensorDictReplayBuffer, expert: TensorDictReplayBuffer) -> UpdateStep:
-        starts = initial_observations(expert.storage[:]).to(device)
-        return ValueDICEUpdate(loss, nu_optimizer, actor_optimizer, online, expert, starts, hp.batch_size,
+        starts = None if hp.initial_states == "expert" else initial_observations(expert.storage[:]).to(device)
+        return ValueDICEUpdate(loss, nu_optimizer, actor_optimizer, online, expert, hp.batch_size, starts,
                                hp.max_grad_norm)
 
     states = {"loss": loss, "optim_nu": nu_optimizer, "optim_actor": actor_optimizer}  # the loss holds actor and nu
@@ -206,7 +206,8 @@ def _resolve(cls: type, hyperparameters: Any) -> Any:
         return cls()
     if isinstance(hyperparameters, cls):
         return hyperparameters
-    if isinstance(hyperparameters, dict):
+    if isinstance(hyperparameters, Mapping):  # a dict, or an OmegaConf DictConfig
+        hyperparameters = dict(hyperparameters)
         known = {f.name for f in dataclasses.fields(cls)}
         unknown = sorted(set(hyperparameters) - known)
         if unknown:
@@ -228,10 +229,10 @@ def make_imitation_method(name: str, actor: nn.Module, make_qvalue: Callable[[],
             with it too.
 
     Keyword Args:
-        obs_dim: observation size (checked against the critic).
+        obs_dim: observation size (checked by one dry call of a critic).
         action_dim: action size (checked against the actor's action spec).
-        hyperparameters: the method's dataclass (:func:`hyperparameters_class`), a dict of its
-            fields, or None for the published defaults.
+        hyperparameters: the method's dataclass (:func:`hyperparameters_class`), a mapping of
+            (some of) its fields (a dict, an OmegaConf ``DictConfig``), or None for the defaults.
         device: where the networks live.
 
     Examples:
@@ -251,4 +252,41 @@ def make_imitation_method(name: str, actor: nn.Module, make_qvalue: Callable[[],
     spec = getattr(actor, "spec", None)
     if spec is not None and "action" in spec.keys() and spec["action"].shape[-1] != action_dim:
         raise ValueError(f"the actor's actions have size {spec['action'].shape[-1]}, expected action_dim={action_dim}.")
-    return builder(actor, make_qvalue, hp, torch.device(device), obs_dim=obs_dim, action_dim=action_dim)
+    _check_qvalue(make_qvalue, obs_dim, action_dim)
+    method = builder(actor, make_qvalue, hp, torch.device(device))
+    method.make_update_step = _checking_demonstrations(name, method.make_update_step)
+    return method
+
+
+#: what every method reads from an expert transition
+DEMONSTRATION_KEYS = ("observation", "action", ("next", "observation"), ("next", "terminated"), ("next", "done"))
+
+
+def _checking_demonstrations(name: str, make_update_step: Callable) -> Callable:
+    """``make_update_step`` that first checks the expert buffer: not empty, with :data:`DEMONSTRATION_KEYS`."""
+
+    def checked(online: TensorDictReplayBuffer, expert: TensorDictReplayBuffer) -> UpdateStep:
+        if expert is None or not len(expert):
+            raise ValueError(f"{name} needs expert demonstrations: the expert buffer is empty.")
+        present = set(expert.storage[0].keys(True, True))
+        missing = [key for key in DEMONSTRATION_KEYS if key not in present]
+        if missing:
+            raise ValueError(f"{name}: the expert transitions lack the keys {missing}.")
+        return make_update_step(online, expert)
+
+    return checked
+
+
+def _check_qvalue(make_qvalue: Callable[[], nn.Module], obs_dim: int, action_dim: int) -> None:
+    """One dry call of a critic from ``make_qvalue()`` on ``[1, obs_dim]`` / ``[1, action_dim]`` inputs."""
+    critic = make_qvalue()
+    keys = list(getattr(critic, "in_keys", ()))
+    if len(keys) != 2:
+        raise ValueError(f"make_qvalue() must build a TensorDictModule reading [observation, action], got in_keys {keys}.")
+    probe = TensorDict({keys[0]: torch.zeros(1, obs_dim), keys[1]: torch.zeros(1, action_dim)}, [1])
+    try:
+        with torch.no_grad():
+            critic(probe)
+    except RuntimeError as err:
+        raise ValueError(f"make_qvalue() builds a critic that does not take observations of size {obs_dim} and "
+                         f"actions of size {action_dim}: {err}") from err

@@ -27,13 +27,28 @@ def _where(trainer: CSIRLTrainer) -> str:
     return f"update {trainer.updates + 1} (frames {trainer.frames})"
 
 
-def _apply(losses: dict[str, torch.Tensor], optimizer: torch.optim.Optimizer, max_grad_norm: float | None) -> None:
-    optimizer.zero_grad(set_to_none=True)
-    sum(losses.values()).backward()
+def _parameters(optimizer: torch.optim.Optimizer) -> list[torch.Tensor]:
+    return [p for group in optimizer.param_groups for p in group["params"]]
+
+
+def _gradients(loss: torch.Tensor, optimizer: torch.optim.Optimizer, retain_graph: bool = False) -> list:
+    """The gradient of ``loss`` with respect to the parameters of ``optimizer`` (None where unused)."""
+    return list(torch.autograd.grad(loss, _parameters(optimizer), retain_graph=retain_graph, allow_unused=True))
+
+
+def _step(grads: list, optimizer: torch.optim.Optimizer, max_grad_norm: float | None) -> None:
+    """Sets ``grads`` on the optimiser's parameters, clips their norm, steps."""
+    params = _parameters(optimizer)
+    for param, grad in zip(params, grads):
+        param.grad = grad
     if max_grad_norm is not None:
-        params = [p for group in optimizer.param_groups for p in group["params"]]
         torch.nn.utils.clip_grad_norm_(params, max_grad_norm)
     optimizer.step()
+
+
+def _apply(losses: dict[str, torch.Tensor], optimizer: torch.optim.Optimizer, max_grad_norm: float | None) -> None:
+    """One optimiser step on the sum of ``losses``."""
+    _step(_gradients(sum(losses.values()), optimizer), optimizer, max_grad_norm)
 
 
 class DiscriminatorStep:
@@ -111,8 +126,9 @@ class ValueDICEUpdate:
         actor_optimizer: over the actor's parameters.
         online: the replay buffer.
         expert: the expert replay buffer.
-        initial_observations: ``[N, D]`` initial observations (e.g. the expert trajectories' first states).
-        batch_size: samples of each kind per step.
+        batch_size: expert and replay samples per step (and initial states).
+        initial_observations: ``[N, D]`` initial observations to sample from (e.g. the expert
+            trajectories' first states); None: the expert batch's own states, as the authors' code.
         max_grad_norm: gradient-norm clipping of each network (None: none).
     """
 
@@ -120,9 +136,9 @@ class ValueDICEUpdate:
     ACTOR_KEYS = ("loss_actor", "loss_orthogonal")
 
     def __init__(self, loss: nn.Module, nu_optimizer: torch.optim.Optimizer, actor_optimizer: torch.optim.Optimizer,
-                 online: Any, expert: Any, initial_observations: torch.Tensor, batch_size: int,
+                 online: Any, expert: Any, batch_size: int, initial_observations: torch.Tensor | None = None,
                  max_grad_norm: float | None = None) -> None:
-        if initial_observations.ndim != 2 or not len(initial_observations):
+        if initial_observations is not None and (initial_observations.ndim != 2 or not len(initial_observations)):
             raise ValueError(f"initial_observations must be a non-empty [N, D] tensor, got {tuple(initial_observations.shape)}.")
         self.loss = loss
         self.nu_optimizer = nu_optimizer
@@ -135,10 +151,16 @@ class ValueDICEUpdate:
 
     def batch(self) -> TensorDictBase:
         """Expert, replay and initial-state samples, as :class:`ValueDICELoss` reads them."""
-        index = torch.randint(len(self.initial_observations), (self.batch_size,), device=self.initial_observations.device)
-        initial = TensorDict({self.loss.tensor_keys.observation: self.initial_observations[index]}, [self.batch_size])
-        return TensorDict({"expert": sample(self.expert, self.batch_size), "collector": sample(self.online, self.batch_size),
-                           "initial": initial}, [])
+        expert = sample(self.expert, self.batch_size)
+        obs_key = self.loss.tensor_keys.observation
+        if self.initial_observations is None:
+            starts = expert.get(obs_key)
+        else:
+            index = torch.randint(len(self.initial_observations), (self.batch_size,),
+                                  device=self.initial_observations.device)
+            starts = self.initial_observations[index]
+        initial = TensorDict({obs_key: starts}, starts.shape[:1])
+        return TensorDict({"expert": expert, "collector": sample(self.online, self.batch_size), "initial": initial}, [])
 
     def __call__(self, trainer: CSIRLTrainer) -> dict[str, torch.Tensor]:
         out = self.loss(self.batch())
@@ -147,17 +169,8 @@ class ValueDICEUpdate:
         nu_loss = losses["loss_nu"] + losses["loss_gradient_penalty"]
         actor_loss = losses["loss_actor"] + losses["loss_orthogonal"]
         # both gradients are taken before either network moves
-        self.nu_optimizer.zero_grad(set_to_none=True)
-        self.actor_optimizer.zero_grad(set_to_none=True)
-        nu_params = [p for g in self.nu_optimizer.param_groups for p in g["params"]]
-        actor_params = [p for g in self.actor_optimizer.param_groups for p in g["params"]]
-        nu_grads = torch.autograd.grad(nu_loss, nu_params, retain_graph=True, allow_unused=True)
-        actor_grads = torch.autograd.grad(actor_loss, actor_params, allow_unused=True)
-        for params, grads, optimizer in ((nu_params, nu_grads, self.nu_optimizer),
-                                         (actor_params, actor_grads, self.actor_optimizer)):
-            for param, grad in zip(params, grads):
-                param.grad = grad
-            if self.max_grad_norm is not None:
-                torch.nn.utils.clip_grad_norm_(params, self.max_grad_norm)
-            optimizer.step()
+        nu_grads = _gradients(nu_loss, self.nu_optimizer, retain_graph=True)
+        actor_grads = _gradients(actor_loss, self.actor_optimizer)
+        for grads, optimizer in ((nu_grads, self.nu_optimizer), (actor_grads, self.actor_optimizer)):
+            _step(grads, optimizer, self.max_grad_norm)
         return {key: value.detach() for key, value in losses.items()}

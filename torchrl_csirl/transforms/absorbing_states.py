@@ -26,7 +26,7 @@ def absorbing_value(absorbing_reward: torch.Tensor, gamma: float) -> torch.Tenso
 class AbsorbingStates(Transform):
     """Turns terminal transitions into transitions to an absorbing state, with an indicator feature.
 
-    Kostrikov et al. (2019, Sec. 4.2, "Discriminator-Actor-Critic") show that ending the return at
+    Kostrikov et al. (2019, "Discriminator-Actor-Critic") show that ending the return at
     a terminal state biases adversarial imitation (a positive reward favours long episodes, a
     negative one early termination) and fix it by letting episodes enter an absorbing state
     ``s_a`` that loops on itself with a *learned* reward ``r_a``. On a batch of transitions this

@@ -21,7 +21,7 @@ def discriminator_reward(logit: torch.Tensor, form: str) -> torch.Tensor:
     * ``"gail"``: ``-log(1 - D) = softplus(logit)``, the generator reward of GAIL in its usual
       non-saturating form (Ho and Ermon 2016 minimise ``E[log D']`` with ``D'`` the "is agent"
       probability, i.e. ``1 - D`` here);
-    * ``"logit"``: ``log D - log(1 - D) = logit``, DAC's reward (Kostrikov et al. 2019, Sec. 4.1),
+    * ``"logit"``: ``log D - log(1 - D) = logit``, DAC's reward (Kostrikov et al. 2019),
       also AIRL's.
 
     Examples:
