@@ -15,21 +15,15 @@ existing run is never replaced unless ``logger.overwrite=true``.
 from __future__ import annotations
 
 import os
-import shutil
 import sys
 import time
 
-import torch
-from omegaconf import OmegaConf
-
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-from common.builders import Run, final_summary, train  # noqa: E402
+from common.builders import Run, final_summary, resume_run, start_run, train  # noqa: E402
 from common.config import describe  # noqa: E402
-from common.run import default_run_name, make_run_dir, resolve_resume, run_script, write_summary  # noqa: E402
+from common.run import resolve_resume, run_script, write_summary  # noqa: E402
 from csirl_utils import CSIRLHighwayConfig, load_config, load_run_config, make_trainer, method_name  # noqa: E402
-
-from torchrl_csirl.trainers import load_checkpoint  # noqa: E402
 
 
 def build(argv: list[str], load=load_config, load_run=load_run_config) -> Run:
@@ -39,26 +33,11 @@ def build(argv: list[str], load=load_config, load_run=load_run_config) -> Run:
     """
     cfg = load(argv)
     if cfg.checkpoint.resume is None:
-        run_dir = make_run_dir(cfg.logger.output_dir, cfg.logger.exp_name,
-                               default_run_name(cfg.env.scenario, method_name(cfg), cfg.seed), cfg.logger.overwrite)
-        OmegaConf.save(cfg, os.path.join(run_dir, "config.yaml"))
-        try:
-            return make_trainer(cfg, run_dir)
-        except BaseException:  # e.g. a bad expert file: the new directory holds no run, remove it
-            shutil.rmtree(run_dir, ignore_errors=True)
-            raise
+        return start_run(cfg, method_name(cfg), make_trainer)
     run_dir, checkpoint = resolve_resume(cfg.checkpoint.resume)
     # the saved configuration, updated by this command line (e.g. a larger total_frames)
     cfg = load_run(run_dir, [a for a in argv if not a.startswith("checkpoint.resume=")])
-    counters = torch.load(os.path.join(checkpoint, "state.pt"), weights_only=False, map_location="cpu")["counters"]
-    run = make_trainer(cfg, run_dir, frames_done=counters["frames"], resume_frames=counters["frames"])
-    try:
-        load_checkpoint(run.trainer, checkpoint, run.online_buffer if cfg.checkpoint.save_buffer else None)
-    except BaseException:
-        run.close()
-        raise
-    print(f"resumed {run_dir} at {counters['frames']} frames, {counters['updates']} updates", file=sys.stderr)
-    return run
+    return resume_run(cfg, run_dir, checkpoint, make_trainer)
 
 
 def curriculum_plots(run: Run, picture=None) -> list[str]:

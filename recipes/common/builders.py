@@ -11,6 +11,7 @@ from __future__ import annotations
 import atexit
 import copy
 import os
+import shutil
 import sys
 import weakref
 from dataclasses import dataclass, field
@@ -26,7 +27,7 @@ from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
 from torchrl.envs import Compose, EnvBase, Transform
 
 from common.config import ConfigError
-from common.run import ExpertDataError
+from common.run import ExpertDataError, default_run_name, make_run_dir
 from torchrl_csirl.data import ExpertDemonstrations, import_published, load_expert_demonstrations
 from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, make_serial_env, resolve_scenario
 from torchrl_csirl.envs import make_env as make_scenario_env
@@ -53,6 +54,9 @@ __all__ = [
     "make_online_buffer",
     "make_worker_env_fn",
     "recorded_in_traffic",
+    "resume_run",
+    "start_run",
+    "evaluation_summary",
 ]
 
 MAX_ENVS_PER_WORKER = 4
@@ -420,6 +424,38 @@ def assemble_trainer(
                evaluation, checkpoint, dict(parts or {}))
 
 
+# ---------------------------------------------------------------------------------------- starting and resuming
+def start_run(cfg: DictConfig, method: str, build: Callable[[DictConfig, str], Any]) -> Any:
+    """A new run: its directory (``logger.*``) with ``config.yaml``, then ``build(cfg, run_dir)``.
+
+    If ``build`` fails (e.g. a bad expert file) the new directory, which holds no run, is removed.
+    """
+    run_dir = make_run_dir(cfg.logger.output_dir, cfg.logger.exp_name,
+                           default_run_name(cfg.env.scenario, method, cfg.seed), cfg.logger.overwrite)
+    OmegaConf.save(cfg, os.path.join(run_dir, "config.yaml"))
+    try:
+        return build(cfg, run_dir)
+    except BaseException:
+        shutil.rmtree(run_dir, ignore_errors=True)
+        raise
+
+
+def resume_run(cfg: DictConfig, run_dir: str, checkpoint: str, make_trainer: Callable[..., Run]) -> Run:
+    """A killed run continued: ``make_trainer(cfg, run_dir, frames_done=, resume_frames=)`` with the
+    checkpoint's counters, then the checkpoint (and the online buffer, if saved) restored."""
+    from torchrl_csirl.trainers import load_checkpoint
+
+    counters = torch.load(os.path.join(checkpoint, "state.pt"), weights_only=False, map_location="cpu")["counters"]
+    run = make_trainer(cfg, run_dir, frames_done=counters["frames"], resume_frames=counters["frames"])
+    try:
+        load_checkpoint(run.trainer, checkpoint, run.online_buffer if cfg.checkpoint.save_buffer else None)
+    except BaseException:
+        run.close()
+        raise
+    print(f"resumed {run_dir} at {counters['frames']} frames, {counters['updates']} updates", file=sys.stderr)
+    return run
+
+
 # ---------------------------------------------------------------------------------------- training and summary
 def train(run: Run) -> None:
     """``run.trainer.train()``; on any exit the collector is shut down and the logs are kept.
@@ -445,10 +481,31 @@ def train(run: Run) -> None:
         shutdown_collector(run.collector)
 
 
+def evaluation_summary(cfg: DictConfig, spec: ScenarioSpec, method: str, final: dict[str, float],
+                 expert_rate: float | None) -> dict[str, Any]:
+    """The summary fields of a run's final test evaluation ``final`` (:func:`evaluate_policy`'s
+    output), with the accomplish rate normalised by ``expert_rate`` (None: not normalised)."""
+    from torchrl_csirl.envs import normalized_accomplish_rate
+
+    return {
+        "scenario": spec.name,
+        "method": method,
+        "preset": cfg.get("preset", "default"),
+        "seed": cfg.seed,
+        "accomplish_rate": final["accomplish_rate"],
+        "accomplish_rate_std": final["accomplish_rate_std"],
+        "success_rate": final["success_rate"],
+        "crash_rate": final["crash_rate"],
+        "return": final["env_return"],  # the env's own reward (robotics: the paper's metric; driving: reference)
+        "normalized_accomplish_rate": (
+            float(normalized_accomplish_rate(final["accomplish_rate"], expert_rate)) if expert_rate else None),
+        "eval_episodes": cfg.eval.final_episodes,
+    }
+
+
 def final_summary(run: Run, method: str, title: str) -> dict[str, Any]:
     """Final checkpoint and test evaluation, ``policy.pt``, the learning curve, and the summary
     fields every recipe reports (the method adds its own)."""
-    from torchrl_csirl.envs import normalized_accomplish_rate
     from torchrl_csirl.modules import save_policy
     from torchrl_csirl.visualization import plot_learning_curve
 
@@ -463,20 +520,9 @@ def final_summary(run: Run, method: str, title: str) -> dict[str, Any]:
     throughput = trainer.throughput
     history = run.evaluation.history
     summary = {
-        "scenario": run.spec.name,
-        "method": method,
-        "preset": cfg.get("preset", "default"),
-        "seed": cfg.seed,
+        **evaluation_summary(cfg, run.spec, method, final, expert_rate),
         "device": str(run.device),
-        "accomplish_rate": final["accomplish_rate"],
-        "accomplish_rate_std": final["accomplish_rate_std"],
-        "success_rate": final["success_rate"],
-        "crash_rate": final["crash_rate"],
-        "return": final["env_return"],  # the env's own reward (robotics: the paper's metric; driving: reference)
-        "normalized_accomplish_rate": (
-            float(normalized_accomplish_rate(final["accomplish_rate"], expert_rate)) if expert_rate else None),
         "auc": sum(h["accomplish_rate"] for h in history) / len(history) if history else None,
-        "eval_episodes": cfg.eval.final_episodes,
         "frames": trainer.frames,
         "updates": trainer.updates,
         "rounds": trainer.rounds,

@@ -30,6 +30,7 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import os
+import types
 import typing
 from dataclasses import dataclass, field
 from typing import Any, Optional, Union
@@ -289,7 +290,7 @@ def _hints(cls: type) -> dict[str, Any]:
 
 def _optional_inner(tp: Any) -> tuple[Any, bool]:
     """(the type, whether null is allowed) of an annotation."""
-    if typing.get_origin(tp) is Union:
+    if typing.get_origin(tp) in (Union, types.UnionType):  # Optional[X], X | None
         args = [a for a in typing.get_args(tp) if a is not type(None)]
         return args[0], len(args) < len(typing.get_args(tp))
     return tp, False
@@ -399,6 +400,51 @@ def format_override(key: str, value: Any) -> str:
     return f"{key}={_value_text(value)}"
 
 
+def attribute_docs(cls: type) -> dict[str, str]:
+    """``name -> description`` from the ``Attributes:`` sections of ``cls``'s and its bases' docstrings.
+
+    The help of a leaf declared without :func:`option` (e.g. a library's hyperparameter dataclass
+    used as a section).
+
+    Examples:
+        >>> @dataclass
+        ... class Hp:
+        ...     \"\"\"Settings.
+        ...
+        ...     Attributes:
+        ...         lr: Adam learning rate.
+        ...         gamma: discount
+        ...             factor.
+        ...     \"\"\"
+        ...     lr: float = 0.1
+        ...     gamma: float = 0.9
+        >>> attribute_docs(Hp)
+        {'lr': 'Adam learning rate', 'gamma': 'discount factor'}
+    """
+    docs: dict[str, str] = {}
+    for klass in reversed(cls.__mro__):
+        lines = (klass.__doc__ or "").splitlines()
+        starts = [i for i, line in enumerate(lines) if line.strip() == "Attributes:"]
+        if not starts:
+            continue
+        indent, name = None, None
+        for line in lines[starts[0] + 1:]:
+            if not line.strip():
+                if name is not None:
+                    break
+                continue
+            depth = len(line) - len(line.lstrip())
+            indent = depth if indent is None else indent
+            if depth < indent:
+                break
+            head, sep, rest = line.strip().partition(":")
+            if depth == indent and sep and head.isidentifier():
+                name, docs[head] = head, rest.strip()
+            elif name is not None:
+                docs[name] += " " + line.strip()
+    return {k: v.rstrip(".") for k, v in docs.items()}
+
+
 def describe(schema: type, prefix: str = "") -> list[str]:
     """``key = default  # what is allowed; help`` for every leaf (a recipe's ``--help``).
 
@@ -413,7 +459,7 @@ def describe(schema: type, prefix: str = "") -> list[str]:
         if dataclasses.is_dataclass(tp):
             lines.extend(describe(tp, prefix=f"{key}."))
             continue
-        help_text = f.metadata.get("help", "")
+        help_text = f.metadata.get("help") or attribute_docs(schema).get(f.name, "")
         allowed = describe_allowed(tp, f.metadata)
         lines.append(f"{key} = {_value_text(f.default)}  # {allowed}" + (f"; {help_text}" if help_text else ""))
     return lines

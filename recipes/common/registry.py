@@ -7,10 +7,10 @@ import the recipes they know (:data:`RECIPE_MODULES`) and look a method up by na
 Examples:
     >>> load_config_for("csirl")(["seed=3"]).seed
     3
-    >>> load_config_for("gibberish")
+    >>> load_config_for("gibberish")  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    KeyError: "unknown method 'gibberish'; known: csirl, csirl-b"
+    KeyError: "unknown method 'gibberish'; known: bc, csirl, csirl-b, ..."
 """
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ from omegaconf import DictConfig
 __all__ = ["RECIPE_MODULES", "known_methods", "load_config_for", "register_recipe"]
 
 #: the recipe modules (importable from recipes/) that register methods
-RECIPE_MODULES = ("csirl_utils",)
+RECIPE_MODULES = ("csirl_utils", "imitation_utils")
 
 _LOADERS: dict[str, Callable[[list[str]], DictConfig]] = {}
 

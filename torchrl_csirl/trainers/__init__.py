@@ -9,10 +9,11 @@ from torchrl_csirl.trainers.imitation_updates import AdversarialImitationUpdate,
 from torchrl_csirl.trainers.hooks import EvaluationHook, SubgoalSelectionHook
 from torchrl_csirl.trainers.metrics_logger import MetricsLogger
 from torchrl_csirl.trainers.trainer import CSIRLTrainer, TrainingDivergedError, check_finite_losses
-from torchrl_csirl.trainers.updates import MetaRewardUpdate, SACUpdate
+from torchrl_csirl.trainers.updates import BCUpdate, MetaRewardUpdate, SACUpdate
 
 __all__ = [
     "AdversarialImitationUpdate",
+    "BCUpdate",
     "CSIRLTrainer",
     "CheckpointHook",
     "DiscriminatorStep",

@@ -2,7 +2,8 @@
 
 * :class:`SACUpdate`: one ensemble-SAC step (CSIRL-B's whole update);
 * :class:`MetaRewardUpdate`: CSIRL's update, a joint SAC + meta-gradient step every
-  ``meta_every`` updates and a SAC step otherwise.
+  ``meta_every`` updates and a SAC step otherwise;
+* :class:`BCUpdate`: one behavioural-cloning step on expert pairs (the BC baseline's update).
 """
 from __future__ import annotations
 
@@ -12,13 +13,24 @@ from typing import TYPE_CHECKING, Any
 import torch
 from tensordict import TensorDictBase
 from torch import nn
+from torchrl.envs.utils import ExplorationType, set_exploration_type
 
 from torchrl_csirl.trainers.trainer import CSIRLTrainer, check_finite_losses
 
 if TYPE_CHECKING:
     from torchrl_csirl.objectives import ActorBehaviourCloning
 
-__all__ = ["MetaRewardUpdate", "SACUpdate"]
+__all__ = ["BCUpdate", "MetaRewardUpdate", "SACUpdate"]
+
+
+def backward_and_step(loss: torch.Tensor, optimizer: torch.optim.Optimizer, max_grad_norm: float | None) -> None:
+    """Zero the gradients, backpropagate ``loss``, clip the gradient norm (unless None), step."""
+    optimizer.zero_grad(set_to_none=True)
+    loss.backward()
+    if max_grad_norm is not None:
+        params = [p for group in optimizer.param_groups for p in group["params"]]
+        torch.nn.utils.clip_grad_norm_(params, max_grad_norm)
+    optimizer.step()
 
 
 def _detached(out: TensorDictBase, keys: tuple[str, ...]) -> dict[str, torch.Tensor]:
@@ -75,12 +87,7 @@ class SACUpdate:
     def step(self, losses: dict[str, torch.Tensor], trainer: CSIRLTrainer) -> None:
         """Checks, backpropagates and applies ``losses`` (sum) with the SAC optimiser."""
         check_finite_losses(losses, f"update {trainer.updates + 1} (frames {trainer.frames})")
-        self.optimizer.zero_grad(set_to_none=True)
-        sum(losses.values()).backward()
-        if self.max_grad_norm is not None:
-            params = [p for group in self.optimizer.param_groups for p in group["params"]]
-            torch.nn.utils.clip_grad_norm_(params, self.max_grad_norm)
-        self.optimizer.step()
+        backward_and_step(sum(losses.values()), self.optimizer, self.max_grad_norm)
         self.target_updater.step()
 
     def __call__(self, trainer: CSIRLTrainer) -> dict[str, torch.Tensor]:
@@ -137,3 +144,45 @@ class MetaRewardUpdate:
         self.reward_optimizer.step()
         return {**{k: v.detach() for k, v in sac_losses.items()}, **_detached(out, SACUpdate.LOG_KEYS + self.META_KEYS),
                 **logs}
+
+
+class BCUpdate:
+    """One behavioural-cloning step: an expert batch, the loss of the deterministic action, Adam.
+
+    The policy acts deterministically while the loss is computed (the mode of a tanh-Gaussian
+    actor), so an ``"l2"`` :class:`~torchrl.objectives.BCLoss` regresses the action the policy is
+    evaluated with on the expert's action. The trainer's online buffer is not read.
+
+    Args:
+        loss: a :class:`~torchrl.objectives.BCLoss` over the actor.
+        optimizer: optimiser over the actor's parameters.
+        expert_buffer: replay buffer of expert ``(observation, action)`` pairs.
+        max_grad_norm: clip the gradient norm (None: no clipping).
+
+    Examples:
+        >>> from types import SimpleNamespace
+        >>> from torchrl.objectives import BCLoss
+        >>> from torchrl_csirl.data import ExpertDemonstrations
+        >>> from torchrl_csirl.modules import make_actor
+        >>> ep = {"observation": torch.zeros(5, 4), "action": torch.full((5, 2), 0.5),
+        ...       "next_observation": torch.ones(5, 4), "terminated": torch.zeros(5, dtype=torch.bool)}
+        >>> expert = ExpertDemonstrations.from_episodes([ep]).as_replay_buffer(batch_size=4)
+        >>> actor = make_actor(4, 2, hidden=(8,))
+        >>> update = BCUpdate(BCLoss(actor, loss_function="l2"), torch.optim.Adam(actor.parameters()), expert)
+        >>> sorted(update(SimpleNamespace(updates=0, frames=0)))
+        ['loss_bc']
+    """
+
+    def __init__(self, loss: nn.Module, optimizer: torch.optim.Optimizer, expert_buffer: Any,
+                 max_grad_norm: float | None = None) -> None:
+        self.loss = loss
+        self.optimizer = optimizer
+        self.expert_buffer = expert_buffer
+        self.max_grad_norm = max_grad_norm
+
+    def __call__(self, trainer: CSIRLTrainer) -> dict[str, torch.Tensor]:
+        with set_exploration_type(ExplorationType.DETERMINISTIC):
+            loss = self.loss(self.expert_buffer.sample())["loss_bc"]
+        check_finite_losses({"loss_bc": loss}, f"update {trainer.updates + 1} (frames {trainer.frames})")
+        backward_and_step(loss, self.optimizer, self.max_grad_norm)
+        return {"loss_bc": loss.detach()}

@@ -40,6 +40,7 @@ from torchrl_csirl.transforms.combine_rewards import CombineRewards
 from torchrl_csirl.transforms.constant_reward import ConstantReward
 from torchrl_csirl.transforms.discriminator_reward import DiscriminatorReward, discriminator_reward
 from torchrl_csirl.transforms.intrinsic_reward import IntrinsicReward
+from torchrl_csirl.transforms.progress_reward import ProgressReward, progress_reward
 from torchrl_csirl.transforms.subgoal_matching import (
     SubgoalMatchingReward,
     failed_termination_potential,
@@ -55,6 +56,7 @@ __all__ = [
     "ConstantReward",
     "DiscriminatorReward",
     "IntrinsicReward",
+    "ProgressReward",
     "SubgoalMatchingReward",
     "absorbing_self_loops",
     "absorbing_value",
@@ -64,4 +66,5 @@ __all__ = [
     "matching_reward",
     "matching_target_index",
     "nearest_expert_index",
+    "progress_reward",
 ]

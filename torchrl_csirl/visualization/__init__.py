@@ -11,8 +11,9 @@ state, the user's backend is left alone), writes a PNG and returns its :class:`p
 """
 from __future__ import annotations
 
-from torchrl_csirl.visualization.curves import plot_learning_curve, plot_subgoal_curriculum
+from torchrl_csirl.visualization.curves import plot_learning_curve, plot_method_curves, plot_subgoal_curriculum
 from torchrl_csirl.visualization.robotics import plot_robotics_curriculum
 from torchrl_csirl.visualization.scene import render_curriculum
 
-__all__ = ["plot_learning_curve", "plot_robotics_curriculum", "plot_subgoal_curriculum", "render_curriculum"]
+__all__ = ["plot_learning_curve", "plot_method_curves", "plot_robotics_curriculum", "plot_subgoal_curriculum",
+           "render_curriculum"]

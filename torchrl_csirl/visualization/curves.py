@@ -19,7 +19,7 @@ from torchrl_csirl.visualization._figure import (
     save_png,
 )
 
-__all__ = ["plot_learning_curve", "plot_subgoal_curriculum"]
+__all__ = ["plot_learning_curve", "plot_method_curves", "plot_subgoal_curriculum"]
 
 #: profiles drawn at most in the uncertainty panel (evenly subsampled, first and last kept)
 MAX_PROFILES = 40
@@ -79,14 +79,19 @@ def plot_learning_curve(
             label=f"expert accomplish rate ({float(expert_accomplish_rate):.2f})",
         )
     if records or expert_accomplish_rate is not None:
-        ax.set_ylim(-0.02, 1.05)
-        ax.set_ylabel("rate")
-        ax.set_xlabel("environment frames")
-        ax.xaxis.set_major_formatter(EngFormatter(sep=""))
-        ax.grid(True, alpha=0.3)
-        ax.legend(loc="lower right", fontsize=9)
+        _rate_axes(ax, "rate", legend_loc="lower right", fontsize=9)
     fig.tight_layout()
     return save_png(fig, path)
+
+
+def _rate_axes(ax, ylabel: str, legend_loc: str, fontsize: int) -> None:
+    """A rate in [0, 1] against environment frames: limits, labels, grid, legend."""
+    ax.set_ylim(-0.02, 1.05)
+    ax.set_ylabel(ylabel)
+    ax.set_xlabel("environment frames")
+    ax.xaxis.set_major_formatter(EngFormatter(sep=""))
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc=legend_loc, fontsize=fontsize)
 
 
 def _draw_rates(ax, records: list[Mapping[str, Any]]) -> None:
@@ -105,6 +110,69 @@ def _draw_rates(ax, records: list[Mapping[str, Any]]) -> None:
                 label="success rate")
     if frames.size == 1:  # a single point: give the x axis some room around it
         ax.set_xlim(frames[0] - max(1.0, 0.1 * frames[0]), frames[0] + max(1.0, 0.1 * frames[0]))
+
+
+def plot_method_curves(
+    curves: Mapping[str, Sequence[tuple[Sequence[float], Sequence[float]]]],
+    path: str | os.PathLike,
+    *,
+    references: Mapping[str, float] | None = None,
+    title: str | None = None,
+    ylabel: str = "test accomplish rate",
+) -> Path:
+    """Learning curves of several methods (the paper's Figure 6): mean +- std over seeds per method.
+
+    Each method's runs are evaluated on the same schedule; a method's curve is drawn at the
+    frames all of its runs reached (the shortest run), its band is the standard deviation over
+    runs (zero for one run). Reference methods (no training) are horizontal dashed lines.
+
+    Args:
+        curves: method -> one ``(frames, rates)`` pair per run (seed).
+        path: where to write the PNG (parent folders are created).
+
+    Keyword Args:
+        references: method -> a constant rate (e.g. the expert's and random actions').
+        title (str, optional): figure title.
+        ylabel (str): the y axis label.
+
+    Returns:
+        Path: ``path`` (a 700 x 450 px PNG).
+
+    Examples:
+        >>> import tempfile, pathlib
+        >>> out = pathlib.Path(tempfile.mkdtemp()) / "merge.png"
+        >>> runs = [([0, 500, 1000], [0.1, 0.4, 0.6]), ([0, 500, 1000], [0.2, 0.5, 0.8])]
+        >>> plot_method_curves({"csirl": runs}, out, references={"expert": 0.95}) == out
+        True
+    """
+    fig = new_figure(700, 450)
+    ax = fig.add_subplot(1, 1, 1)
+    ax.set_title(title if title is not None else "Learning curves")
+    colors = colormaps["tab10"]
+    drawn = False
+    for k, (method, runs) in enumerate(sorted(curves.items())):
+        runs = [(finite_array(f, "frames"), finite_array(r, "rates")) for f, r in runs]
+        runs = [(f, r) for f, r in runs if f.size and f.size == r.size]
+        if not runs:
+            continue
+        length = min(f.size for f, _ in runs)
+        frames = runs[0][0][:length]
+        rates = np.stack([r[:length] for _, r in runs])
+        mean, std = rates.mean(0), rates.std(0, ddof=1) if len(runs) > 1 else np.zeros(length)
+        color = colors(k % 10)
+        ax.plot(frames, mean, "o-", color=color, markersize=3, label=f"{method} ({len(runs)} run{'s' * (len(runs) > 1)})")
+        ax.fill_between(frames, mean - std, mean + std, color=color, alpha=0.2, linewidth=0)
+        drawn = True
+    for k, (method, rate) in enumerate(sorted((references or {}).items())):
+        ax.axhline(float(rate), color=str(0.15 + 0.3 * (k % 3)), linestyle="--", linewidth=1.2,
+                   label=f"{method} ({float(rate):.2f})")
+        drawn = True
+    if not drawn:
+        empty_message(ax, "no finished run")
+    else:
+        _rate_axes(ax, ylabel, legend_loc="best", fontsize=8)
+    fig.tight_layout()
+    return save_png(fig, path)
 
 
 def plot_subgoal_curriculum(

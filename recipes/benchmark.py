@@ -1,0 +1,394 @@
+"""The paper's comparison: methods x scenarios x seeds as Ray Tune trials, and its table and curves.
+
+Run the sweep (local Ray by default, one trial at a time: sized for a 2-core machine)::
+
+    python recipes/benchmark.py --methods csirl bc sac --scenarios merge roundabout --seeds 0 1 2 \\
+        --output-dir runs/benchmark [key=value ...] [method:key=value ...]
+
+Each cell (method, scenario, seed) is one run of its recipe (``recipes/csirl_highway.py`` for
+``csirl`` and ``csirl-b``, ``recipes/imitation_highway.py method=<name>`` for the others) in its own
+process, in ``<output-dir>/<scenario>-<method>-s<seed>``, its output in ``<output-dir>/logs``. The
+``expert`` row runs for the first seed only (the expert driver is deterministic). The
+sweep is resumable: a cell whose ``summary.json`` exists is not run again, a cell with a checkpoint
+continues from it (``checkpoint.resume``), any other leftover is replaced. ``key=value`` overrides
+go to every cell; ``<method>:key=value``, ``csirl_highway:key=value`` or
+``imitation_highway:key=value`` to that method's or that recipe's cells only. ``--address`` joins an
+existing Ray cluster (``ray start --head`` on it first); ``--max-concurrent`` and
+``--cpus-per-trial`` size the trials.
+
+Write the table (method rows x scenario columns, expert-normalised accomplish rate mean +- std over
+seeds, the paper's Table I beside it; Markdown and CSV) and one learning-curve figure per scenario
+(the paper's Figure 6)::
+
+    python recipes/benchmark.py report runs/benchmark [more folders or run dirs] [--out runs/benchmark/report]
+
+See docs/BENCHMARK.md.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import subprocess
+import sys
+from collections import defaultdict
+from dataclasses import dataclass
+from typing import Any
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+from common.config import SCENARIO_NAMES  # noqa: E402
+from summarize_runs import find_summaries, mean_std  # noqa: E402
+
+RECIPES_DIR = os.path.dirname(os.path.abspath(__file__))
+REPO_ROOT = os.path.dirname(RECIPES_DIR)
+
+#: the table's rows, in the paper's order, and the recipe of each
+METHOD_ORDER = ("expert", "random", "sac", "bc", "gail", "dac", "valuedice", "sqil", "iqlearn", "csirl-b", "csirl")
+CSIRL_RECIPE, IMITATION_RECIPE = "csirl_highway", "imitation_highway"
+REFERENCE_METHODS = ("random", "expert")
+#: methods whose run does not depend on the seed (the expert driver is deterministic): first seed only
+SEED_FREE_METHODS = ("expert",)
+#: the table's columns, in the paper's order
+SCENARIO_ORDER = ("highway-fast", "merge", "intersection", "roundabout")
+
+#: the paper's Table I (accomplish rate, 25 expert trajectories, 5 seeds; the expert at 1.00, so
+#: read as expert-normalised): /work/shared/SPEC.md section 2, paper Table "tab:result"
+PAPER_TABLE: dict[str, dict[str, float]] = {
+    "expert": {"highway-fast": 1.00, "merge": 1.00, "intersection": 1.00, "roundabout": 1.00},
+    "random": {"highway-fast": 0.02, "merge": 0.01, "intersection": 0.16, "roundabout": 0.04},
+    "sac": {"highway-fast": 0.10, "merge": 0.06, "intersection": 0.11, "roundabout": 0.09},
+    "bc": {"highway-fast": 0.10, "merge": 0.13, "intersection": 0.14, "roundabout": 0.04},
+    "gail": {"highway-fast": 0.06, "merge": 0.01, "intersection": 0.09, "roundabout": 0.04},
+    "dac": {"highway-fast": 0.01, "merge": 0.05, "intersection": 0.32, "roundabout": 0.03},
+    "valuedice": {"highway-fast": 0.12, "merge": 0.04, "intersection": 0.32, "roundabout": 0.02},
+    "sqil": {"highway-fast": 0.09, "merge": 0.13, "intersection": 0.32, "roundabout": 0.13},
+    "iqlearn": {"highway-fast": 0.52, "merge": 0.49, "intersection": 0.36, "roundabout": 0.10},
+    "csirl": {"highway-fast": 0.85, "merge": 0.92, "intersection": 0.86, "roundabout": 0.74},
+}
+
+
+class BenchmarkError(ValueError):
+    """Bad benchmark arguments (one line)."""
+
+
+# ---------------------------------------------------------------------------------------- cells
+def recipe_of(method: str) -> str:
+    """The recipe that runs ``method``."""
+    return CSIRL_RECIPE if method in ("csirl", "csirl-b") else IMITATION_RECIPE
+
+
+def known_methods() -> tuple[str, ...]:
+    """Every method a cell can run: CSIRL's and those ``imitation_highway.py`` accepts."""
+    from imitation_utils import METHODS
+
+    return ("csirl", "csirl-b", *METHODS)
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One run of the sweep: its name, directory and command line."""
+
+    method: str
+    scenario: str
+    seed: int
+    run_dir: str
+    command: tuple[str, ...]
+    resumed: bool
+
+    @property
+    def name(self) -> str:
+        return os.path.basename(self.run_dir)
+
+
+def split_overrides(overrides: list[str], methods: list[str]) -> dict[str, list[str]]:
+    """``method -> overrides`` from plain ``key=value`` (every cell) and ``<method|recipe>:key=value`` ones.
+
+    Examples:
+        >>> split_overrides(["seed=1", "bc:optim.lr=0.001", "csirl_highway:csirl.delta=3"], ["bc", "csirl"])
+        {'bc': ['seed=1', 'optim.lr=0.001'], 'csirl': ['seed=1', 'csirl.delta=3']}
+    """
+    out: dict[str, list[str]] = {m: [] for m in methods}
+    for item in overrides:
+        head, sep, rest = item.partition(":")
+        if sep and "=" not in head:
+            if head not in (*known_methods(), CSIRL_RECIPE, IMITATION_RECIPE):
+                raise BenchmarkError(f"{item}: {head!r} is neither a method ({', '.join(known_methods())}) nor "
+                                     f"a recipe ({CSIRL_RECIPE}, {IMITATION_RECIPE})")
+            for m in methods:
+                if head in (m, recipe_of(m)):
+                    out[m].append(rest)
+        else:
+            for m in methods:
+                out[m].append(item)
+    return out
+
+
+def has_checkpoint(run_dir: str) -> bool:
+    return os.path.isfile(os.path.join(run_dir, "checkpoints", "last", "state.pt"))
+
+
+def make_cell(method: str, scenario: str, seed: int, output_dir: str, overrides: list[str]) -> Cell | None:
+    """The cell's command line, or None when its ``summary.json`` exists (done)."""
+    run_dir = os.path.join(output_dir, f"{scenario}-{method}-s{seed}")
+    if os.path.isfile(os.path.join(run_dir, "summary.json")):
+        return None
+    recipe = os.path.join(RECIPES_DIR, f"{recipe_of(method)}.py")
+    args = [f"env.scenario={scenario}", f"seed={seed}", "logger.progress_bar=false", *overrides]
+    if recipe_of(method) == IMITATION_RECIPE:
+        args.insert(0, f"method={method}")
+    elif method == "csirl-b":
+        args.append("csirl.intrinsic=false")
+    resumed = has_checkpoint(run_dir)
+    if resumed:
+        args = [f"checkpoint.resume={run_dir}", *(a for a in args if not a.startswith("method="))]
+    else:  # a run killed before its first checkpoint is started again
+        args += [f"logger.output_dir={output_dir}", f"logger.exp_name={os.path.basename(run_dir)}",
+                 "logger.overwrite=true"]
+    return Cell(method, scenario, seed, run_dir, (sys.executable, recipe, *args), resumed)
+
+
+def plan_cells(methods: list[str], scenarios: list[str], seeds: list[int], output_dir: str,
+               overrides: list[str]) -> tuple[list[Cell], list[str]]:
+    """(cells to run, names of the cells already done)."""
+    unknown = [m for m in methods if m not in known_methods()]
+    if unknown:
+        raise BenchmarkError(f"--methods {' '.join(unknown)}: unknown; known: {', '.join(known_methods())}")
+    bad = [s for s in scenarios if s not in SCENARIO_NAMES]
+    if bad:
+        raise BenchmarkError(f"--scenarios {' '.join(bad)}: unknown; known: {', '.join(SCENARIO_NAMES)}")
+    per_method = split_overrides(overrides, methods)
+    todo, done = [], []
+    for scenario in scenarios:
+        for method in methods:
+            for seed in seeds[:1] if method in SEED_FREE_METHODS else seeds:
+                cell = make_cell(method, scenario, seed, output_dir, per_method[method])
+                if cell is None:
+                    done.append(f"{scenario}-{method}-s{seed}")
+                else:
+                    todo.append(cell)
+    return todo, done
+
+
+# ---------------------------------------------------------------------------------------- trials
+def run_cell(config: dict[str, Any]) -> None:
+    """The Ray Tune trainable: one cell's recipe in a subprocess; reports its final summary.
+
+    The recipe's output goes to ``<output-dir>/logs/<cell>.log``; a failed recipe fails the trial
+    with the end of that log.
+    """
+    from ray import tune
+
+    cell = config["cell"]
+    log_path = cell["log"]
+    os.makedirs(os.path.dirname(log_path), exist_ok=True)
+    env = {**os.environ, "WANDB_SILENT": "true", "MPLBACKEND": "Agg"}
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (REPO_ROOT, env.get("PYTHONPATH")) if p)
+    with open(log_path, "a") as log:
+        log.write("$ " + " ".join(cell["command"]) + "\n")
+        log.flush()
+        proc = subprocess.run(cell["command"], stdout=subprocess.PIPE, stderr=log, text=True, env=env, cwd=REPO_ROOT)
+        log.write(proc.stdout)
+    if proc.returncode != 0:
+        with open(log_path) as f:
+            tail = f.read()[-2000:]
+        raise RuntimeError(f"{cell['name']}: exit status {proc.returncode}; see {log_path}:\n{tail}")
+    summary = json.loads(proc.stdout.strip().splitlines()[-1])
+    metrics = {k: summary[k] for k in ("accomplish_rate", "normalized_accomplish_rate", "success_rate", "frames",
+                                       "updates", "wall_s") if summary.get(k) is not None}
+    tune.report({**metrics, "run_dir": summary["run_dir"]})
+
+
+def run_sweep(cells: list[Cell], output_dir: str, *, address: str | None, max_concurrent: int,
+              cpus_per_trial: float) -> list[str]:
+    """Runs ``cells`` as Ray Tune trials; returns the names of the failed cells."""
+    import ray
+    from ray import tune
+
+    ray.init(address=address, num_cpus=None if address else max(1, int(max_concurrent * cpus_per_trial)),
+             include_dashboard=False, ignore_reinit_error=True, log_to_driver=False,
+             runtime_env={"env_vars": {"PYTHONPATH": os.pathsep.join(
+                 p for p in (REPO_ROOT, os.environ.get("PYTHONPATH")) if p)}} if address else None)
+    try:
+        space = [{"name": c.name, "command": list(c.command), "log": os.path.join(output_dir, "logs", f"{c.name}.log")}
+                 for c in cells]
+        tuner = tune.Tuner(
+            tune.with_resources(run_cell, {"cpu": cpus_per_trial}),
+            param_space={"cell": tune.grid_search(space)},
+            tune_config=tune.TuneConfig(max_concurrent_trials=max_concurrent),
+            run_config=tune.RunConfig(name="benchmark", storage_path=os.path.join(output_dir, "ray"), verbose=0),
+        )
+        results = tuner.fit()
+        return [r.config["cell"]["name"] for r in results if r.error is not None]
+    finally:
+        ray.shutdown()
+
+
+def sweep_main(argv: list[str]) -> int:
+    parser = argparse.ArgumentParser(prog="benchmark.py", description="methods x scenarios x seeds as Ray Tune trials")
+    available = [m for m in METHOD_ORDER if m in known_methods()]
+    parser.add_argument("--methods", nargs="+", default=available, metavar="METHOD",
+                        help=f"default: all ({' '.join(available)})")
+    parser.add_argument("--scenarios", nargs="+", default=list(SCENARIO_ORDER), metavar="SCENARIO")
+    parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
+    parser.add_argument("--output-dir", default="runs/benchmark")
+    parser.add_argument("--address", default=None, help="an existing Ray cluster (default: local Ray)")
+    parser.add_argument("--max-concurrent", type=int, default=1, help="trials at once (default 1: a 2-core machine)")
+    parser.add_argument("--cpus-per-trial", type=float, default=2.0, help="CPUs Ray reserves per trial")
+    parser.add_argument("--dry-run", action="store_true", help="print the cells' commands, run nothing")
+    parser.add_argument("overrides", nargs="*", help="key=value (every cell) or <method|recipe>:key=value")
+    args = parser.parse_args(argv)
+    output_dir = os.path.abspath(args.output_dir)
+    cells, done = plan_cells(args.methods, args.scenarios, args.seeds, output_dir, args.overrides)
+    print(f"{len(cells)} cells to run, {len(done)} already done ({output_dir})", file=sys.stderr)
+    if args.dry_run:
+        for cell in cells:
+            print(" ".join(cell.command[1:]))
+        return 0
+    failed = run_sweep(cells, output_dir, address=args.address, max_concurrent=args.max_concurrent,
+                       cpus_per_trial=args.cpus_per_trial) if cells else []
+    print(json.dumps({"output_dir": output_dir, "ran": len(cells), "already_done": len(done), "failed": failed}))
+    return 1 if failed else 0
+
+
+# ---------------------------------------------------------------------------------------- report
+def read_runs(paths: list[str]) -> list[dict[str, Any]]:
+    """The summaries of the finished runs under ``paths``, each with its run directory."""
+    runs = []
+    for path in find_summaries(paths):
+        with open(path) as f:
+            summary = json.load(f)
+        summary["run_dir"] = os.path.dirname(path)
+        runs.append(summary)
+    return runs
+
+
+def table_rows(runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """One row per (method, scenario): expert-normalised and raw accomplish rate over seeds, cost, the paper's value."""
+    groups: dict[tuple[str, str], list[dict]] = defaultdict(list)
+    for run in runs:
+        groups[(run["method"], run["scenario"])].append(run)
+    rank = {m: i for i, m in enumerate(METHOD_ORDER)}
+    rows = []
+    for (method, scenario), group in sorted(groups.items(), key=lambda kv: (rank.get(kv[0][0], 99), kv[0])):
+        row: dict[str, Any] = {"method": method, "scenario": scenario, "seeds": " ".join(
+            str(s) for s in sorted(int(r["seed"]) for r in group)), "runs": len(group)}
+        for field in ("normalized_accomplish_rate", "accomplish_rate", "success_rate", "total_wall_s", "updates_per_s"):
+            values = [float(r[field]) for r in group if r.get(field) is not None]
+            stats = mean_std(values) if values else {"mean": None, "std": None}
+            row[f"{field}_mean"], row[f"{field}_std"] = stats["mean"], stats["std"]
+        row["paper"] = PAPER_TABLE.get(method, {}).get(scenario)
+        rows.append(row)
+    return rows
+
+
+def _pm(mean: float | None, std: float | None) -> str:
+    return "n/a" if mean is None else f"{mean:.2f} ± {std:.2f}"
+
+
+def markdown_table(rows: list[dict[str, Any]]) -> str:
+    """Method rows x scenario columns: ``ours (paper)``, expert-normalised accomplish rate; then the cost."""
+    scenarios = [s for s in SCENARIO_ORDER if any(r["scenario"] == s for r in rows)]
+    methods = list(dict.fromkeys(r["method"] for r in rows))
+    cell = {(r["method"], r["scenario"]): r for r in rows}
+    lines = ["Expert-normalised test accomplish rate, mean ± std over seeds (the paper's Table I in brackets).", "",
+             "| method | " + " | ".join(scenarios) + " |", "|---" * (len(scenarios) + 1) + "|"]
+    for method in methods:
+        entries = []
+        for s in scenarios:
+            r = cell.get((method, s))
+            paper = PAPER_TABLE.get(method, {}).get(s)
+            ours = "—" if r is None else f"{_pm(r['normalized_accomplish_rate_mean'], r['normalized_accomplish_rate_std'])} (n={r['runs']})"
+            entries.append(ours + (f" [{paper:.2f}]" if paper is not None else ""))
+        lines.append(f"| {method} | " + " | ".join(entries) + " |")
+    lines += ["", "Cost per run: wall time [min] (start-up and final evaluation included) and updates/s, mean over runs.", "",
+              "| method | " + " | ".join(scenarios) + " |", "|---" * (len(scenarios) + 1) + "|"]
+    for method in methods:
+        entries = []
+        for s in scenarios:
+            r = cell.get((method, s))
+            if r is None or r["total_wall_s_mean"] is None:
+                entries.append("—")
+                continue
+            ups = r["updates_per_s_mean"]
+            entries.append(f"{r['total_wall_s_mean'] / 60:.1f} min" + (f", {ups:.0f} upd/s" if ups else ""))
+        lines.append(f"| {method} | " + " | ".join(entries) + " |")
+    return "\n".join(lines)
+
+
+def write_csv(rows: list[dict[str, Any]], path: str) -> str:
+    with open(path, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    return path
+
+
+def eval_curve(run_dir: str) -> tuple[list[float], list[float]]:
+    """(frames, eval accomplish rate) of a run's ``metrics.jsonl`` (empty for a reference row)."""
+    path = os.path.join(run_dir, "metrics.jsonl")
+    frames, rates = [], []
+    if os.path.isfile(path):
+        with open(path) as f:
+            for line in f:
+                row = json.loads(line) if line.strip() else {}
+                if row.get("eval_accomplish_rate") is not None:
+                    frames.append(float(row["frames"]))
+                    rates.append(float(row["eval_accomplish_rate"]))
+    return frames, rates
+
+
+def learning_curve_figures(runs: list[dict[str, Any]], out_dir: str) -> list[str]:
+    """One PNG per scenario: every trained method's evaluation curve (mean ± std over seeds), the
+    reference rows as lines."""
+    from torchrl_csirl.visualization import plot_method_curves
+
+    paths = []
+    for scenario in [s for s in SCENARIO_ORDER if any(r["scenario"] == s for r in runs)]:
+        curves: dict[str, list] = defaultdict(list)
+        references: dict[str, list[float]] = defaultdict(list)
+        for run in (r for r in runs if r["scenario"] == scenario):
+            if run["method"] in REFERENCE_METHODS:
+                references[run["method"]].append(float(run["accomplish_rate"]))
+            else:
+                curves[run["method"]].append(eval_curve(run["run_dir"]))
+        path = plot_method_curves(curves, os.path.join(out_dir, f"curves_{scenario}.png"),
+                                  references={m: sum(v) / len(v) for m, v in references.items()},
+                                  title=f"{scenario}: evaluation accomplish rate (raw)")
+        paths.append(os.fspath(path))
+    return paths
+
+
+def report_main(argv: list[str]) -> int:
+    parser = argparse.ArgumentParser(prog="benchmark.py report", description="the table and curves of finished runs")
+    parser.add_argument("paths", nargs="+", help="sweep output folders or run directories")
+    parser.add_argument("--out", default=None, help="where to write (default: <first path>/report)")
+    args = parser.parse_args(argv)
+    runs = read_runs(args.paths)
+    out_dir = os.path.abspath(args.out or os.path.join(args.paths[0], "report"))
+    os.makedirs(out_dir, exist_ok=True)
+    rows = table_rows(runs)
+    table = markdown_table(rows)
+    with open(os.path.join(out_dir, "table.md"), "w") as f:
+        f.write(table + "\n")
+    files = {"markdown": os.path.join(out_dir, "table.md"), "csv": write_csv(rows, os.path.join(out_dir, "table.csv")),
+             "figures": learning_curve_figures(runs, out_dir)}
+    print(table, file=sys.stderr)
+    print(json.dumps({"runs": len(runs), **files}))
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    try:
+        if argv[:1] == ["report"]:
+            return report_main(argv[1:])
+        return sweep_main(argv)
+    except (BenchmarkError, FileNotFoundError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

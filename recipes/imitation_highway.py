@@ -1,0 +1,76 @@
+"""One baseline on a driving scenario: ``python recipes/imitation_highway.py method=<name> [key=value ...]``.
+
+Trains (or, for the reference rows, evaluates) one of the methods CSIRL is compared with, under
+the CSIRL recipe's budget, networks, input features, demonstrations and evaluation, with the same
+outputs. Methods: ``sac`` (SAC on the true distance reward), ``bc`` (behavioural cloning),
+``random`` and ``expert`` (reference rows, no training); CSIRL itself is
+``recipes/csirl_highway.py``. Configuration: the typed schema in ``recipes/imitation_utils.py``
+(``python recipes/imitation_highway.py --help`` lists every key). See docs/BENCHMARK.md.
+
+The run directory (``logger.output_dir``/<name>) receives ``config.yaml``, ``metrics.jsonl``,
+``metrics.csv``, ``summary.json`` and, for a trained method, ``checkpoints/last``, ``policy.pt``
+and ``learning_curve.png``; the last printed line is a JSON summary. ``checkpoint.resume=<run dir>``
+continues a killed run; an existing run is never replaced unless ``logger.overwrite=true``.
+"""
+from __future__ import annotations
+
+import os
+import sys
+import time
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+from common.builders import final_summary, resume_run, start_run, train  # noqa: E402
+from common.config import describe  # noqa: E402
+from common.run import resolve_resume, run_script, write_summary  # noqa: E402
+from imitation_utils import (  # noqa: E402
+    REFERENCE_METHODS,
+    ImitationHighwayConfig,
+    evaluate_reference,
+    load_config,
+    load_run_config,
+    make_trainer,
+)
+
+
+def train_and_summarize(cfg) -> dict[str, object]:
+    """A trained method (new or resumed): the training loop, then the final evaluation, policy,
+    curve and summary."""
+    if cfg.checkpoint.resume is None:
+        run = start_run(cfg, cfg.method, make_trainer)
+    else:
+        run = resume_run(cfg, *resolve_resume(cfg.checkpoint.resume), make_trainer)
+    train(run)
+    try:
+        return final_summary(run, run.cfg.method, title=f"{run.cfg.method} on {run.spec.name}")
+    finally:
+        run.logger.close()
+        run.eval_env.close()
+
+
+def main(argv: list[str] | None = None) -> dict[str, object]:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if "--help" in argv or "-h" in argv:
+        print(__doc__ + "\nKeys (key, default, what it accepts, meaning):\n  "
+              + "\n  ".join(describe(ImitationHighwayConfig)))
+        return {}
+    start = time.perf_counter()
+    resume = next((a.split("=", 1)[1] for a in argv if a.startswith("checkpoint.resume=")), None)
+    if resume is not None and resume != "null":  # the saved run's configuration (and method), updated
+        cfg = load_run_config(resolve_resume(resume)[0], [a for a in argv if not a.startswith("checkpoint.resume=")])
+        cfg.checkpoint.resume = resume
+    else:
+        cfg = load_config(argv)
+    if cfg.method in REFERENCE_METHODS:
+        summary = start_run(cfg, cfg.method, evaluate_reference)
+    else:
+        summary = train_and_summarize(cfg)
+    summary["total_wall_s"] = round(time.perf_counter() - start, 1)
+    print(f"{summary['scenario']} / {summary['method']}: accomplish rate {summary['accomplish_rate']:.3f} "
+          f"(success {summary['success_rate']:.2f}) after {summary['frames']} frames / {summary['updates']} updates",
+          file=sys.stderr)
+    return write_summary(summary, summary["run_dir"])
+
+
+if __name__ == "__main__":
+    run_script(main)

@@ -1,0 +1,332 @@
+"""The baselines' part of ``recipes/imitation_highway.py``: their configuration schema and builders.
+
+Methods (``method=<name>``):
+
+* ``sac``: SAC on the paper's "true distance reward": :class:`~torchrl_csirl.transforms.ProgressReward`
+  toward the scenario's finish, recomputed at sampling time. Uses no demonstrations for training.
+  Its learner is the one every SAC-based baseline uses (``sac.*``: the published SAC defaults,
+  :class:`~torchrl_csirl.objectives._imitation.SACHyperparameters`, two critics).
+* ``bc``: behavioural cloning, TorchRL's :class:`~torchrl.objectives.BCLoss` (``bc.loss_function``)
+  on the deterministic action, on expert batches of ``expert.batch_size``. It runs in the same
+  loop as every trained method (same frames collected with its own policy, same number of
+  updates, same evaluation cadence), so its learning curve sits on the same axis; the collected
+  frames are not used by its update.
+* ``gail``, ``dac``, ``valuedice``, ``sqil``, ``iqlearn``: built by
+  :func:`~torchrl_csirl.trainers.imitation.make_imitation_method`; the ``<method>`` section holds
+  the fields of its hyperparameter dataclass (docs/BASELINES.md gives their sources).
+* ``random``, ``expert``: reference rows, no training: uniform random actions, and the expert
+  driver (:class:`~torchrl_csirl.envs.expert_policy.ExpertDriverPolicy`), scored on the same
+  test episodes.
+
+The pieces every recipe shares (environments, collector, buffers, logging, evaluation,
+checkpoints, device, run directory, summary) are :mod:`common`'s; fairness with CSIRL comes from
+the shared defaults: the same demonstrations (``expert.*``), the same frame budget
+(``collector.total_frames``), the same networks (``make_actor`` / ``make_qvalue``, 256 x 256),
+the same input features (``model.ego_relative_features``) and the same evaluation (``eval.*``).
+
+Examples:
+    >>> cfg = load_config(["method=bc", "env.scenario=roundabout"])
+    >>> cfg.method, cfg.env.scenario, cfg.collector.total_frames
+    ('bc', 'roundabout', 60000)
+    >>> load_config(["method=gibberish"])  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    common.config.ConfigError: method=gibberish: must be one of sac, bc, ..., random, expert or null
+"""
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass, field
+from functools import partial
+from typing import Any, Optional
+
+import torch
+from omegaconf import DictConfig, OmegaConf
+from torchrl.envs import Compose
+from torchrl.envs.utils import RandomPolicy
+from torchrl.objectives import BCLoss, SoftUpdate
+
+from common import config as config_lib
+from common.builders import (
+    Run,
+    assemble_trainer,
+    check_collector,
+    load_experts,
+    make_eval_env,
+    make_logger,
+    make_online_buffer,
+    evaluation_summary,
+)
+from common.config import (
+    DEVICES,
+    CheckpointConfig,
+    CollectorConfig,
+    ConfigError,
+    EnvConfig,
+    EvalConfig,
+    ExpertConfig,
+    LoggerConfig,
+    ModelConfig,
+    option,
+)
+from common.registry import register_recipe
+from common.run import ExpertDataError, expert_accomplish_rate, resolve_device
+from torchrl_csirl.data import ExpertDemonstrations
+from torchrl_csirl.envs import SCENARIOS, ScenarioSpec
+from torchrl_csirl.modules import EgoRelativeFeatures, make_actor, make_qvalue
+from torchrl_csirl.objectives._imitation import SACHyperparameters, make_sac_learner
+from torchrl_csirl.trainers import BCUpdate, SACUpdate, evaluate_policy
+from torchrl_csirl.trainers.imitation import (
+    IMITATION_METHODS,
+    ImitationMethod,
+    hyperparameters_class,
+    make_imitation_method,
+)
+from torchrl_csirl.transforms import CombineRewards, ProgressReward
+
+__all__ = ["ImitationHighwayConfig", "METHODS", "REFERENCE_METHODS", "load_config", "load_run_config", "make_trainer",
+           "evaluate_reference"]
+
+#: the loss-based baselines of :func:`~torchrl_csirl.trainers.imitation.make_imitation_method`
+LOSS_METHODS = tuple(IMITATION_METHODS)
+#: methods trained by this recipe's loop
+TRAINED_METHODS = ("sac", "bc", *LOSS_METHODS)
+#: reference rows: evaluated, not trained
+REFERENCE_METHODS = ("random", "expert")
+METHODS = (*TRAINED_METHODS, *REFERENCE_METHODS)
+#: methods of the benchmark trained by recipes/csirl_highway.py
+CSIRL_METHODS = ("csirl", "csirl-b")
+
+
+# ---------------------------------------------------------------------------------------- config
+@dataclass
+class ImitationExpertConfig(ExpertConfig):
+    batch_size: int = option(256, above=0, help="expert pairs per bc update (the other methods set their own sizes)")
+
+
+@dataclass
+class ImitationReplayBufferConfig:
+    size: int = option(1_000_000, above=0, help="online buffer capacity")
+    clear_each_round: bool = option(False, help="empty the buffer at each round start")
+    warmup_frames: int = option(1000, minimum=0, help="transitions in the buffer before the first update of a round")
+
+
+@dataclass
+class ImitationOptimConfig:
+    utd_ratio: float = option(0.5, above=0.0, help="updates per collected frame (learning rates: each method's section)")
+
+
+@dataclass
+class SACBaselineConfig(SACHyperparameters):
+    """The ``sac`` baseline: the SAC learner of every baseline (published SAC defaults) and its reward's scale."""
+
+    reward_scale: Optional[float] = option(
+        None, above=0.0, help="progress reward per unit of normalised distance (null: the scenario's matching scale)")
+
+
+@dataclass
+class BCConfig:
+    loss_function: str = option("l2", choices=("l2", "l1"), help="distance of the deterministic action to the expert's")
+    lr: float = option(3.0e-4, above=0.0, help="Adam learning rate")
+    max_grad_norm: Optional[float] = option(None, above=0.0, help="clip the gradient norm (null: no clipping)")
+
+
+@dataclass
+class _ImitationHighwayBase:
+    method: Optional[str] = option(None, choices=METHODS, help="the baseline (required)")
+    preset: str = option("default", help="default (no other preset)")
+    seed: int = option(0, minimum=0, help="random seed")
+    device: str = option("cpu", choices=DEVICES, help="the learner's device (collection stays on the CPU)")
+    updates_per_round: int = option(2000, above=0, help="updates between two evaluations (a round)")
+    env: EnvConfig = field(default_factory=EnvConfig)
+    collector: CollectorConfig = field(default_factory=CollectorConfig)
+    expert: ImitationExpertConfig = field(default_factory=ImitationExpertConfig)
+    replay_buffer: ImitationReplayBufferConfig = field(default_factory=ImitationReplayBufferConfig)
+    model: ModelConfig = field(default_factory=ModelConfig)
+    optim: ImitationOptimConfig = field(default_factory=ImitationOptimConfig)
+    eval: EvalConfig = field(default_factory=EvalConfig)
+    logger: LoggerConfig = field(default_factory=LoggerConfig)
+    checkpoint: CheckpointConfig = field(default_factory=CheckpointConfig)
+    sac: SACBaselineConfig = field(default_factory=SACBaselineConfig)
+    bc: BCConfig = field(default_factory=BCConfig)
+
+
+#: ``recipes/imitation_highway.py``'s schema: the shared sections, ``sac``, ``bc`` and one section per
+#: loss-based method, the fields of its hyperparameter dataclass (``hyperparameters_class``)
+ImitationHighwayConfig = dataclasses.make_dataclass(
+    "ImitationHighwayConfig",
+    [(name, hyperparameters_class(name), field(default_factory=hyperparameters_class(name))) for name in LOSS_METHODS],
+    bases=(_ImitationHighwayBase,),
+)
+ImitationHighwayConfig.__doc__ = "``recipes/imitation_highway.py``: one baseline under CSIRL's default budget and evaluation."
+ImitationHighwayConfig.__module__ = __name__
+
+
+def check_method(overrides: list[str]) -> None:
+    """One clear line for a missing method, or for a CSIRL method (another recipe trains it)."""
+    given = [o.split("=", 1)[1] for o in overrides if o.startswith("method=")]
+    if not given:
+        raise ConfigError(f"method: required (method=<name>), one of {', '.join(METHODS)}")
+    if given[-1] in CSIRL_METHODS:
+        raise ConfigError(f"method={given[-1]}: CSIRL is trained by recipes/csirl_highway.py "
+                          "(recipes/benchmark.py dispatches it there)")
+
+
+def _checked(cfg: DictConfig) -> DictConfig:
+    if cfg.method is None:
+        raise ConfigError(f"method=null: must be one of {', '.join(METHODS)}")
+    check_collector(cfg.collector)
+    resolve_device(cfg.device)
+    return cfg
+
+
+def load_config(overrides: list[str] | None = None) -> DictConfig:
+    """The defaults and ``key=value`` overrides (``method=<name>`` required).
+
+    Raises:
+        ConfigError: one line naming the bad key or value.
+    """
+    overrides = list(overrides or [])
+    check_method(overrides)
+    return _checked(config_lib.load_config(ImitationHighwayConfig, overrides))
+
+
+def load_run_config(run_dir: str, overrides: list[str] | None = None) -> DictConfig:
+    """The configuration saved in ``run_dir/config.yaml``, updated by ``overrides`` (resume)."""
+    overrides = list(overrides or [])
+    if any(o.startswith("method=") for o in overrides):
+        check_method(overrides)
+    return _checked(config_lib.load_run_config(ImitationHighwayConfig, run_dir, overrides))
+
+
+def _loader_of(method: str):
+    def load(overrides: list[str]) -> DictConfig:
+        return load_config([f"method={method}", *overrides])
+
+    return load
+
+
+for _method in METHODS:
+    register_recipe((_method,), _loader_of(_method))
+
+
+# ---------------------------------------------------------------------------------------- data
+def load_demonstrations(cfg: DictConfig, spec: ScenarioSpec) -> ExpertDemonstrations:
+    """:func:`common.builders.load_experts`, with an unavailable shipped size as one :class:`ExpertDataError` line."""
+    try:
+        return load_experts(cfg.expert, spec)
+    except ValueError as err:
+        if isinstance(err, ExpertDataError):
+            raise
+        raise ExpertDataError(f"expert.num_trajectories={cfg.expert.num_trajectories}: {err} "
+                              f"(method={cfg.method} needs these demonstrations)") from None
+
+
+def input_features(cfg: DictConfig, spec: ScenarioSpec) -> EgoRelativeFeatures | None:
+    """The ego-relative input map of every network (``model.ego_relative_features``), or None."""
+    return EgoRelativeFeatures.from_scenario(spec) if cfg.model.ego_relative_features else None
+
+
+# ---------------------------------------------------------------------------------------- methods
+def sac_hyperparameters(section: DictConfig) -> SACHyperparameters:
+    """The SAC learner's settings of the ``sac`` section (its ``reward_scale`` aside)."""
+    values = OmegaConf.to_container(section)
+    values.pop("reward_scale")
+    return SACHyperparameters(**values)
+
+
+def make_sac(cfg: DictConfig, spec: ScenarioSpec, device: torch.device) -> ImitationMethod:
+    """SAC on the progress reward toward the finish (the paper's "SAC (true distance reward)")."""
+    hp = sac_hyperparameters(cfg.sac)
+    features = input_features(cfg, spec)
+    actor = make_actor(spec.obs_dim, spec.action_dim, input_features=features)
+    loss = make_sac_learner(actor, make_qvalue(spec.obs_dim, spec.action_dim, input_features=features), hp).to(device)
+    optimizer = torch.optim.Adam([p for p in loss.parameters() if p.requires_grad], lr=hp.lr)
+    update = SACUpdate(loss, optimizer, SoftUpdate(loss, tau=hp.tau), hp.max_grad_norm)
+    reward = ProgressReward.from_scenario(spec, scale=cfg.sac.reward_scale).to(device)
+    return ImitationMethod("sac", actor, [reward, CombineRewards(["progress_reward"])], [],
+                           {"loss": loss, "optim_sac": optimizer}, lambda online, expert: update, hp)
+
+
+def make_bc(cfg: DictConfig, spec: ScenarioSpec, device: torch.device) -> ImitationMethod:
+    """Behavioural cloning (TorchRL's ``BCLoss``) on expert batches of ``expert.batch_size``."""
+    actor = make_actor(spec.obs_dim, spec.action_dim, input_features=input_features(cfg, spec)).to(device)
+    loss = BCLoss(actor, loss_function=cfg.bc.loss_function)
+    optimizer = torch.optim.Adam(actor.parameters(), lr=cfg.bc.lr)
+
+    def make_update_step(online, expert) -> BCUpdate:
+        return BCUpdate(loss, optimizer, expert, cfg.bc.max_grad_norm)
+
+    return ImitationMethod("bc", actor, [], [], {"actor": actor, "optim_bc": optimizer}, make_update_step)
+
+
+def make_loss_method(cfg: DictConfig, spec: ScenarioSpec, device: torch.device) -> ImitationMethod:
+    """A loss-based baseline (:func:`~torchrl_csirl.trainers.imitation.make_imitation_method`) with
+    the ``<method>`` section as its hyperparameters and CSIRL's actor and critic factory."""
+    features = input_features(cfg, spec)
+    actor = make_actor(spec.obs_dim, spec.action_dim, input_features=features)
+    return make_imitation_method(
+        cfg.method, actor, partial(make_qvalue, spec.obs_dim, spec.action_dim, input_features=features),
+        obs_dim=spec.obs_dim, action_dim=spec.action_dim, hyperparameters=OmegaConf.to_object(cfg[cfg.method]),
+        device=device)
+
+
+METHOD_BUILDERS = {"sac": make_sac, "bc": make_bc, **{name: make_loss_method for name in LOSS_METHODS}}
+
+
+def make_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume_frames: int | None = None) -> Run:
+    """Builds the method and the trainer with the shared hooks (``run.method`` is the
+    :class:`~torchrl_csirl.trainers.imitation.ImitationMethod`, ``run.expert_buffer`` its demonstrations).
+
+    The online buffer samples the method's ``batch_size`` (``expert.batch_size`` for ``bc``); the
+    expert buffer holds every demonstrated transition, with the method's expert transforms.
+    """
+    torch.manual_seed(cfg.seed)
+    device = resolve_device(cfg.device)
+    spec = SCENARIOS[cfg.env.scenario]
+    demos = load_demonstrations(cfg, spec)
+    try:  # e.g. a negative learning rate of a section read from a hyperparameter dataclass
+        method = METHOD_BUILDERS[cfg.method](cfg, spec, device)
+    except (ValueError, TypeError) as err:
+        raise ConfigError(f"{cfg.method}.*: {err}") from None
+    batch_size = getattr(method.hyperparameters, "batch_size", cfg.expert.batch_size)
+    online = make_online_buffer(cfg.replay_buffer.size, batch_size, method.online_transforms, device)
+    expert = demos.as_replay_buffer(batch_size=cfg.expert.batch_size, device=device,
+                                    transform=Compose(*method.expert_transforms) if method.expert_transforms else None)
+    return assemble_trainer(
+        cfg, spec, run_dir, device=device, demos=demos, policy=method.policy, online_buffer=online,
+        update_step=method.make_update_step(online, expert), total_frames=cfg.collector.total_frames,
+        updates_per_round=cfg.updates_per_round, states=method.states, frames_done=frames_done,
+        resume_frames=resume_frames, parts={"method": method, "expert_buffer": expert},
+    )
+
+
+# ---------------------------------------------------------------------------------------- reference rows
+def reference_policy(method: str, env: Any, spec: ScenarioSpec) -> Any:
+    """Uniform random actions (``random``) or the expert driver on ``env`` (``expert``)."""
+    if method == "random":
+        return RandomPolicy(env.full_action_spec[env.action_key])
+    from torchrl_csirl.envs.expert_policy import ExpertDriverPolicy
+
+    return ExpertDriverPolicy(env, spec.name)
+
+
+def evaluate_reference(cfg: DictConfig, run_dir: str) -> dict[str, Any]:
+    """A reference row: its policy on the ``eval.final_episodes`` test episodes, logged; the summary."""
+    torch.manual_seed(cfg.seed)
+    spec = SCENARIOS[cfg.env.scenario]
+    demos = load_demonstrations(cfg, spec)
+    env = make_eval_env(spec.name)
+    logger = make_logger(cfg, run_dir)
+    start = time.perf_counter()
+    try:
+        final = evaluate_policy(env, reference_policy(cfg.method, env, spec), episodes=cfg.eval.final_episodes,
+                                max_steps=spec.max_steps, seed=cfg.eval.seed)
+        logger.log({"frames": 0, "updates": 0, **{f"test_{k}": v for k, v in final.items()}})
+    finally:
+        logger.close()
+        env.close()
+    return {**evaluation_summary(cfg, spec, cfg.method, final, expert_accomplish_rate(demos.metadata)), "device": "cpu",
+            "auc": None, "frames": 0, "updates": 0, "rounds": 0, "wall_s": round(time.perf_counter() - start, 1),
+            "run_dir": run_dir, "plots": []}
