@@ -206,10 +206,12 @@ def run_sweep(cells: list[Cell], output_dir: str, *, address: str | None, max_co
     import ray
     from ray import tune
 
+    # the trial workers import this module (``run_cell``) and the package: both directories on their path
+    worker_path = os.pathsep.join(p for p in (RECIPES_DIR, REPO_ROOT,
+                                              os.environ.get("PYTHONPATH")) if p)
     ray.init(address=address, num_cpus=None if address else max(1, int(max_concurrent * cpus_per_trial)),
              include_dashboard=False, ignore_reinit_error=True, log_to_driver=False,
-             runtime_env={"env_vars": {"PYTHONPATH": os.pathsep.join(
-                 p for p in (REPO_ROOT, os.environ.get("PYTHONPATH")) if p)}} if address else None)
+             runtime_env={"env_vars": {"PYTHONPATH": worker_path}})
     try:
         space = [{"name": c.name, "command": list(c.command), "log": os.path.join(output_dir, "logs", f"{c.name}.log")}
                  for c in cells]
