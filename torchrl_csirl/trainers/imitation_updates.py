@@ -18,27 +18,19 @@ from torch import nn
 
 from torchrl_csirl.objectives._imitation import sample
 from torchrl_csirl.trainers.trainer import CSIRLTrainer, check_finite_losses
-from torchrl_csirl.trainers.updates import SACUpdate
+from torchrl_csirl.trainers.updates import SACUpdate, optimizer_parameters, update_location
 
 __all__ = ["AdversarialImitationUpdate", "DiscriminatorStep", "ValueDICEUpdate"]
 
 
-def _where(trainer: CSIRLTrainer) -> str:
-    return f"update {trainer.updates + 1} (frames {trainer.frames})"
-
-
-def _parameters(optimizer: torch.optim.Optimizer) -> list[torch.Tensor]:
-    return [p for group in optimizer.param_groups for p in group["params"]]
-
-
 def _gradients(loss: torch.Tensor, optimizer: torch.optim.Optimizer, retain_graph: bool = False) -> list:
     """The gradient of ``loss`` with respect to the parameters of ``optimizer`` (None where unused)."""
-    return list(torch.autograd.grad(loss, _parameters(optimizer), retain_graph=retain_graph, allow_unused=True))
+    return list(torch.autograd.grad(loss, optimizer_parameters(optimizer), retain_graph=retain_graph, allow_unused=True))
 
 
 def _step(grads: list, optimizer: torch.optim.Optimizer, max_grad_norm: float | None) -> None:
     """Sets ``grads`` on the optimiser's parameters, clips their norm, steps."""
-    params = _parameters(optimizer)
+    params = optimizer_parameters(optimizer)
     for param, grad in zip(params, grads):
         param.grad = grad
     if max_grad_norm is not None:
@@ -80,7 +72,7 @@ class DiscriminatorStep:
     def __call__(self, trainer: CSIRLTrainer) -> dict[str, torch.Tensor]:
         out = self.loss(self.make_input(sample(self.expert, self.batch_size), sample(self.online, self.batch_size)))
         losses = {name: out.get(key) for key, name in self.loss_keys.items()}
-        check_finite_losses(losses, _where(trainer))
+        check_finite_losses(losses, update_location(trainer))
         _apply(losses, self.optimizer, self.max_grad_norm)
         logs = {key: out.get(key).detach() for key in out.keys() if key not in self.loss_keys}
         return {**{k: v.detach() for k, v in losses.items()}, **logs}
@@ -165,7 +157,7 @@ class ValueDICEUpdate:
     def __call__(self, trainer: CSIRLTrainer) -> dict[str, torch.Tensor]:
         out = self.loss(self.batch())
         losses = {key: out.get(key) for key in self.NU_KEYS + self.ACTOR_KEYS}
-        check_finite_losses(losses, _where(trainer))
+        check_finite_losses(losses, update_location(trainer))
         nu_loss = losses["loss_nu"] + losses["loss_gradient_penalty"]
         actor_loss = losses["loss_actor"] + losses["loss_orthogonal"]
         # both gradients are taken before either network moves

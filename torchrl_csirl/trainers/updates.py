@@ -23,13 +23,22 @@ if TYPE_CHECKING:
 __all__ = ["BCUpdate", "MetaRewardUpdate", "SACUpdate"]
 
 
+def update_location(trainer: CSIRLTrainer) -> str:
+    """Where an update stands, for error messages: ``"update N (frames F)"``."""
+    return f"update {trainer.updates + 1} (frames {trainer.frames})"
+
+
+def optimizer_parameters(optimizer: torch.optim.Optimizer) -> list[torch.Tensor]:
+    """Every parameter ``optimizer`` steps, in its parameter groups' order."""
+    return [p for group in optimizer.param_groups for p in group["params"]]
+
+
 def backward_and_step(loss: torch.Tensor, optimizer: torch.optim.Optimizer, max_grad_norm: float | None) -> None:
     """Zero the gradients, backpropagate ``loss``, clip the gradient norm (unless None), step."""
     optimizer.zero_grad(set_to_none=True)
     loss.backward()
     if max_grad_norm is not None:
-        params = [p for group in optimizer.param_groups for p in group["params"]]
-        torch.nn.utils.clip_grad_norm_(params, max_grad_norm)
+        torch.nn.utils.clip_grad_norm_(optimizer_parameters(optimizer), max_grad_norm)
     optimizer.step()
 
 
@@ -86,7 +95,7 @@ class SACUpdate:
 
     def step(self, losses: dict[str, torch.Tensor], trainer: CSIRLTrainer) -> None:
         """Checks, backpropagates and applies ``losses`` (sum) with the SAC optimiser."""
-        check_finite_losses(losses, f"update {trainer.updates + 1} (frames {trainer.frames})")
+        check_finite_losses(losses, update_location(trainer))
         backward_and_step(sum(losses.values()), self.optimizer, self.max_grad_norm)
         self.target_updater.step()
 
@@ -137,7 +146,7 @@ class MetaRewardUpdate:
         sac_losses, logs = self.sac_update.with_actor_bc(
             {key: out.get(key) for key in SACUpdate.LOSS_KEYS if key in out.keys()})
         meta = out.get("loss_meta")
-        check_finite_losses({**sac_losses, "loss_meta": meta}, f"update {trainer.updates + 1} (frames {trainer.frames})")
+        check_finite_losses({**sac_losses, "loss_meta": meta}, update_location(trainer))
         self.reward_optimizer.zero_grad(set_to_none=True)
         # one backward: the SAC losses reach the actor/critics, the meta-loss the reward net only
         self.sac_update.step({**sac_losses, "loss_meta": meta}, trainer)
@@ -183,6 +192,6 @@ class BCUpdate:
     def __call__(self, trainer: CSIRLTrainer) -> dict[str, torch.Tensor]:
         with set_exploration_type(ExplorationType.DETERMINISTIC):
             loss = self.loss(self.expert_buffer.sample())["loss_bc"]
-        check_finite_losses({"loss_bc": loss}, f"update {trainer.updates + 1} (frames {trainer.frames})")
+        check_finite_losses({"loss_bc": loss}, update_location(trainer))
         backward_and_step(loss, self.optimizer, self.max_grad_norm)
         return {"loss_bc": loss.detach()}
