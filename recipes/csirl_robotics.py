@@ -1,7 +1,7 @@
-"""CSIRL on a robotics task, end to end: ``python recipes/csirl_robotics.py env.scenario=relocate [key=value ...]``.
+"""CSIRL on a robotics task, end to end: ``python recipes/csirl_robotics.py env.task=relocate [key=value ...]``.
 
 The driving recipe (``recipes/csirl_highway.py``) on the paper's robotics tasks
-(``env.scenario=relocate | antmaze-umaze``, docs/SCENARIOS.md): the same learner, matching
+(``env.task=relocate | antmaze-umaze``, also spelled ``env.scenario``, docs/SCENARIOS.md): the same learner, matching
 reward, curriculum, meta-learned reward, outputs, logging, checkpoints, resume and final JSON
 line; the task's spec supplies the dimensions, the matching features ``h(s)`` and the episode
 limit. Differences from the driving recipe's configuration:
@@ -23,6 +23,7 @@ import os
 import sys
 from dataclasses import dataclass, field
 from functools import partial
+from typing import Optional
 
 from omegaconf import DictConfig
 
@@ -44,6 +45,8 @@ __all__ = ["CSIRLRoboticsConfig", "load_config", "load_run_config", "main"]
 @dataclass
 class RoboticsEnvConfig:
     scenario: str = option("relocate", choices=tuple(ROBOTICS_TASKS), help="the robotics task")
+    task: Optional[str] = option(None, choices=tuple(ROBOTICS_TASKS),
+                                 help="the same as env.scenario (set either; null: env.scenario decides)")
 
 
 @dataclass
@@ -72,7 +75,25 @@ class CSIRLRoboticsConfig(CSIRLHighwayConfig):
     collector: RoboticsCollectorConfig = field(default_factory=RoboticsCollectorConfig)
 
 
-def _check(cfg: DictConfig) -> DictConfig:
+def resolve_task(cfg: DictConfig, overrides: list[str] | None) -> None:
+    """``env.task`` and ``env.scenario`` name the same thing: one value for both, or a ConfigError.
+
+    Examples:
+        >>> cfg = load_config(["env.task=antmaze-umaze", "expert.path=x.npz"])
+        >>> cfg.env.scenario, cfg.env.task
+        ('antmaze-umaze', 'antmaze-umaze')
+    """
+    given = {key: value for key, _, value in (item.partition("=") for item in overrides or [])}
+    task, scenario = given.get("env.task"), given.get("env.scenario")
+    if task is not None and scenario is not None and task != scenario:
+        raise ConfigError(f"env.task={task} and env.scenario={scenario}: the same setting, give one of them")
+    if cfg.env.task is not None and task is not None:
+        cfg.env.scenario = cfg.env.task
+    cfg.env.task = cfg.env.scenario
+
+
+def _check(cfg: DictConfig, overrides: list[str] | None = None) -> DictConfig:
+    resolve_task(cfg, overrides)
     check_collector(cfg.collector)
     resolve_device(cfg.device)
     if cfg.model.ego_relative_features:
@@ -92,12 +113,12 @@ def load_config(overrides: list[str] | None = None) -> DictConfig:
         >>> cfg.env.scenario, cfg.expert.curriculum, cfg.model.ego_relative_features
         ('relocate', 'expert', False)
     """
-    return _check(config_lib.load_config(CSIRLRoboticsConfig, overrides))
+    return _check(config_lib.load_config(CSIRLRoboticsConfig, overrides), overrides)
 
 
 def load_run_config(run_dir: str, overrides: list[str] | None = None) -> DictConfig:
     """The configuration saved in ``run_dir/config.yaml``, updated by ``overrides`` (resume)."""
-    return _check(config_lib.load_run_config(CSIRLRoboticsConfig, run_dir, overrides))
+    return _check(config_lib.load_run_config(CSIRLRoboticsConfig, run_dir, overrides), overrides)
 
 
 def build(argv: list[str]) -> Run:

@@ -65,6 +65,8 @@ CONFIG_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "config", 
 @dataclass
 class CSIRLConfig:
     intrinsic: bool = option(True, help="false: CSIRL-B (matching reward only, no meta-gradient)")
+    fixed_subgoal: bool = option(
+        False, help="true: no curriculum, the subgoal stays at the curriculum trajectory's last state (ablation)")
     delta: float = option(5.0, above=0.0, help="subgoal threshold on U_i / U_avg")
     sigma: float = option(0.2, above=0.0, help="soft-average factor")
     dispersion: str = option("variance", choices=("variance", "abs_cv"), help="variance (paper) | abs_cv (code)")
@@ -258,6 +260,12 @@ def make_update_step(cfg: DictConfig, modules: LossModules, optimizers: dict, on
                             meta_every=cfg.csirl.meta_every)
 
 
+def first_subgoal(cfg: DictConfig, length: int) -> int | None:
+    """The curriculum's first subgoal: the last state with ``fixed_subgoal`` (it can never move
+    on from there), else None (drawn in ``[1, 5]`` as in the paper)."""
+    return length - 1 if cfg.fixed_subgoal else None
+
+
 # ---------------------------------------------------------------------------------------- assembly
 def make_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume_frames: int | None = None) -> Run:
     """Builds every piece and the trainer with the CSIRL hooks registered.
@@ -273,7 +281,8 @@ def make_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume_fra
     modules = make_loss_modules(cfg, spec, device, demos)
     optimizers = make_optimizers(cfg, modules)
     curriculum = SubgoalCurriculum(curriculum_obs, modules.sac, modules.actor, delta=cfg.csirl.delta,
-                                   sigma=cfg.csirl.sigma, dispersion=cfg.csirl.dispersion, seed=cfg.seed)
+                                   sigma=cfg.csirl.sigma, dispersion=cfg.csirl.dispersion, seed=cfg.seed,
+                                   initial_subgoal=first_subgoal(cfg.csirl, curriculum_obs.shape[0]))
     matching = make_matching(cfg, spec, curriculum_obs, curriculum)
     online = make_online_buffer(cfg.replay_buffer.size, cfg.replay_buffer.batch_size,
                                 make_reward_transforms(cfg, matching, modules), device)

@@ -1,6 +1,8 @@
 """Roll a task's expert and write expert demonstrations (``ExpertDemonstrations`` ``.npz``).
 
-Experts: the privileged expert driver on the driving scenarios, the DAPG policy on ``relocate``.
+Experts: the privileged expert driver on the driving scenarios, the DAPG policy on ``relocate``,
+the waypoint-driven goal-reaching ant on ``antmaze-umaze`` (``--ant-policy``: a run of
+``recipes/train_ant_expert.py``).
 
 Episode ``i`` is reset with seed ``--seed + i``; the expert itself is deterministic, so the same
 command writes the same bytes. The script ends with ONE JSON line with the statistics of every
@@ -24,6 +26,9 @@ Examples:
     python recipes/generate_experts.py --scenario relocate --episodes 25 --seed 0 --only-successful \
         --out torchrl_csirl/data/experts/relocate/expert_25.npz
     python recipes/generate_experts.py --scenario relocate --episodes 20 --seed 10000
+    # AntMaze: the waypoint expert with a trained goal-reaching ant, on unseen seeds
+    python recipes/generate_experts.py --scenario antmaze-umaze --ant-policy runs/ant-goal-sac-s0-... \
+        --episodes 100 --seed 10000
 """
 from __future__ import annotations
 
@@ -47,12 +52,17 @@ ACTION_UNITS = {
 """What an action means, per task family (recorded in the datasets' metadata)."""
 
 
-def expert_metadata(scenario: str) -> dict[str, str]:
+def expert_options(scenario: str, ant_policy: str | None) -> dict[str, Any]:
+    """The keywords of ``make_expert(scenario, ...)``: the ant's policy for AntMaze, else none."""
+    return {"policy": ant_policy} if scenario == "antmaze-umaze" else {}
+
+
+def expert_metadata(scenario: str, **options: Any) -> dict[str, str]:
     """The ``generator`` (the expert's class) and ``action_units`` entries of a task's datasets."""
     from torchrl_csirl.envs import resolve_scenario
     from torchrl_csirl.envs.expert import make_expert
 
-    expert_class = type(make_expert(scenario))
+    expert_class = type(make_expert(scenario, **options))
     return {
         "generator": f"{expert_class.__module__}.{expert_class.__qualname__}",
         "action_units": ACTION_UNITS[resolve_scenario(scenario).family],
@@ -76,8 +86,9 @@ def roll_episodes(
     max_attempts: int | None = None,
     desc: str | None = None,
     end_at_arrival: bool = False,
+    expert_kwargs: dict[str, Any] | None = None,
 ) -> tuple[list[dict], list[dict]]:
-    """Roll expert episodes with seeds ``seed, seed + 1, ...``.
+    """Roll expert episodes with seeds ``seed, seed + 1, ...`` (``expert_kwargs``: ``make_expert``'s options).
 
     With ``end_at_arrival`` (used when recording), each episode ends at the ego's arrival (see
     :func:`~torchrl_csirl.envs.expert.rollout_expert`); otherwise it runs until the env ends it.
@@ -90,7 +101,7 @@ def roll_episodes(
 
     end_at_arrival = end_at_arrival and resolve_scenario(scenario).episode_ends_at_goal
     env = make_gym_env(scenario)
-    expert = make_expert(scenario)
+    expert = make_expert(scenario, **(expert_kwargs or {}))
     attempts = episodes if not only_successful else (max_attempts or 4 * episodes)
     kept: list[dict] = []
     rolled: list[dict] = []
@@ -221,9 +232,14 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     )
     parser.add_argument("--shipped", action="store_true", help="write the shipped datasets of --scenario")
     parser.add_argument("--shipped-dir", default=None, help="output folder of --shipped (default: the package's)")
+    parser.add_argument("--ant-policy", default=None,
+                        help="antmaze-umaze: the goal-reaching ant (policy.pt or a run of recipes/train_ant_expert.py)")
     args = parser.parse_args(argv)
     if args.episodes < 1:
         parser.error("--episodes must be >= 1")
+    if (args.scenario == "antmaze-umaze") != (args.ant_policy is not None):
+        parser.error("--ant-policy is required with --scenario antmaze-umaze and applies to it only")
+    options = expert_options(args.scenario, args.ant_policy)
 
     if args.shipped:
         from torchrl_csirl.data.shipped import EXPERTS_DIR
@@ -240,7 +256,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         # recording ends at arrival; evaluation (no --out) runs the env's full episodes
         kept, rolled = roll_episodes(
             args.scenario, args.episodes, seed, args.empty_road, args.only_successful, args.max_attempts,
-            end_at_arrival=bool(args.out) and not args.full_episodes,
+            end_at_arrival=bool(args.out) and not args.full_episodes, expert_kwargs=options,
         )
         result = {"scenario": args.scenario, "seed": seed, **summarize(rolled, kept)}
         if args.out:
@@ -248,7 +264,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
                 raise SystemExit("no episode kept: nothing written")
             meta = {
                 "scenario": args.scenario,
-                **expert_metadata(args.scenario),
+                **expert_metadata(args.scenario, **options),
                 "base_seed": seed,
                 "empty_road": bool(args.empty_road),
                 "only_successful": bool(args.only_successful),

@@ -133,6 +133,20 @@ def test_csirl_b_switch_trains_without_the_reward_network(tmp_path):
         run.close()
 
 
+def test_fixed_subgoal_switch_keeps_the_subgoal_at_the_last_curriculum_state(tmp_path):
+    cfg = _tiny_cfg(tmp_path, "csirl.fixed_subgoal=true", "collector.total_frames=300")
+    run = csirl_utils.make_trainer(cfg, str(tmp_path))
+    try:
+        last = run.curriculum.length - 1
+        assert run.curriculum.subgoal == last
+        run.trainer.train()
+        history = run.selection.history
+        assert len(history) >= 2 and all(entry["subgoal"] == last for entry in history)
+        assert run.matching.subgoal == last
+    finally:
+        run.close()
+
+
 def test_automatic_temperature_is_trained_and_logged(tmp_path):
     cfg = _tiny_cfg(tmp_path, "csirl.fixed_alpha=false", "collector.total_frames=300")
     run = csirl_utils.make_trainer(cfg, str(tmp_path))

@@ -52,7 +52,7 @@ def _check_run(summary: dict, task: str) -> None:
 
 
 def test_relocate_end_to_end_from_the_shipped_dapg_data(tmp_path):
-    summary = csirl_robotics.main(["env.scenario=relocate", *TINY, f"logger.output_dir={tmp_path}"])
+    summary = csirl_robotics.main(["env.task=relocate", *TINY, f"logger.output_dir={tmp_path}"])
     _check_run(summary, "relocate")
     assert summary["curriculum_length"] == 201  # the first DAPG trajectory: 200 steps + its last state
 
@@ -77,6 +77,11 @@ def test_configuration_and_data_errors(tmp_path):
         csirl_robotics.load_config(["model.ego_relative_features=true"])
     with pytest.raises(ConfigError, match="env.scenario=merge"):
         csirl_robotics.load_config(["env.scenario=merge"])
+    with pytest.raises(ConfigError, match="env.task=merge"):
+        csirl_robotics.load_config(["env.task=merge"])
+    with pytest.raises(ConfigError, match="env.task=relocate and env.scenario=antmaze-umaze: the same setting"):
+        csirl_robotics.load_config(["env.task=relocate", "env.scenario=antmaze-umaze"])
+    assert csirl_robotics.load_config(["env.scenario=relocate"]).env.task == "relocate"
     # a dataset of another task: one error naming both dimensions
     relocate_data = os.path.join(os.path.dirname(builders.__file__), "..", "..", "torchrl_csirl", "data", "experts",
                                  "relocate", "expert_25.npz")

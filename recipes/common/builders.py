@@ -316,7 +316,7 @@ class Run:
     spec: ScenarioSpec
     run_dir: str
     device: torch.device
-    demos: ExpertDemonstrations
+    demos: ExpertDemonstrations | None
     online_buffer: TensorDictReplayBuffer
     mirror: PolicyMirror
     collector: BaseCollector
@@ -350,7 +350,7 @@ def assemble_trainer(
     run_dir: str,
     *,
     device: torch.device,
-    demos: ExpertDemonstrations,
+    demos: ExpertDemonstrations | None,
     policy: nn.Module,
     online_buffer: TensorDictReplayBuffer,
     update_step: Callable[[CSIRLTrainer], dict[str, torch.Tensor]],
@@ -514,7 +514,7 @@ def final_summary(run: Run, method: str, title: str) -> dict[str, Any]:
     trainer, cfg = run.trainer, run.cfg
     run.checkpoint.save(trainer)
     final = run.evaluate(cfg.eval.final_episodes)
-    expert_rate = expert_accomplish_rate(run.demos.metadata)
+    expert_rate = expert_accomplish_rate(run.demos.metadata) if run.demos is not None else None
     save_policy(run.mirror.policy, os.path.join(run.run_dir, "policy.pt"), obs_dim=run.spec.obs_dim,
                 action_dim=run.spec.action_dim, scenario=run.spec.name, frames=trainer.frames)
     throughput = trainer.throughput

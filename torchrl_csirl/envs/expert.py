@@ -807,17 +807,19 @@ class ExpertDriver:
 
 
 def _robotics_experts() -> dict[str, Any]:
+    from torchrl_csirl.envs.robotics.ant_goal import WaypointAntExpert
     from torchrl_csirl.envs.robotics.expert import DAPGRelocateExpert
 
-    return {"relocate": DAPGRelocateExpert}
+    return {"antmaze-umaze": WaypointAntExpert, "relocate": DAPGRelocateExpert}
 
 
 def expert_tasks() -> tuple[str, ...]:
-    """The tasks with an expert: the four driving scenarios and Relocate (the DAPG policy).
+    """The tasks with an expert: the four driving scenarios, AntMaze (the waypoint-driven ant) and
+    Relocate (the DAPG policy).
 
     Examples:
-        >>> expert_tasks()[-1]
-        'relocate'
+        >>> expert_tasks()[-2:]
+        ('antmaze-umaze', 'relocate')
     """
     return (*EXPERT_CONFIGS, *_robotics_experts())
 
@@ -825,7 +827,9 @@ def expert_tasks() -> tuple[str, ...]:
 def make_expert(name: str, **overrides: Any) -> Any:
     """Build the expert of a task: the driver of a driving scenario (optionally overriding
     fields of its :class:`ExpertConfig`) or a robotics task's policy (``"relocate"``: the DAPG
-    expert, :class:`~torchrl_csirl.envs.robotics.expert.DAPGRelocateExpert`).
+    expert, :class:`~torchrl_csirl.envs.robotics.expert.DAPGRelocateExpert`; ``"antmaze-umaze"``:
+    :class:`~torchrl_csirl.envs.robotics.WaypointAntExpert`, whose goal-reaching policy must be
+    given as ``policy=<policy.pt or run directory of recipes/train_ant_expert.py>`` until one ships).
 
     Every expert has ``reset(env)`` and ``act(env) -> action``.
 
@@ -837,6 +841,13 @@ def make_expert(name: str, **overrides: Any) -> Any:
         'DAPGRelocateExpert'
     """
     robotics = _robotics_experts()
+    if name == "antmaze-umaze":
+        unknown = sorted(set(overrides) - {"policy"})
+        if unknown or "policy" not in overrides:
+            raise ValueError(
+                "The 'antmaze-umaze' expert needs policy=<the goal-reaching ant policy: policy.pt or a run directory "
+                f"of recipes/train_ant_expert.py> (no trained ant ships yet, docs/ROBOTICS.md); got {sorted(overrides)}.")
+        return robotics[name](overrides["policy"])
     if name in robotics:
         if overrides:
             raise ValueError(f"The {name!r} expert takes no options, got {sorted(overrides)}.")

@@ -15,6 +15,7 @@ from typing import Mapping
 import gymnasium as gym
 import numpy as np
 
+from torchrl_csirl.envs.robotics.ant_goal import ANT_GOAL_SPEC
 from torchrl_csirl.envs.robotics.tasks import ROBOTICS_TASKS
 from torchrl_csirl.envs.spec import TaskSpec
 from torchrl_csirl.envs.driving import (
@@ -195,9 +196,11 @@ SCENARIOS: dict[str, ScenarioSpec] = {
 }
 
 
-TASKS: dict[str, TaskSpec] = {**SCENARIOS, **ROBOTICS_TASKS}
-"""Every task by name: the driving :data:`SCENARIOS` and the robotics tasks (``"antmaze-umaze"``,
-``"relocate"``), all described by a :class:`~torchrl_csirl.envs.spec.TaskSpec`."""
+TASKS: dict[str, TaskSpec] = {**SCENARIOS, **ROBOTICS_TASKS, ANT_GOAL_SPEC.name: ANT_GOAL_SPEC}
+"""Every task by name: the driving :data:`SCENARIOS`, the robotics tasks (``"antmaze-umaze"``,
+``"relocate"``) and ``"ant-goal"`` (the AntMaze expert's training task,
+:class:`~torchrl_csirl.envs.robotics.AntGoalEnv`), all described by a
+:class:`~torchrl_csirl.envs.spec.TaskSpec`."""
 
 
 def register_scenarios() -> None:

@@ -56,7 +56,7 @@ def load_policy(path: str | os.PathLike) -> ProbabilisticActor:
 
     The returned :class:`~torchrl.modules.ProbabilisticActor` acts deterministically (the mode)
     unless an exploration type says otherwise; its ``metadata`` attribute holds what was saved
-    with it. Two lines roll it out::
+    with it and its dimensions (``obs_dim``, ``action_dim``). Two lines roll it out::
 
         policy = load_policy("runs/merge-csirl-s0-...")
         rollout = make_env(policy.metadata["scenario"]).rollout(60, policy)
@@ -77,5 +77,6 @@ def load_policy(path: str | os.PathLike) -> ProbabilisticActor:
     actor = make_actor(payload["obs_dim"], payload["action_dim"],
                        input_features=EgoRelativeFeatures(**features) if features else None)
     actor.load_state_dict(payload["state_dict"])
-    actor.metadata = dict(payload["metadata"])
+    actor.metadata = {"obs_dim": int(payload["obs_dim"]), "action_dim": int(payload["action_dim"]),
+                      **payload["metadata"]}
     return actor

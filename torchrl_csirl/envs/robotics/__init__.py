@@ -5,9 +5,12 @@
   :func:`torchrl_csirl.envs.make_env` (``"antmaze-umaze"``, ``"relocate"``).
 * :class:`AntMazeUMazeEnv`, :class:`RelocateEnv`: the gymnasium environments.
 * :class:`DAPGRelocatePolicy`: the shipped DAPG expert of Relocate.
+* :class:`AntGoalEnv` (task ``"ant-goal"``) and :class:`WaypointAntExpert`: the AntMaze expert's
+  training task and the waypoint controller driving the trained ant through the maze.
 """
 from __future__ import annotations
 
+from torchrl_csirl.envs.robotics.ant_goal import ANT_GOAL_SPEC, AntGoalEnv, WaypointAntExpert, next_waypoint
 from torchrl_csirl.envs.robotics.tasks import (
     ANTMAZE_UMAZE_MAP,
     ROBOTICS_TASKS,
@@ -19,7 +22,11 @@ from torchrl_csirl.envs.robotics.tasks import (
 )
 
 __all__ = [
+    "ANT_GOAL_SPEC",
     "ANTMAZE_UMAZE_MAP",
+    "AntGoalEnv",
+    "WaypointAntExpert",
+    "next_waypoint",
     "ROBOTICS_TASKS",
     "AntMazeUMazeEnv",
     "RelocateEnv",

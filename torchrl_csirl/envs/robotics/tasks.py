@@ -242,6 +242,11 @@ class AntMazeUMazeEnv(_RoboticsTaskEnv):
         """The goal (x, y) [m] of the current episode."""
         return np.asarray(self._inner.goal, dtype=np.float64)
 
+    @property
+    def maze(self) -> Any:
+        """gymnasium-robotics' ``Maze`` (cells to coordinates and back, the map)."""
+        return self._inner.maze
+
     def position(self) -> np.ndarray:
         """The ant's torso (x, y) [m]."""
         return np.asarray(self._inner.ant_env.data.qpos[:2], dtype=np.float64)

@@ -1,0 +1,227 @@
+"""Trains the AntMaze expert's goal-reaching ant: ``python recipes/train_ant_expert.py [key=value ...]``.
+
+TorchRL's SAC (the baselines' learner: :func:`~torchrl_csirl.objectives._imitation.make_sac_learner`,
+published SAC defaults, two critics, 256 x 256 networks) on the ``ant-goal`` task
+(:class:`~torchrl_csirl.envs.robotics.AntGoalEnv`: short hops to a goal 0-7 m away in the U-maze,
+reward = speed toward the goal, +10 on arrival), with the shared recipe machinery: collector
+workers, checkpoints every ``checkpoint.every_rounds`` rounds with the replay buffer (exact resume
+with ``checkpoint.resume=<run dir>``; the run takes hours on 2 cores), metrics CSV/JSONL, wandb
+offline, a learning curve of the hop success, ``policy.pt`` and ``summary.json``.
+
+At the end, the trained policy drives the ant through the U-maze as
+:class:`~torchrl_csirl.envs.robotics.WaypointAntExpert` on ``expert_eval.episodes`` AntMaze
+episodes from seed ``expert_eval.seed`` (unseen: the training task draws its own hops), and the
+summary reports that success rate (the expert's acceptance figure, docs/ROBOTICS.md) beside the
+hop success. ``device=auto`` trains on a GPU when there is one.
+
+Examples::
+
+    python recipes/train_ant_expert.py                                   # 1 M frames, CPU or GPU
+    python recipes/train_ant_expert.py checkpoint.resume=runs/ant-goal-sac-s0-...   # continue
+    python recipes/generate_experts.py --scenario antmaze-umaze --ant-policy runs/ant-goal-sac-s0-... \\
+        --episodes 100 --seed 10000                                     # the expert on unseen seeds
+"""
+from __future__ import annotations
+
+import os
+import sys
+import time
+from dataclasses import dataclass, field
+
+from omegaconf import DictConfig, OmegaConf
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+import torch  # noqa: E402
+
+from common import config as config_lib  # noqa: E402
+from common.builders import Run, assemble_trainer, check_collector, final_summary, make_online_buffer  # noqa: E402
+from common.builders import resume_run, start_run, train  # noqa: E402
+from common.config import DEVICES, CheckpointConfig, CollectorConfig, EvalConfig, LoggerConfig, option  # noqa: E402
+from common.run import resolve_device, resolve_resume, run_script, write_summary  # noqa: E402
+
+from torchrl.objectives import SoftUpdate  # noqa: E402
+
+from torchrl_csirl.envs import resolve_scenario  # noqa: E402
+from torchrl_csirl.modules import make_actor, make_qvalue  # noqa: E402
+from torchrl_csirl.objectives._imitation import SACHyperparameters, make_sac_learner  # noqa: E402
+from torchrl_csirl.trainers import SACUpdate  # noqa: E402
+
+__all__ = ["AntExpertConfig", "evaluate_waypoint_expert", "load_config", "main", "make_trainer"]
+
+TASK = "ant-goal"
+
+
+# ---------------------------------------------------------------------------------------- config
+@dataclass
+class AntEnvConfig:
+    scenario: str = option(TASK, choices=(TASK,), help="the training task (short-hop goal reaching)")
+
+
+@dataclass
+class AntCollectorConfig(CollectorConfig):
+    total_frames: int = option(1_000_000, above=0, help="environment frames")
+    frames_per_batch: int = option(800, above=0, help="frames per collected batch (>= 200 per environment)")
+    init_random_frames: int = option(10_000, minimum=0, help="uniform random actions first")
+
+
+@dataclass
+class AntReplayBufferConfig:
+    size: int = option(1_000_000, above=0, help="replay buffer capacity")
+    clear_each_round: bool = option(False, help="empty the buffer at each round start")
+    warmup_frames: int = option(10_000, minimum=0, help="transitions in the buffer before the first update")
+
+
+@dataclass
+class AntOptimConfig:
+    utd_ratio: float = option(0.5, above=0.0, help="updates per collected frame (learning rate: sac.lr)")
+
+
+@dataclass
+class AntEvalConfig(EvalConfig):
+    episodes: int = option(20, above=0, help="deterministic hops per evaluation")
+    final_episodes: int = option(100, above=0, help="hops of the final test")
+
+
+@dataclass
+class AntCheckpointConfig(CheckpointConfig):
+    every_rounds: int = option(5, minimum=0, help="checkpoint cadence in rounds (0: only at the end)")
+
+
+@dataclass
+class ExpertEvalConfig:
+    episodes: int = option(20, minimum=0, help="AntMaze episodes driven by the waypoint expert at the end (0: none)")
+    seed: int = option(10_000, minimum=0, help="AntMaze episode i uses seed + i")
+
+
+@dataclass
+class AntExpertConfig:
+    """``recipes/train_ant_expert.py``: SAC on the ant's goal-reaching task."""
+
+    preset: str = option("default", help="default (no other preset)")
+    seed: int = option(0, minimum=0, help="random seed")
+    device: str = option("auto", choices=DEVICES, help="the learner's device (auto: a GPU when there is one)")
+    updates_per_round: int = option(10_000, above=0, help="updates between two evaluations (a round)")
+    env: AntEnvConfig = field(default_factory=AntEnvConfig)
+    collector: AntCollectorConfig = field(default_factory=AntCollectorConfig)
+    replay_buffer: AntReplayBufferConfig = field(default_factory=AntReplayBufferConfig)
+    optim: AntOptimConfig = field(default_factory=AntOptimConfig)
+    sac: SACHyperparameters = field(default_factory=SACHyperparameters)
+    eval: AntEvalConfig = field(default_factory=AntEvalConfig)
+    expert_eval: ExpertEvalConfig = field(default_factory=ExpertEvalConfig)
+    logger: LoggerConfig = field(default_factory=LoggerConfig)
+    checkpoint: AntCheckpointConfig = field(default_factory=AntCheckpointConfig)
+
+
+def _checked(cfg: DictConfig) -> DictConfig:
+    check_collector(cfg.collector)
+    resolve_device(cfg.device)
+    return cfg
+
+
+def load_config(overrides: list[str] | None = None) -> DictConfig:
+    """The defaults and ``key=value`` overrides.
+
+    Examples:
+        >>> cfg = load_config(["seed=1"])
+        >>> cfg.env.scenario, cfg.collector.total_frames, cfg.sac.num_qvalue_nets
+        ('ant-goal', 1000000, 2)
+    """
+    return _checked(config_lib.load_config(AntExpertConfig, overrides))
+
+
+def load_run_config(run_dir: str, overrides: list[str] | None = None) -> DictConfig:
+    """The configuration saved in ``run_dir/config.yaml``, updated by ``overrides`` (resume)."""
+    return _checked(config_lib.load_run_config(AntExpertConfig, run_dir, overrides))
+
+
+# ---------------------------------------------------------------------------------------- assembly
+def make_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume_frames: int | None = None) -> Run:
+    """SAC on the environment's own reward, with the shared hooks (evaluation, checkpoints, logging)."""
+    torch.manual_seed(cfg.seed)
+    device = resolve_device(cfg.device)
+    spec = resolve_scenario(cfg.env.scenario)
+    hp = SACHyperparameters(**OmegaConf.to_container(cfg.sac))
+    actor = make_actor(spec.obs_dim, spec.action_dim)
+    loss = make_sac_learner(actor, make_qvalue(spec.obs_dim, spec.action_dim), hp).to(device)
+    optimizer = torch.optim.Adam([p for p in loss.parameters() if p.requires_grad], lr=hp.lr)
+    online = make_online_buffer(cfg.replay_buffer.size, hp.batch_size, [], device)
+    return assemble_trainer(
+        cfg, spec, run_dir, device=device, demos=None, policy=actor, online_buffer=online,
+        update_step=SACUpdate(loss, optimizer, SoftUpdate(loss, tau=hp.tau), hp.max_grad_norm),
+        total_frames=cfg.collector.total_frames, updates_per_round=cfg.updates_per_round,
+        states={"loss": loss, "optim_sac": optimizer}, frames_done=frames_done, resume_frames=resume_frames,
+    )
+
+
+def evaluate_waypoint_expert(policy, episodes: int, seed: int) -> dict[str, float]:
+    """The waypoint expert driven by ``policy`` on ``episodes`` AntMaze U-maze episodes (seed + i).
+
+    Returns:
+        ``success_rate`` (goal reached), ``progress`` (mean route progress), ``steps`` (mean length).
+    """
+    from torchrl_csirl.envs import make_gym_env
+    from torchrl_csirl.envs.robotics import WaypointAntExpert
+
+    env = make_gym_env("antmaze-umaze")
+    expert = WaypointAntExpert(policy)
+    successes, progress, steps = [], [], []
+    try:
+        for i in range(episodes):
+            _, info = env.reset(seed=seed + i)
+            expert.reset(env)
+            for t in range(1, env.max_steps + 1):
+                _, _, terminated, truncated, info = env.step(expert.act(env))
+                if terminated or truncated:
+                    break
+            successes.append(float(info["success"]))
+            progress.append(float(info["progress"]))
+            steps.append(t)
+    finally:
+        env.close()
+    n = max(len(successes), 1)
+    return {"success_rate": sum(successes) / n, "progress": sum(progress) / n, "steps": sum(steps) / n}
+
+
+def finish(run: Run) -> dict[str, object]:
+    """Final hop test, ``policy.pt``, the learning curve, the waypoint expert on AntMaze, the summary."""
+    summary = final_summary(run, "sac", title="SAC on ant-goal (hop success)")
+    summary["hop_success_rate"] = summary["success_rate"]
+    episodes = run.cfg.expert_eval.episodes
+    if episodes:
+        maze = evaluate_waypoint_expert(run.mirror.policy, episodes, run.cfg.expert_eval.seed)
+        summary.update(antmaze_success_rate=maze["success_rate"], antmaze_progress=maze["progress"],
+                       antmaze_episodes=episodes, antmaze_seed=run.cfg.expert_eval.seed)
+    return summary
+
+
+def main(argv: list[str] | None = None) -> dict[str, object]:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if "--help" in argv or "-h" in argv:
+        print(__doc__ + "\nKeys (key, default, what it accepts, meaning):\n  "
+              + "\n  ".join(config_lib.describe(AntExpertConfig)))
+        return {}
+    start = time.perf_counter()
+    cfg = load_config(argv)
+    if cfg.checkpoint.resume is None:
+        run = start_run(cfg, "sac", make_trainer)
+    else:
+        run_dir, checkpoint = resolve_resume(cfg.checkpoint.resume)
+        cfg = load_run_config(run_dir, [a for a in argv if not a.startswith("checkpoint.resume=")])
+        run = resume_run(cfg, run_dir, checkpoint, make_trainer)
+    train(run)
+    try:
+        summary = finish(run)
+    finally:
+        run.logger.close()
+        run.eval_env.close()
+    summary["total_wall_s"] = round(time.perf_counter() - start, 1)
+    maze = summary.get("antmaze_success_rate")
+    print(f"ant-goal: hop success {summary['hop_success_rate']:.2f}"
+          + (f", AntMaze with waypoints {maze:.2f}" if maze is not None else "")
+          + f" after {summary['frames']} frames / {summary['updates']} updates", file=sys.stderr)
+    return write_summary(summary, run.run_dir)
+
+
+if __name__ == "__main__":
+    run_script(main)

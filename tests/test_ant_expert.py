@@ -1,0 +1,148 @@
+"""The AntMaze expert's pieces: the ant-goal training task, the waypoint controller, its recipe."""
+from __future__ import annotations
+
+import json
+import math
+import os
+import sys
+
+import numpy as np
+import pytest
+import torch
+from torchrl.envs.utils import check_env_specs
+
+RECIPES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "recipes")
+sys.path.insert(0, RECIPES)
+
+import generate_experts  # noqa: E402
+import train_ant_expert  # noqa: E402
+
+from torchrl_csirl.envs import make_env, make_gym_env, resolve_scenario  # noqa: E402
+from torchrl_csirl.envs.expert import make_expert  # noqa: E402
+from torchrl_csirl.envs.robotics import ANTMAZE_UMAZE_MAP, WaypointAntExpert, maze_cell_route, next_waypoint  # noqa: E402
+from torchrl_csirl.envs.robotics.ant_goal import (  # noqa: E402
+    ARRIVAL_BONUS,
+    GOAL_VECTOR_CLIP,
+    ant_goal_observation,
+    free_cells,
+    heading_of,
+    is_flipped,
+)
+from torchrl_csirl.modules import make_actor, save_policy  # noqa: E402
+
+
+def _yaw_quaternion(yaw: float) -> np.ndarray:
+    return np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)])
+
+
+def test_ant_goal_env_specs_and_hops():
+    spec = resolve_scenario("ant-goal")
+    assert (spec.obs_dim, spec.action_dim, spec.max_steps) == (29, 8, 200)
+    check_env_specs(make_env("ant-goal", seed=0))
+    env = make_gym_env("ant-goal")
+    cells = set(free_cells())
+    for seed in range(20):
+        obs, info = env.reset(seed=seed)
+        start = tuple(int(v) for v in env._inner.maze.cell_xy_to_rowcol(env.position()))
+        goal = tuple(int(v) for v in env._inner.maze.cell_xy_to_rowcol(env.goal))
+        assert start in cells and goal in cells
+        assert len(maze_cell_route(ANTMAZE_UMAZE_MAP, start, goal)) <= 3  # the goal's cell is the start's or next to it
+        assert info["distance_to_finish"] > 0.9 and not info["success"]
+        # the goal vector is the goal seen from the torso, clipped
+        assert np.linalg.norm(obs[27:]) == pytest.approx(min(info["distance_to_finish"], GOAL_VECTOR_CLIP), rel=1e-5)
+    # seeded: the same episode twice
+    a, _ = env.reset(seed=7)
+    b, _ = env.reset(seed=7)
+    np.testing.assert_array_equal(a, b)
+    env.close()
+
+
+def test_ant_goal_observation_is_in_the_heading_frame():
+    ant = np.zeros(27)
+    ant[1:5] = _yaw_quaternion(math.pi / 2)  # facing +y
+    assert heading_of(ant[1:5]) == pytest.approx(math.pi / 2)
+    local = ant_goal_observation(ant, np.array([0.0, 0.0]), np.array([0.0, 3.0]))[27:]
+    np.testing.assert_allclose(local, [3.0, 0.0], atol=1e-12)  # straight ahead
+    local = ant_goal_observation(ant, np.array([0.0, 0.0]), np.array([-30.0, 0.0]))[27:]
+    np.testing.assert_allclose(local, [0.0, GOAL_VECTOR_CLIP], atol=1e-12)  # to its left, clipped
+    with pytest.raises(ValueError, match="27 values"):
+        ant_goal_observation(np.zeros(29), np.zeros(2), np.zeros(2))
+    assert not is_flipped(_yaw_quaternion(2.0)) and is_flipped(np.array([0.0, 1.0, 0.0, 0.0]))
+
+
+def test_ant_goal_reward_pays_progress_and_the_arrival():
+    env = make_gym_env("ant-goal")
+    env.reset(seed=3)
+    ant = env._inner.ant_env
+    before = env._distance
+    # put the goal right in front of the ant's current position: the next step arrives
+    env._inner.goal = env.position() + np.array([0.1, 0.0])
+    env._distance = float(np.hypot(*(env.goal - env.position())))
+    _, reward, terminated, truncated, info = env.step(np.zeros(8))
+    assert terminated and not truncated and info["success"] and reward > ARRIVAL_BONUS - 5
+    # a flipped ant ends its episode
+    env.reset(seed=4)
+    qpos, qvel = ant.data.qpos.copy(), ant.data.qvel.copy()
+    qpos[3:7] = (0.0, 1.0, 0.0, 0.0)
+    ant.set_state(qpos, qvel)
+    _, _, terminated, _, info = env.step(np.zeros(8))
+    assert terminated and not info["success"]
+    assert before > 0
+    env.close()
+
+
+def test_waypoints_follow_the_maze_route():
+    env = make_gym_env("antmaze-umaze")
+    env.reset(seed=0)
+    maze, goal = env.maze, env.goal
+    centre = lambda cell: maze.cell_rowcol_to_xy(np.array(cell))  # noqa: E731
+    # along the U: the centre of the next cell, then the goal itself from the cell before it
+    np.testing.assert_allclose(next_waypoint(centre((1, 1)), goal, maze), centre((1, 2)))
+    np.testing.assert_allclose(next_waypoint(centre((1, 3)), goal, maze), centre((2, 3)))
+    np.testing.assert_allclose(next_waypoint(centre((3, 3)), goal, maze), centre((3, 2)))
+    np.testing.assert_allclose(next_waypoint(centre((3, 2)), goal, maze), goal)
+    np.testing.assert_allclose(next_waypoint(goal + 0.3, goal, maze), goal)
+    env.close()
+
+
+def test_waypoint_expert_needs_an_ant_policy(tmp_path):
+    with pytest.raises(ValueError, match="needs policy="):
+        make_expert("antmaze-umaze")
+    with pytest.raises(FileNotFoundError):
+        make_expert("antmaze-umaze", policy=str(tmp_path / "none.pt"))
+    path = tmp_path / "wrong.pt"
+    save_policy(make_actor(39, 30), path, obs_dim=39, action_dim=30, scenario="relocate")
+    with pytest.raises(ValueError, match="29 inputs and 8 actions, got 39 and 30"):
+        WaypointAntExpert(str(path))
+    ok = tmp_path / "ant.pt"
+    torch.manual_seed(0)
+    save_policy(make_actor(29, 8), ok, obs_dim=29, action_dim=8, scenario="ant-goal")
+    expert = make_expert("antmaze-umaze", policy=str(ok))
+    env = make_gym_env("antmaze-umaze")
+    env.reset(seed=0)
+    action = expert.act(env)
+    assert action.shape == (8,) and np.all(np.abs(action) <= 1.0)
+    env.close()
+    with pytest.raises(SystemExit):
+        generate_experts.main(["--scenario", "antmaze-umaze", "--episodes", "1"])  # no --ant-policy
+
+
+def test_train_ant_expert_end_to_end(tmp_path):
+    summary = train_ant_expert.main([
+        "collector.total_frames=800", "collector.frames_per_batch=400", "collector.num_workers=1",
+        "collector.init_random_frames=200", "collector.main_threads=1", "replay_buffer.warmup_frames=200",
+        "sac.batch_size=32", "updates_per_round=100", "eval.episodes=1", "eval.final_episodes=1",
+        "expert_eval.episodes=1", "device=cpu", "logger.backend=none", "logger.progress_bar=false",
+        f"logger.output_dir={tmp_path}", "logger.exp_name=ant",
+    ])
+    assert summary["scenario"] == "ant-goal" and summary["frames"] == 800 and summary["updates"] == 400
+    assert 0.0 <= summary["hop_success_rate"] <= 1.0 and 0.0 <= summary["antmaze_success_rate"] <= 1.0
+    run_dir = summary["run_dir"]
+    for name in ("config.yaml", "metrics.jsonl", "policy.pt", "summary.json", "learning_curve.png"):
+        assert os.path.exists(os.path.join(run_dir, name)), name
+    with open(os.path.join(run_dir, "summary.json")) as f:
+        assert json.load(f)["antmaze_episodes"] == 1
+    # the trained policy drives the AntMaze expert (and its datasets) straight from the run directory
+    result = generate_experts.main(["--scenario", "antmaze-umaze", "--ant-policy", run_dir, "--episodes", "1",
+                                    "--seed", "10000", "--out", str(tmp_path / "ant.npz")])
+    assert result["episodes"] == 1 and os.path.exists(result["out"])

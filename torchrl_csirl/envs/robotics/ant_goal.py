@@ -1,0 +1,317 @@
+"""The AntMaze expert's pieces: a short-hop goal-reaching ant and the waypoint controller driving it.
+
+D4RL and Minari built their AntMaze data from a goal-reaching ant policy driven through the maze
+by waypoints from a path planner (SPEC section 5, docs/ROBOTICS.md). No such policy is reachable
+offline, so we train our own:
+
+* :class:`AntGoalEnv` (task ``"ant-goal"``, :func:`~torchrl_csirl.envs.make_env`): the U-maze ant
+  (gymnasium-robotics' ``AntMazeEnv`` model, 0.05 s steps) starting anywhere in a random free cell
+  with a random heading; the goal is the centre of that cell or of a neighbouring free cell, with
+  +-1 m of noise (0-7 m hops: what the waypoint controller asks). Reward: the speed toward the
+  goal (``(d_{t-1} - d_t) / dt``), minus a control cost (``0.1 |a|^2``; gymnasium's ant: 0.5),
+  +10 on arrival (within 0.45 m, which terminates the episode); a flipped ant (its torso's up
+  axis pointing below the horizon: it never recovers) terminates it too. 200 steps.
+* :func:`ant_goal_observation`: the policy's input (29 values): the ant's 27 values (torso height,
+  orientation, joint angles, velocities; no position) then the goal vector in the torso's heading
+  frame, clipped to 5 m. Where the hop is in the maze does not matter to the policy.
+* :class:`WaypointAntExpert`: the expert of ``"antmaze-umaze"``. At each step the breadth-first
+  cell route (:func:`~torchrl_csirl.envs.robotics.maze_cell_route`) from the ant's cell to the goal
+  cell gives the waypoint (the centre of the next cell on it; the goal itself in the goal cell),
+  and the trained goal-reaching policy acts on it with its mean action.
+
+``recipes/train_ant_expert.py`` trains the policy with TorchRL's SAC (resumable).
+"""
+from __future__ import annotations
+
+import math
+import os
+from types import MappingProxyType
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+from gymnasium import spaces
+
+from torchrl_csirl.envs.robotics.tasks import (
+    ANTMAZE_SUCCESS_RADIUS,
+    ANTMAZE_UMAZE_MAP,
+    RoboticsTaskSpec,
+    _ensure_headless_gl,
+    maze_cell_route,
+)
+
+__all__ = [
+    "ANT_GOAL_SPEC",
+    "AntGoalEnv",
+    "WaypointAntExpert",
+    "ant_goal_observation",
+    "free_cells",
+    "heading_of",
+    "is_flipped",
+    "next_waypoint",
+]
+
+GOAL_VECTOR_CLIP = 5.0  # [m] the policy never sees a goal further away than this
+ARRIVAL_BONUS = 10.0
+CONTROL_COST = 0.1  # x |a|^2 (gymnasium's ant: 0.5; lower, so that ending an episode early never pays)
+
+
+def free_cells(maze_map: Any = ANTMAZE_UMAZE_MAP) -> list[tuple[int, int]]:
+    """The (row, col) cells of a maze that are not walls (``1``).
+
+    Examples:
+        >>> free_cells()[:3]
+        [(1, 1), (1, 2), (1, 3)]
+    """
+    return [(r, c) for r, row in enumerate(maze_map) for c, cell in enumerate(row) if cell != 1]
+
+
+def heading_of(quaternion: np.ndarray) -> float:
+    """The yaw [rad] of a MuJoCo ``(w, x, y, z)`` quaternion.
+
+    Examples:
+        >>> round(heading_of(np.array([math.cos(0.4), 0.0, 0.0, math.sin(0.4)])), 6)
+        0.8
+    """
+    w, x, y, z = (float(v) for v in quaternion[:4])
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def is_flipped(quaternion: np.ndarray) -> bool:
+    """Whether the torso's up axis points below the horizon (``(w, x, y, z)`` quaternion).
+
+    Examples:
+        >>> is_flipped(np.array([1.0, 0.0, 0.0, 0.0])), is_flipped(np.array([0.0, 1.0, 0.0, 0.0]))
+        (False, True)
+    """
+    _, x, y, _ = (float(v) for v in quaternion[:4])
+    return 1.0 - 2.0 * (x * x + y * y) < 0.0
+
+
+def ant_goal_observation(ant_values: np.ndarray, position: np.ndarray, goal: np.ndarray) -> np.ndarray:
+    """The goal-reaching policy's input: the ant's 27 values, then the goal vector in its heading frame.
+
+    Args:
+        ant_values: the 27 values of the ant (``qpos[2:]`` then ``qvel``: torso height, the
+            ``(w, x, y, z)`` orientation, 8 joint angles, 14 velocities).
+        position: the torso's ``(x, y)`` [m].
+        goal: the goal's ``(x, y)`` [m].
+
+    Returns:
+        29 float64 values; the goal vector ``R(-yaw) (goal - position)`` is clipped to 5 m.
+
+    Examples:
+        >>> ant = np.zeros(27); ant[1] = 1.0  # upright, heading +x
+        >>> ant_goal_observation(ant, np.array([1.0, 1.0]), np.array([1.0, 9.0]))[27:].tolist()
+        [0.0, 5.0]
+    """
+    ant_values = np.asarray(ant_values, dtype=np.float64).reshape(-1)
+    if ant_values.shape[0] != 27:
+        raise ValueError(f"ant_values must hold the ant's 27 values, got {ant_values.shape[0]}.")
+    dx, dy = (np.asarray(goal, dtype=np.float64) - np.asarray(position, dtype=np.float64))[:2]
+    yaw = heading_of(ant_values[1:5])
+    cos, sin = math.cos(yaw), math.sin(yaw)
+    local = np.array([cos * dx + sin * dy, -sin * dx + cos * dy])
+    norm = float(np.hypot(*local))
+    if norm > GOAL_VECTOR_CLIP:
+        local *= GOAL_VECTOR_CLIP / norm
+    return np.concatenate([ant_values, local])
+
+
+class AntGoalEnv(gym.Env):
+    """Short-hop goal reaching for the U-maze ant (the training task of the AntMaze expert).
+
+    Each episode starts in a uniformly drawn free cell (+-1 m around its centre, a uniform
+    heading); the goal is the centre (+-1 m) of the same cell or of a free neighbour. ``info``
+    carries the task keys (``distance_to_finish`` to the goal, ``progress``, ``arrived``,
+    ``success``).
+
+    Examples:
+        >>> env = AntGoalEnv()
+        >>> obs, info = env.reset(seed=0)
+        >>> obs.shape, info["success"]
+        ((29,), False)
+        >>> obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+        >>> terminated, truncated
+        (False, False)
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
+    max_steps = 200
+
+    def __init__(self, render_mode: str | None = None) -> None:
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}.")
+        _ensure_headless_gl(render_mode)
+        from gymnasium_robotics.envs.maze.ant_maze_v5 import AntMazeEnv
+
+        self.render_mode = render_mode
+        self._inner = AntMazeEnv(render_mode=render_mode, maze_map=[list(row) for row in ANTMAZE_UMAZE_MAP],
+                                 continuing_task=False, include_cfrc_ext_in_observation=False)
+        self._inner.position_noise_range = 0.25  # +-1 m in 4 m cells (gymnasium-robotics' default)
+        self.action_space = self._inner.action_space
+        self.observation_space = spaces.Box(-np.inf, np.inf, (29,), np.float32)
+        self.dt = float(self._inner.ant_env.dt)
+        self._cells = free_cells()
+        self._steps = 0
+        self._distance = self._initial_distance = 0.0
+
+    @property
+    def goal(self) -> np.ndarray:
+        """The goal (x, y) [m] of the current episode."""
+        return np.asarray(self._inner.goal, dtype=np.float64)
+
+    def position(self) -> np.ndarray:
+        """The ant's torso (x, y) [m]."""
+        return np.asarray(self._inner.ant_env.data.qpos[:2], dtype=np.float64)
+
+    def _ant_values(self) -> np.ndarray:
+        data = self._inner.ant_env.data
+        return np.concatenate([data.qpos[2:], data.qvel]).astype(np.float64)
+
+    def _draw_cells(self) -> tuple[tuple[int, int], tuple[int, int]]:
+        start = self._cells[int(self.np_random.integers(len(self._cells)))]
+        r, c = start
+        options = [start] + [n for n in ((r - 1, c), (r + 1, c), (r, c - 1), (r, c + 1)) if n in self._cells]
+        return start, options[int(self.np_random.integers(len(options)))]
+
+    def _turn(self, yaw: float) -> None:
+        ant = self._inner.ant_env
+        qpos, qvel = ant.data.qpos.copy(), ant.data.qvel.copy()
+        qpos[3:7] = (math.cos(yaw / 2.0), 0.0, 0.0, math.sin(yaw / 2.0))
+        ant.set_state(qpos, qvel)
+
+    def _observe(self) -> np.ndarray:
+        return ant_goal_observation(self._ant_values(), self.position(), self.goal).astype(np.float32)
+
+    def _info(self) -> dict[str, Any]:
+        success = self._distance <= ANTMAZE_SUCCESS_RADIUS
+        d0 = self._initial_distance
+        progress = min(max(1.0 - self._distance / d0, 0.0), 1.0) if d0 > 0 else 1.0
+        return {"distance_to_finish": self._distance, "progress": progress, "arrived": success, "success": success}
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        for _ in range(100):  # a goal already reached at the start is drawn again
+            start, goal = self._draw_cells()
+            # the inner env draws its noise from its own generator: seed it from ours
+            inner_seed = int(self.np_random.integers(2**31 - 1))
+            self._inner.reset(seed=inner_seed, options={"reset_cell": np.array(start), "goal_cell": np.array(goal)})
+            self._distance = self._initial_distance = float(np.hypot(*(self.goal - self.position())))
+            if self._distance > 2.0 * ANTMAZE_SUCCESS_RADIUS:
+                break
+        self._turn(float(self.np_random.uniform(-math.pi, math.pi)))
+        self._steps = 0
+        return self._observe(), self._info()
+
+    def step(self, action):
+        action = np.asarray(action, dtype=np.float64)
+        self._inner.ant_env.step(action)
+        self._steps += 1
+        before, self._distance = self._distance, float(np.hypot(*(self.goal - self.position())))
+        reward = (before - self._distance) / self.dt - CONTROL_COST * float(np.sum(action * action))
+        arrived = self._distance <= ANTMAZE_SUCCESS_RADIUS
+        if arrived:
+            reward += ARRIVAL_BONUS
+        terminated = arrived or is_flipped(self._inner.ant_env.data.qpos[3:7])
+        truncated = self._steps >= self.max_steps and not terminated
+        return self._observe(), float(reward), bool(terminated), bool(truncated), self._info()
+
+    def render(self):
+        return self._inner.render()
+
+    def close(self) -> None:
+        self._inner.close()
+        super().close()
+
+
+def _ant_goal_spec() -> RoboticsTaskSpec:
+    layout = {"z": (0, 1), "orientation": (1, 5), "joint_angles": (5, 13), "velocity": (13, 16),
+              "angular_velocity": (16, 19), "joint_velocities": (19, 27), "goal_vector": (27, 29)}
+    return RoboticsTaskSpec(
+        name="ant-goal",
+        gym_id="csirl/ant-goal-v0",
+        base_env="AntMaze_UMaze-v5",
+        entry_point=f"{__name__}:AntGoalEnv",
+        obs_dim=29,
+        action_dim=8,
+        max_steps=AntGoalEnv.max_steps,
+        finish_position=None,
+        ego_feature_indices=(27, 28, 13, 14),
+        position_feature_indices=(27, 28),
+        matching_scale=100.0,
+        dt=0.05,
+        family="robotics",
+        observation_layout=MappingProxyType(layout),
+        description="the U-maze ant reaching a goal 0-7 m away (the AntMaze expert's training task)",
+    )
+
+
+ANT_GOAL_SPEC = _ant_goal_spec()
+
+
+def next_waypoint(position: np.ndarray, goal: np.ndarray, maze: Any) -> np.ndarray:
+    """The waypoint toward ``goal``: the centre of the next cell on the cell route, or the goal itself.
+
+    Args:
+        position: the ant's (x, y) [m].
+        goal: the goal (x, y) [m].
+        maze: a gymnasium-robotics ``Maze`` (``cell_xy_to_rowcol``, ``cell_rowcol_to_xy``, ``maze_map``).
+
+    Examples:
+        >>> from gymnasium_robotics.envs.maze.ant_maze_v5 import AntMazeEnv
+        >>> maze = AntMazeEnv(maze_map=[list(r) for r in ANTMAZE_UMAZE_MAP]).maze
+        >>> next_waypoint(np.array([-4.0, 4.0]), np.array([-4.0, -4.0]), maze).tolist()
+        [0.0, 4.0]
+    """
+    cell = tuple(int(v) for v in maze.cell_xy_to_rowcol(np.asarray(position, dtype=np.float64)))
+    goal_cell = tuple(int(v) for v in maze.cell_xy_to_rowcol(np.asarray(goal, dtype=np.float64)))
+    if cell == goal_cell or maze.maze_map[cell[0]][cell[1]] == 1:
+        return np.asarray(goal, dtype=np.float64)
+    route = maze_cell_route(maze.maze_map, cell, goal_cell)
+    if len(route) == 2:  # the goal's cell is next: head for the goal itself
+        return np.asarray(goal, dtype=np.float64)
+    return np.asarray(maze.cell_rowcol_to_xy(np.array(route[1])), dtype=np.float64)
+
+
+class WaypointAntExpert:
+    """The AntMaze expert: a goal-reaching ant policy driven through the maze by waypoints.
+
+    Interface of every expert (``reset(env)``, ``act(env)``) on an
+    :class:`~torchrl_csirl.envs.robotics.AntMazeUMazeEnv`.
+
+    Args:
+        policy: the goal-reaching actor (a :func:`~torchrl_csirl.modules.save_policy` file or
+            run directory of ``recipes/train_ant_expert.py``, or the loaded actor), acting with
+            its mean action on :func:`ant_goal_observation`.
+
+    Raises:
+        FileNotFoundError: no policy file there.
+        ValueError: the policy's dimensions are not the ant's (29 inputs, 8 actions).
+    """
+
+    def __init__(self, policy: Any) -> None:
+        from torchrl_csirl.modules import load_policy
+
+        self.policy = load_policy(policy) if isinstance(policy, (str, os.PathLike)) else policy
+        meta = getattr(self.policy, "metadata", {})
+        dims = (meta.get("obs_dim", 29), meta.get("action_dim", 8))
+        if dims != (29, 8):
+            raise ValueError(f"the ant expert needs a policy with 29 inputs and 8 actions, got {dims[0]} and {dims[1]}.")
+
+    def reset(self, env: Any) -> None:
+        """Nothing to reset: the waypoint is recomputed from the ant's cell at every step."""
+
+    @torch.no_grad()
+    def act(self, env: Any) -> np.ndarray:
+        from tensordict import TensorDict
+        from torchrl.envs.utils import ExplorationType, set_exploration_type
+
+        position = env.position()
+        waypoint = next_waypoint(position, env.goal, env.maze)
+        ant = env.observation()[:27]
+        obs = torch.as_tensor(ant_goal_observation(ant, position, waypoint), dtype=torch.float32)
+        with set_exploration_type(ExplorationType.DETERMINISTIC):
+            action = self.policy(TensorDict({"observation": obs}, []))["action"]
+        return action.numpy().astype(np.float32)
