@@ -2,7 +2,7 @@
 
 TorchRL's SAC (the baselines' learner: :func:`~torchrl_csirl.objectives._imitation.make_sac_learner`,
 published SAC defaults, two critics, 256 x 256 networks) on the ``ant-goal`` task
-(:class:`~torchrl_csirl.envs.robotics.AntGoalEnv`: short hops to a goal 0-7 m away in the U-maze,
+(:class:`~torchrl_csirl.envs.robotics.AntGoalEnv`: short hops to a goal 0.9-6.3 m away in the U-maze,
 reward = speed toward the goal, +10 on arrival), with the shared recipe machinery: collector
 workers, checkpoints every ``checkpoint.every_rounds`` rounds with the replay buffer (exact resume
 with ``checkpoint.resume=<run dir>``; the run takes hours on 2 cores), metrics CSV/JSONL, wandb

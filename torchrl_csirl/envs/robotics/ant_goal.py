@@ -7,7 +7,7 @@ offline, so we train our own:
 * :class:`AntGoalEnv` (task ``"ant-goal"``, :func:`~torchrl_csirl.envs.make_env`): the U-maze ant
   (gymnasium-robotics' ``AntMazeEnv`` model, 0.05 s steps) starting anywhere in a random free cell
   with a random heading; the goal is the centre of that cell or of a neighbouring free cell, with
-  +-1 m of noise (0-7 m hops: what the waypoint controller asks). Reward: the speed toward the
+  +-1 m of noise (0.9-6.3 m hops, shorter ones redrawn: what the waypoint controller asks). Reward: the speed toward the
   goal (``(d_{t-1} - d_t) / dt``), minus a control cost (``0.1 |a|^2``; gymnasium's ant: 0.5),
   +10 on arrival (within 0.45 m, which terminates the episode); a flipped ant (its torso's up
   axis pointing below the horizon: it never recovers) terminates it too. 200 steps.
@@ -244,7 +244,7 @@ def _ant_goal_spec() -> RoboticsTaskSpec:
         dt=0.05,
         family="robotics",
         observation_layout=MappingProxyType(layout),
-        description="the U-maze ant reaching a goal 0-7 m away (the AntMaze expert's training task)",
+        description="the U-maze ant reaching a goal 0.9-6.3 m away (the AntMaze expert's training task)",
     )
 
 
