@@ -122,7 +122,8 @@ def summarize(summaries: list[dict]) -> dict[str, dict]:
 
 def markdown_table(stats: dict[str, dict]) -> str:
     """One row per group: mean ± std of the main figures."""
-    head = "| scenario / method / preset | seeds | accomplish (raw) | expert-normalised | success | AUC | frames | updates | wall [min] |"
+    head = ("| scenario / method / preset | seeds | accomplish (raw) | expert-normalised | success | crash | AUC | frames "
+            "| updates | wall [min] |")
     rows = [head, "|---" * (head.count("|") - 1) + "|"]
 
     def cell(s: dict, field: str, fmt: str = "{:.3f}", scale: float = 1.0) -> str:
@@ -133,7 +134,8 @@ def markdown_table(stats: dict[str, dict]) -> str:
     for key, s in stats.items():
         rows.append(
             f"| {key} | {','.join(map(str, s['seeds']))} | {cell(s, 'accomplish_rate')} | "
-            f"{cell(s, 'normalized_accomplish_rate')} | {cell(s, 'success_rate', '{:.2f}')} | {cell(s, 'auc')} | "
+            f"{cell(s, 'normalized_accomplish_rate')} | {cell(s, 'success_rate', '{:.2f}')} | "
+            f"{cell(s, 'crash_rate', '{:.2f}')} | {cell(s, 'auc')} | "
             f"{cell(s, 'frames', '{:.0f}')} | {cell(s, 'updates', '{:.0f}')} | {cell(s, 'total_wall_s', '{:.1f}', 1 / 60)} |"
         )
     return "\n".join(rows)
