@@ -6,8 +6,8 @@ Rolls out the saved deterministic policy on the recipe's test episodes (seeds
 ``seed .. seed + episodes - 1``, as the final evaluation does) and reports, per group of
 episodes, the accomplish rate, the outcomes (success, crash, off-road, time-out), the ego's mean
 and largest speed, the speed and the step at which crashed episodes ended, and the mean
-accomplish rate of the crashed episodes (an accomplish rate earned by driving far and then
-crashing is not expert-like). On merge the episodes are also split by the traffic ahead at reset:
+accomplish rate of the crashed and of the off-road episodes (an accomplish rate earned by driving
+far and then crashing is not expert-like). On merge the episodes are also split by the traffic ahead at reset:
 two main-road vehicles ahead of the ego slow to 20 m/s; when they share a lane the other one is
 **free**, when they do not both lanes are **blocked** and finishing means squeezing past them (the
 expert nudges, docs/EXPERTS.md). The last line is JSON.
@@ -90,6 +90,7 @@ def summarize_group(group: list[dict]) -> dict[str, object]:
     """Episodes, mean accomplish rate, outcome counts, speeds, and what the crashed episodes had reached."""
     counts = Counter(r["outcome"] for r in group)
     crashed = [r for r in group if r["outcome"] == "crash"]
+    offroad = [r for r in group if r["outcome"] == "offroad"]
     return {
         "episodes": len(group),
         "accomplish_rate": _mean([r["accomplish_rate"] for r in group]),
@@ -99,6 +100,7 @@ def summarize_group(group: list[dict]) -> dict[str, object]:
         "crash_speed": _mean([r["final_speed"] for r in crashed]),
         "crash_step": _mean([float(r["steps"]) for r in crashed]),
         "crash_accomplish_rate": _mean([r["accomplish_rate"] for r in crashed]),
+        "offroad_accomplish_rate": _mean([r["accomplish_rate"] for r in offroad]),
     }
 
 
@@ -119,13 +121,13 @@ def _cell(value: object, fmt: str) -> str:
 def print_table(stats: dict[str, dict]) -> None:
     """The groups as a Markdown table on stderr."""
     print("| episodes | n | accomplish (raw) | success | crash | off-road | time-out | mean / max speed [m/s] "
-          "| at a crash: speed, step, accomplish |", file=sys.stderr)
-    print("|---|---|---|---|---|---|---|---|---|", file=sys.stderr)
+          "| at a crash: speed, step, accomplish | off-road: accomplish |", file=sys.stderr)
+    print("|---|---|---|---|---|---|---|---|---|---|", file=sys.stderr)
     for name, s in stats.items():
         crash = f"{_cell(s['crash_speed'], '.1f')}, {_cell(s['crash_step'], '.0f')}, {_cell(s['crash_accomplish_rate'], '.2f')}"
         print(f"| {name} | {s['episodes']} | {_cell(s['accomplish_rate'], '.3f')} | {s['success']} | {s['crash']} "
               f"| {s['offroad']} | {s['timeout']} | {_cell(s['mean_speed'], '.1f')} / {_cell(s['max_speed'], '.1f')} "
-              f"| {crash} |", file=sys.stderr)
+              f"| {crash} | {_cell(s['offroad_accomplish_rate'], '.2f')} |", file=sys.stderr)
 
 
 def main(argv: list[str] | None = None) -> dict[str, dict]:

@@ -490,6 +490,7 @@ def test_policy_outcomes_reports_outcomes_and_speeds_and_splits_merge_by_the_tra
     for group in stats.values():
         assert sum(group[o] for o in policy_outcomes.OUTCOMES) == group["episodes"]
     assert 0.0 <= stats["all"]["accomplish_rate"] <= 1.0
+    assert stats["all"]["offroad_accomplish_rate"] is None or 0.0 <= stats["all"]["offroad_accomplish_rate"] <= 1.0
     # merge starts the ego at 30 m/s: the speeds read back from the observation are in that range
     assert 15.0 < stats["all"]["mean_speed"] <= stats["all"]["max_speed"] < 60.0
     roundabout = policy_outcomes.main([saved("roundabout"), "--episodes", "2"])
