@@ -23,6 +23,7 @@ offline, so we train our own:
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 from types import MappingProxyType
@@ -31,13 +32,14 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import torch
-from gymnasium import spaces
 
 from torchrl_csirl.envs.robotics.tasks import (
     ANTMAZE_SUCCESS_RADIUS,
     ANTMAZE_UMAZE_MAP,
+    ANT_LAYOUT,
+    ROBOTICS_TASKS,
+    AntMazeUMazeEnv,
     RoboticsTaskSpec,
-    _ensure_headless_gl,
     maze_cell_route,
 )
 
@@ -119,13 +121,14 @@ def ant_goal_observation(ant_values: np.ndarray, position: np.ndarray, goal: np.
     return np.concatenate([ant_values, local])
 
 
-class AntGoalEnv(gym.Env):
+class AntGoalEnv(AntMazeUMazeEnv):
     """Short-hop goal reaching for the U-maze ant (the training task of the AntMaze expert).
 
-    Each episode starts in a uniformly drawn free cell (+-1 m around its centre, a uniform
-    heading); the goal is the centre (+-1 m) of the same cell or of a free neighbour. ``info``
-    carries the task keys (``distance_to_finish`` to the goal, ``progress``, ``arrived``,
-    ``success``).
+    The U-maze ant of :class:`~torchrl_csirl.envs.robotics.AntMazeUMazeEnv` (same model, goal,
+    position, rendering and info keys) with its own episodes: each starts in a uniformly drawn
+    free cell (+-1 m around its centre, a uniform heading); the goal is the centre (+-1 m) of the
+    same cell or of a free neighbour. ``distance_to_finish`` is the straight-line distance to the
+    goal.
 
     Examples:
         >>> env = AntGoalEnv()
@@ -137,34 +140,13 @@ class AntGoalEnv(gym.Env):
         (False, False)
     """
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
     max_steps = 200
 
     def __init__(self, render_mode: str | None = None) -> None:
-        if render_mode not in (None, "rgb_array"):
-            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}.")
-        _ensure_headless_gl(render_mode)
-        from gymnasium_robotics.envs.maze.ant_maze_v5 import AntMazeEnv
-
-        self.render_mode = render_mode
-        self._inner = AntMazeEnv(render_mode=render_mode, maze_map=[list(row) for row in ANTMAZE_UMAZE_MAP],
-                                 continuing_task=False, include_cfrc_ext_in_observation=False)
-        self._inner.position_noise_range = 0.25  # +-1 m in 4 m cells (gymnasium-robotics' default)
-        self.action_space = self._inner.action_space
-        self.observation_space = spaces.Box(-np.inf, np.inf, (29,), np.float32)
+        super().__init__(render_mode, position_noise=0.25)  # +-1 m in 4 m cells (gymnasium-robotics' default)
         self.dt = float(self._inner.ant_env.dt)
         self._cells = free_cells()
-        self._steps = 0
-        self._distance = self._initial_distance = 0.0
-
-    @property
-    def goal(self) -> np.ndarray:
-        """The goal (x, y) [m] of the current episode."""
-        return np.asarray(self._inner.goal, dtype=np.float64)
-
-    def position(self) -> np.ndarray:
-        """The ant's torso (x, y) [m]."""
-        return np.asarray(self._inner.ant_env.data.qpos[:2], dtype=np.float64)
+        self._distance = 0.0
 
     def _ant_values(self) -> np.ndarray:
         data = self._inner.ant_env.data
@@ -182,17 +164,17 @@ class AntGoalEnv(gym.Env):
         qpos[3:7] = (math.cos(yaw / 2.0), 0.0, 0.0, math.sin(yaw / 2.0))
         ant.set_state(qpos, qvel)
 
-    def _observe(self) -> np.ndarray:
-        return ant_goal_observation(self._ant_values(), self.position(), self.goal).astype(np.float32)
+    def _goal_observation(self) -> np.ndarray:
+        return ant_goal_observation(self._ant_values(), self.position(), self.goal)
 
-    def _info(self) -> dict[str, Any]:
-        success = self._distance <= ANTMAZE_SUCCESS_RADIUS
-        d0 = self._initial_distance
-        progress = min(max(1.0 - self._distance / d0, 0.0), 1.0) if d0 > 0 else 1.0
-        return {"distance_to_finish": self._distance, "progress": progress, "arrived": success, "success": success}
+    def _distance_and_success(self) -> tuple[float, bool]:
+        return self._distance, self._distance <= ANTMAZE_SUCCESS_RADIUS
+
+    def _flatten(self, raw: np.ndarray) -> np.ndarray:
+        return raw  # _inner_step's, already the policy's input
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
-        super().reset(seed=seed)
+        gym.Env.reset(self, seed=seed)
         for _ in range(100):  # a goal already reached at the start is drawn again
             start, goal = self._draw_cells()
             # the inner env draws its noise from its own generator: seed it from ours
@@ -203,47 +185,34 @@ class AntGoalEnv(gym.Env):
                 break
         self._turn(float(self.np_random.uniform(-math.pi, math.pi)))
         self._steps = 0
-        return self._observe(), self._info()
+        self._observation = self._goal_observation()
+        return self._observation.astype(np.float32), self._info()
 
-    def step(self, action):
+    def _inner_step(self, action) -> tuple[np.ndarray, float, bool]:
+        """One ant step: speed toward the goal minus the control cost, +10 on arrival; ends at arrival or a flip."""
         action = np.asarray(action, dtype=np.float64)
         self._inner.ant_env.step(action)
-        self._steps += 1
         before, self._distance = self._distance, float(np.hypot(*(self.goal - self.position())))
         reward = (before - self._distance) / self.dt - CONTROL_COST * float(np.sum(action * action))
         arrived = self._distance <= ANTMAZE_SUCCESS_RADIUS
         if arrived:
             reward += ARRIVAL_BONUS
-        terminated = arrived or is_flipped(self._inner.ant_env.data.qpos[3:7])
-        truncated = self._steps >= self.max_steps and not terminated
-        return self._observe(), float(reward), bool(terminated), bool(truncated), self._info()
-
-    def render(self):
-        return self._inner.render()
-
-    def close(self) -> None:
-        self._inner.close()
-        super().close()
+        return self._goal_observation(), reward, arrived or is_flipped(self._inner.ant_env.data.qpos[3:7])
 
 
 def _ant_goal_spec() -> RoboticsTaskSpec:
-    layout = {"z": (0, 1), "orientation": (1, 5), "joint_angles": (5, 13), "velocity": (13, 16),
-              "angular_velocity": (16, 19), "joint_velocities": (19, 27), "goal_vector": (27, 29)}
-    return RoboticsTaskSpec(
+    # AntMaze's spec (same ant, dimensions and step) with this task's env, limit and goal vector; no
+    # maze_map: features 27-28 are the goal vector, not a position to draw in the maze
+    return dataclasses.replace(
+        ROBOTICS_TASKS["antmaze-umaze"],
         name="ant-goal",
         gym_id="csirl/ant-goal-v0",
-        base_env="AntMaze_UMaze-v5",
+        env_options=(),
+        maze_map=None,
         entry_point=f"{__name__}:AntGoalEnv",
-        obs_dim=29,
-        action_dim=8,
         max_steps=AntGoalEnv.max_steps,
         finish_position=None,
-        ego_feature_indices=(27, 28, 13, 14),
-        position_feature_indices=(27, 28),
-        matching_scale=100.0,
-        dt=0.05,
-        family="robotics",
-        observation_layout=MappingProxyType(layout),
+        observation_layout=MappingProxyType({**ANT_LAYOUT, "goal_vector": (27, 29)}),
         description="the U-maze ant reaching a goal 0.9-6.3 m away (the AntMaze expert's training task)",
     )
 

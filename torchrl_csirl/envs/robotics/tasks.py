@@ -353,19 +353,21 @@ class RoboticsTaskSpec(TaskSpec):
         return kwargs
 
 
+# the ant's 27 values: torso z, torso quaternion, 8 joint angles, torso linear and angular velocity,
+# 8 joint velocities
+ANT_LAYOUT: MappingProxyType = MappingProxyType({
+    "z": (0, 1),
+    "orientation": (1, 5),
+    "joint_angles": (5, 13),
+    "velocity": (13, 16),
+    "angular_velocity": (16, 19),
+    "joint_velocities": (19, 27),
+})
+
+
 def _antmaze_spec() -> RoboticsTaskSpec:
-    # 27 ant values: torso z, torso quaternion, 8 joint angles, torso linear and angular velocity,
-    # 8 joint velocities; then the ant's (x, y)
-    layout = {
-        "z": (0, 1),
-        "orientation": (1, 5),
-        "joint_angles": (5, 13),
-        "velocity": (13, 16),
-        "angular_velocity": (16, 19),
-        "joint_velocities": (19, 27),
-        "x": (27, 28),
-        "y": (28, 29),
-    }
+    # the ant's 27 values, then its (x, y)
+    layout = {**ANT_LAYOUT, "x": (27, 28), "y": (28, 29)}
     return RoboticsTaskSpec(
         name="antmaze-umaze",
         gym_id="csirl/antmaze-umaze-v0",
