@@ -66,8 +66,10 @@ from common.config import (
     EnvConfig,
     EvalConfig,
     ExpertConfig,
+    LearnerReplayBufferConfig,
     LoggerConfig,
     ModelConfig,
+    UpdateRatioConfig,
     option,
 )
 from common.registry import register_recipe
@@ -106,18 +108,6 @@ class ImitationExpertConfig(ExpertConfig):
 
 
 @dataclass
-class ImitationReplayBufferConfig:
-    size: int = option(1_000_000, above=0, help="online buffer capacity")
-    clear_each_round: bool = option(False, help="empty the buffer at each round start")
-    warmup_frames: int = option(1000, minimum=0, help="transitions in the buffer before the first update of a round")
-
-
-@dataclass
-class ImitationOptimConfig:
-    utd_ratio: float = option(0.5, above=0.0, help="updates per collected frame (learning rates: each method's section)")
-
-
-@dataclass
 class SACBaselineConfig(SACHyperparameters):
     """The ``sac`` baseline: the SAC learner of every baseline (published SAC defaults) and its reward's scale."""
 
@@ -142,9 +132,9 @@ class _ImitationHighwayBase:
     env: EnvConfig = field(default_factory=EnvConfig)
     collector: CollectorConfig = field(default_factory=CollectorConfig)
     expert: ImitationExpertConfig = field(default_factory=ImitationExpertConfig)
-    replay_buffer: ImitationReplayBufferConfig = field(default_factory=ImitationReplayBufferConfig)
+    replay_buffer: LearnerReplayBufferConfig = field(default_factory=LearnerReplayBufferConfig)
     model: ModelConfig = field(default_factory=ModelConfig)
-    optim: ImitationOptimConfig = field(default_factory=ImitationOptimConfig)
+    optim: UpdateRatioConfig = field(default_factory=UpdateRatioConfig)
     eval: EvalConfig = field(default_factory=EvalConfig)
     logger: LoggerConfig = field(default_factory=LoggerConfig)
     checkpoint: CheckpointConfig = field(default_factory=CheckpointConfig)

@@ -37,7 +37,16 @@ import torch  # noqa: E402
 from common import config as config_lib  # noqa: E402
 from common.builders import Run, assemble_trainer, check_collector, final_summary, make_online_buffer  # noqa: E402
 from common.builders import resume_run, start_run, train  # noqa: E402
-from common.config import DEVICES, CheckpointConfig, CollectorConfig, EvalConfig, LoggerConfig, option  # noqa: E402
+from common.config import (  # noqa: E402
+    DEVICES,
+    CheckpointConfig,
+    CollectorConfig,
+    EvalConfig,
+    LearnerReplayBufferConfig,
+    LoggerConfig,
+    UpdateRatioConfig,
+    option,
+)
 from common.run import resolve_device, resolve_resume, run_script, write_summary  # noqa: E402
 
 from torchrl.objectives import SoftUpdate  # noqa: E402
@@ -66,15 +75,8 @@ class AntCollectorConfig(CollectorConfig):
 
 
 @dataclass
-class AntReplayBufferConfig:
-    size: int = option(1_000_000, above=0, help="replay buffer capacity")
-    clear_each_round: bool = option(False, help="empty the buffer at each round start")
+class AntReplayBufferConfig(LearnerReplayBufferConfig):
     warmup_frames: int = option(10_000, minimum=0, help="transitions in the buffer before the first update")
-
-
-@dataclass
-class AntOptimConfig:
-    utd_ratio: float = option(0.5, above=0.0, help="updates per collected frame (learning rate: sac.lr)")
 
 
 @dataclass
@@ -105,7 +107,7 @@ class AntExpertConfig:
     env: AntEnvConfig = field(default_factory=AntEnvConfig)
     collector: AntCollectorConfig = field(default_factory=AntCollectorConfig)
     replay_buffer: AntReplayBufferConfig = field(default_factory=AntReplayBufferConfig)
-    optim: AntOptimConfig = field(default_factory=AntOptimConfig)
+    optim: UpdateRatioConfig = field(default_factory=UpdateRatioConfig)
     sac: SACHyperparameters = field(default_factory=SACHyperparameters)
     eval: AntEvalConfig = field(default_factory=AntEvalConfig)
     expert_eval: ExpertEvalConfig = field(default_factory=ExpertEvalConfig)

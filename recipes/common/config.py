@@ -134,6 +134,22 @@ class ReplayBufferConfig:
 
 
 @dataclass
+class LearnerReplayBufferConfig:
+    """The online buffer of a recipe whose learner section sets its own batch size (baselines, the ant expert)."""
+
+    size: int = option(1_000_000, above=0, help="online buffer capacity")
+    clear_each_round: bool = option(False, help="empty the buffer at each round start")
+    warmup_frames: int = option(1000, minimum=0, help="transitions in the buffer before the first update of a round")
+
+
+@dataclass
+class UpdateRatioConfig:
+    """``optim`` of a recipe whose learner section holds its learning rates."""
+
+    utd_ratio: float = option(0.5, above=0.0, help="updates per collected frame (learning rates: the learner's section)")
+
+
+@dataclass
 class ModelConfig:
     ego_relative_features: bool = option(True, help="networks also read the other vehicles' offsets from the ego")
 
