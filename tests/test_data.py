@@ -398,12 +398,20 @@ class TestPublishedFiles:
 
         demos = import_published(published_files("roundabout")[24], end_at="termination", scenario="roundabout")
         early = dict(demos.metadata["early_dones"])
+        assert sorted(early) == list(ROUNDABOUT_EARLY_DONES)
+        arrivals = [_shipped_length("roundabout", "empty", 0)]
+        arrivals += [_shipped_length("roundabout", "traffic", i) for i in range(1, 23)]
         for i, length in enumerate(demos.lengths.tolist()):
-            # off the road: terminated there; otherwise the recording runs to our time limit
             terminated = demos.trajectory(i)["next", "terminated"][-1].item()
-            assert (length, terminated) == ((early[i] + 1, True) if i in ROUNDABOUT_EARLY_DONES else (55, False))
+            if i == 23:  # stalls before the ring: runs to our time limit
+                assert (length, terminated) == (55, False)
+            else:  # cut where our scene ends the episode: the arrival (before any later off-road done)
+                assert (length, terminated) == (arrivals[i], True)
+                assert i not in early or early[i] + 1 > length
         highway = import_published(published_files("highway-fast")[4], end_at="termination", scenario="highway-fast")
-        assert highway.lengths.tolist() == [75] * 4 and not highway.transitions()["next", "terminated"].any()
+        # the curriculum trajectory reaches x = 650 m on its last step; the others (600-650 m) never arrive
+        assert highway.lengths.tolist() == [75] * 4
+        assert highway.transitions()["next", "terminated"].reshape(4, 75)[:, -1].tolist() == [True, False, False, False]
         # highway episodes end at x of about 600-650 m (x in [150, 700] normalised to [-1, 1])
         final_x = 150 + (np.stack([highway.trajectory(i)["next", "observation"][-1, 1].numpy() for i in range(4)]) + 1) * 275
         assert final_x.min() > 550 and final_x.max() < 700

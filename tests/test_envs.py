@@ -312,6 +312,34 @@ def test_merge_ends_past_370():
     assert info["arrived"] and info["success"]
 
 
+def _drive_one_step_from(env, lane_index: tuple, longitudinal: float, speed: float):
+    """Put the ego alone on ``lane_index`` at ``longitudinal`` m and step once (zero action)."""
+    base = env.unwrapped
+    lane = base.road.network.get_lane(lane_index)
+    base.road.vehicles = [base.vehicle]
+    base.vehicle.position = lane.position(longitudinal, 0.0)
+    base.vehicle.heading = lane.heading_at(longitudinal)
+    base.vehicle.speed = speed
+    base.vehicle.on_state_update()
+    return env.step(np.zeros(2, np.float32))
+
+
+@pytest.mark.parametrize(
+    "name, lane_index, longitudinal, speed",
+    [("highway-fast", ("0", "1", 2), 645.0, 35.0), ("roundabout", ("nxs", "nxr", 0), 14.0, 10.0)],
+)
+def test_episode_ends_at_the_finish_in_scenes_that_drive_on(name, lane_index, longitudinal, speed):
+    """highway-fast and roundabout end on arrival, as merge and intersection do; stock drives on."""
+    env = make_gym_env(name)
+    env.reset(seed=0)
+    _, _, terminated, truncated, info = _drive_one_step_from(env, lane_index, longitudinal, speed)
+    assert info["arrived"] and info["success"] and terminated and not truncated
+    stock = make_gym_env(name, arrival_terminal=False)
+    stock.reset(seed=0)
+    _, _, terminated, truncated, info = _drive_one_step_from(stock, lane_index, longitudinal, speed)
+    assert info["arrived"] and info["success"] and not terminated and not truncated
+
+
 def test_intersection_arrival_only_at_intended_destination():
     env = make_gym_env("intersection", spawn_probability=0.0)
     env.reset(seed=0)

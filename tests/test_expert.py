@@ -246,13 +246,13 @@ def test_shipped_trajectories_end_at_arrival_without_repeated_states(scenario):
         assert not repeated.any(), f"{scenario} trajectory {i}: identical consecutive observations"
         done = traj["next", "done"].reshape(-1)
         assert done[-1] and not done[:-1].any()
-        if scenario in ("highway-fast", "roundabout"):  # the env does not terminate on arrival
-            assert traj["next", "truncated"].reshape(-1)[-1]
-            assert traj["action"].shape[0] < SCENARIOS[scenario].max_steps
+        # every scene ends at the finish: the recording's last transition is a termination
+        assert traj["next", "terminated"].reshape(-1)[-1]
+        assert traj["action"].shape[0] < SCENARIOS[scenario].max_steps
 
 
 def test_rollout_end_at_arrival_truncates_highway():
-    env = make_gym_env("highway-fast")
+    env = make_gym_env("highway-fast", arrival_terminal=False)  # stock: drives on past the finish
     full = rollout_expert(env, seed=1, empty_road=True)
     cut = rollout_expert(env, seed=1, empty_road=True, end_at_arrival=True)
     assert full["length"] == SCENARIOS["highway-fast"].max_steps and full["success"]

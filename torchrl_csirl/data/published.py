@@ -30,7 +30,7 @@ So a ``done`` before the last step is normal. Where a trajectory ends is chosen 
 * ``"termination"``: cut where our scenario's environment would end the episode (needs
   ``scenario``): after a ``done`` recorded before the trailing run (crash, off-road), after the
   first step whose next state passes the scene's termination (merge: x > 370 m; intersection:
-  arrival on the exit lane; highway-fast and roundabout do not terminate on arrival), or at the
+  arrival on the exit lane; roundabout: at the finish; highway-fast: x >= 650 m), or at the
   scenario's time limit; otherwise at the end of the recording.
 
 Mapping of the last kept step to ``terminated`` / ``truncated``: with ``end_at="termination"``
@@ -193,9 +193,10 @@ def _denormalise(spec: Any, feature: str, value: np.ndarray) -> np.ndarray:
 class _SceneTermination:
     """Whether our scenario's environment terminates in a (next) state, from the ego row alone.
 
-    Merge ends past ``merge_end_x``; intersection on arrival on its exit lane (road network of
-    the scene, as the environment decides it); highway-fast and roundabout never terminate on
-    arrival (crashes and off-road are read from the recorded ``dones``).
+    Every scene ends on arrival at the finish, decided by the environment's own test on the
+    scene's road network (merge: past ``merge_end_x``; intersection: on its exit lane;
+    roundabout: at the finish or past it on the north exit; highway-fast: x >= 650 m). Crashes
+    and off-road are read from the recorded ``dones``.
     """
 
     def __init__(self, scenario: str) -> None:
@@ -217,20 +218,28 @@ class _SceneTermination:
         """``ego``: ``(T, F)`` normalised ego rows; returns ``(T,)`` bool."""
         features = self.spec.features
         x = _denormalise(self.spec, "x", ego[:, features.index("x")])
-        if self.spec.name == "merge":
-            return x > float(self.spec.config["merge_end_x"])
-        if self.spec.name != "intersection":
-            return np.zeros(len(ego), dtype=bool)
-        env = self._road_env()
         y = _denormalise(self.spec, "y", ego[:, features.index("y")])
-        heading = np.arctan2(ego[:, features.index("sin_h")], ego[:, features.index("cos_h")])
+        if "sin_h" in features:
+            heading = np.arctan2(ego[:, features.index("sin_h")], ego[:, features.index("cos_h")])
+        else:  # highway-fast and merge: straight roads along +x
+            heading = np.zeros(len(ego))
+        env = self._road_env()
         network = env.road.network
         out = np.zeros(len(ego), dtype=bool)
         for t, position in enumerate(np.stack([x, y], -1)):
             lane_index = network.get_closest_lane_index(position, float(heading[t]))
-            vehicle = _EgoState(lane_index, network.get_lane(lane_index), position)
-            out[t] = env.has_arrived(vehicle)
+            out[t] = _arrived(env, _EgoState(lane_index, network.get_lane(lane_index), position))
         return out
+
+
+def _arrived(env: Any, ego: _EgoState) -> bool:
+    """The environment's arrival test (``has_arrived_at_finish``) applied to a recorded ego state."""
+    controlled = env.controlled_vehicles
+    env.controlled_vehicles = [ego]  # ``env.vehicle`` is the first controlled vehicle
+    try:
+        return bool(env.has_arrived_at_finish())
+    finally:
+        env.controlled_vehicles = controlled
 
 
 class _EgoState:

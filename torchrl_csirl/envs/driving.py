@@ -5,8 +5,8 @@ Every scene shares :class:`CSIRLDrivingMixin`:
 * continuous ``[acceleration, steering]`` actions in ``[-1, 1]`` (scaled by the action config),
 * a flattened Kinematics observation (``fast=True`` uses the pandas-free
   :class:`~torchrl_csirl.envs._observation.FastKinematicObservation`, identical output),
-* termination on crash and off-road (plus scene-specific conditions), truncation at
-  ``max_steps`` policy steps,
+* termination on crash, off-road and arrival at the finish (``arrival_terminal``, plus
+  scene-specific conditions), truncation at ``max_steps`` policy steps,
 * ``info`` entries ``distance_to_finish``, ``progress``, ``crashed``, ``offroad``, ``arrived``,
   ``success``.
 
@@ -109,6 +109,9 @@ class CSIRLDrivingMixin:
                 "max_steps": 100,
                 "finish_position": [0.0, 0.0],
                 "offroad_terminal": True,
+                # the task ends at the finish in every scene (stock highway-fast and roundabout
+                # drive on): docs/SCENARIOS.md, "Episodes end at the finish"
+                "arrival_terminal": True,
                 "fast": True,
             }
         )
@@ -187,6 +190,7 @@ class CSIRLDrivingMixin:
         return bool(
             self.vehicle.crashed
             or (self.config["offroad_terminal"] and self.is_offroad())
+            or (self.config.get("arrival_terminal", True) and self.has_arrived_at_finish())
             or self._scene_terminated()
         )
 
