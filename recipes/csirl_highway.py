@@ -20,9 +20,9 @@ import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-from common.builders import Run, final_summary, resume_run, start_run, train  # noqa: E402
-from common.config import describe  # noqa: E402
-from common.run import resolve_resume, run_script, write_summary  # noqa: E402
+from common.builders import Run, final_summary, open_run, train_and_finish  # noqa: E402
+from common.config import help_requested  # noqa: E402
+from common.run import run_script, write_summary  # noqa: E402
 from csirl_utils import CSIRLHighwayConfig, load_config, load_run_config, make_trainer, method_name  # noqa: E402
 
 
@@ -31,13 +31,7 @@ def build(argv: list[str], load=load_config, load_run=load_run_config) -> Run:
 
     ``load`` / ``load_run`` read the configuration (another recipe's schema, e.g. csirl_robotics.py).
     """
-    cfg = load(argv)
-    if cfg.checkpoint.resume is None:
-        return start_run(cfg, method_name(cfg), make_trainer)
-    run_dir, checkpoint = resolve_resume(cfg.checkpoint.resume)
-    # the saved configuration, updated by this command line (e.g. a larger total_frames)
-    cfg = load_run(run_dir, [a for a in argv if not a.startswith("checkpoint.resume=")])
-    return resume_run(cfg, run_dir, checkpoint, make_trainer)
+    return open_run(argv, method_name, make_trainer, load, load_run)
 
 
 def curriculum_plots(run: Run, picture=None) -> list[str]:
@@ -73,17 +67,10 @@ def main(argv: list[str] | None = None, *, schema: type = CSIRLHighwayConfig, do
     """Build, train, finish; ``schema``, ``doc``, ``build_run`` and ``finish_run`` are another recipe's
     when it reuses this one (csirl_robotics.py)."""
     argv = sys.argv[1:] if argv is None else list(argv)
-    if "--help" in argv or "-h" in argv:
-        print((doc or __doc__) + "\nKeys (key, default, what it accepts, meaning):\n  " + "\n  ".join(describe(schema)))
+    if help_requested(argv, doc or __doc__, schema):
         return {}
     start = time.perf_counter()
-    run = build_run(argv)
-    train(run)
-    try:
-        summary = finish_run(run)
-    finally:
-        run.logger.close()
-        run.eval_env.close()
+    summary = train_and_finish(build_run(argv), finish_run)
     summary["total_wall_s"] = round(time.perf_counter() - start, 1)  # with start-up, final eval and plots
     print(
         f"{summary['scenario']}: accomplish rate {summary['accomplish_rate']:.3f} "
@@ -91,7 +78,7 @@ def main(argv: list[str] | None = None, *, schema: type = CSIRLHighwayConfig, do
         f"{summary['frames_per_s']:.1f} frames/s, {summary['updates_per_s']:.1f} updates/s",
         file=sys.stderr,
     )
-    return write_summary(summary, run.run_dir)
+    return write_summary(summary, summary["run_dir"])
 
 
 if __name__ == "__main__":

@@ -20,8 +20,8 @@ import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-from common.builders import final_summary, resume_run, start_run, train  # noqa: E402
-from common.config import describe  # noqa: E402
+from common.builders import final_summary, resume_run, start_run, train_and_finish  # noqa: E402
+from common.config import help_requested  # noqa: E402
 from common.run import resolve_resume, run_script, write_summary  # noqa: E402
 from imitation_utils import (  # noqa: E402
     REFERENCE_METHODS,
@@ -40,19 +40,17 @@ def train_and_summarize(cfg) -> dict[str, object]:
         run = start_run(cfg, cfg.method, make_trainer)
     else:
         run = resume_run(cfg, *resolve_resume(cfg.checkpoint.resume), make_trainer)
-    train(run)
-    try:
-        return final_summary(run, run.cfg.method, title=f"{run.cfg.method} on {run.spec.name}")
-    finally:
-        run.logger.close()
-        run.eval_env.close()
+    return train_and_finish(run, summarize)
+
+
+def summarize(run) -> dict[str, object]:
+    """The final evaluation, policy, curve and summary of a trained method."""
+    return final_summary(run, run.cfg.method, title=f"{run.cfg.method} on {run.spec.name}")
 
 
 def main(argv: list[str] | None = None) -> dict[str, object]:
     argv = sys.argv[1:] if argv is None else list(argv)
-    if "--help" in argv or "-h" in argv:
-        print(__doc__ + "\nKeys (key, default, what it accepts, meaning):\n  "
-              + "\n  ".join(describe(ImitationHighwayConfig)))
+    if help_requested(argv, __doc__, ImitationHighwayConfig):
         return {}
     start = time.perf_counter()
     resume = next((a.split("=", 1)[1] for a in argv if a.startswith("checkpoint.resume=")), None)

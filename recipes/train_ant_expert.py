@@ -36,7 +36,7 @@ import torch  # noqa: E402
 
 from common import config as config_lib  # noqa: E402
 from common.builders import Run, assemble_trainer, check_collector, final_summary, make_online_buffer  # noqa: E402
-from common.builders import resume_run, start_run, train  # noqa: E402
+from common.builders import open_run, train_and_finish  # noqa: E402
 from common.config import (  # noqa: E402
     DEVICES,
     CheckpointConfig,
@@ -47,7 +47,7 @@ from common.config import (  # noqa: E402
     UpdateRatioConfig,
     option,
 )
-from common.run import resolve_device, resolve_resume, run_script, write_summary  # noqa: E402
+from common.run import resolve_device, run_script, write_summary  # noqa: E402
 
 from torchrl.objectives import SoftUpdate  # noqa: E402
 
@@ -199,24 +199,11 @@ def finish(run: Run) -> dict[str, object]:
 
 def main(argv: list[str] | None = None) -> dict[str, object]:
     argv = sys.argv[1:] if argv is None else list(argv)
-    if "--help" in argv or "-h" in argv:
-        print(__doc__ + "\nKeys (key, default, what it accepts, meaning):\n  "
-              + "\n  ".join(config_lib.describe(AntExpertConfig)))
+    if config_lib.help_requested(argv, __doc__, AntExpertConfig):
         return {}
     start = time.perf_counter()
-    cfg = load_config(argv)
-    if cfg.checkpoint.resume is None:
-        run = start_run(cfg, "sac", make_trainer)
-    else:
-        run_dir, checkpoint = resolve_resume(cfg.checkpoint.resume)
-        cfg = load_run_config(run_dir, [a for a in argv if not a.startswith("checkpoint.resume=")])
-        run = resume_run(cfg, run_dir, checkpoint, make_trainer)
-    train(run)
-    try:
-        summary = finish(run)
-    finally:
-        run.logger.close()
-        run.eval_env.close()
+    run = open_run(argv, lambda cfg: "sac", make_trainer, load_config, load_run_config)
+    summary = train_and_finish(run, finish)
     summary["total_wall_s"] = round(time.perf_counter() - start, 1)
     maze = summary.get("antmaze_success_rate")
     print(f"ant-goal: hop success {summary['hop_success_rate']:.2f}"

@@ -27,7 +27,7 @@ from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
 from torchrl.envs import Compose, EnvBase, Transform
 
 from common.config import ConfigError
-from common.run import ExpertDataError, default_run_name, make_run_dir
+from common.run import ExpertDataError, default_run_name, make_run_dir, resolve_resume
 from torchrl_csirl.data import ExpertDemonstrations, import_published, load_expert_demonstrations
 from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, make_serial_env, resolve_scenario
 from torchrl_csirl.envs import make_env as make_scenario_env
@@ -456,6 +456,21 @@ def resume_run(cfg: DictConfig, run_dir: str, checkpoint: str, make_trainer: Cal
     return run
 
 
+def open_run(argv: list[str], method: Callable[[DictConfig], str], make_trainer: Callable[..., Run],
+             load: Callable[[list[str]], DictConfig],
+             load_run: Callable[[str, list[str]], DictConfig]) -> Run:
+    """The run a recipe's command line asks for: a new one (:func:`start_run` on ``load(argv)``), or
+    with ``checkpoint.resume=`` the saved run, its configuration updated by the rest of the command
+    line (``load_run(run_dir, argv)``, e.g. a larger ``collector.total_frames``) and its checkpoint
+    restored (:func:`resume_run`). ``method(cfg)`` names a new run's directory."""
+    cfg = load(argv)
+    if cfg.checkpoint.resume is None:
+        return start_run(cfg, method(cfg), make_trainer)
+    run_dir, checkpoint = resolve_resume(cfg.checkpoint.resume)
+    cfg = load_run(run_dir, [a for a in argv if not a.startswith("checkpoint.resume=")])
+    return resume_run(cfg, run_dir, checkpoint, make_trainer)
+
+
 # ---------------------------------------------------------------------------------------- training and summary
 def train(run: Run) -> None:
     """``run.trainer.train()``; on any exit the collector is shut down and the logs are kept.
@@ -479,6 +494,17 @@ def train(run: Run) -> None:
         raise
     finally:
         shutdown_collector(run.collector)
+
+
+def train_and_finish(run: Run, finish: Callable[[Run], dict[str, Any]]) -> dict[str, Any]:
+    """:func:`train`, then ``finish(run)`` (final evaluation, policy, plots, summary); the logger and
+    the evaluation environment are closed whatever happens."""
+    train(run)
+    try:
+        return finish(run)
+    finally:
+        run.logger.close()
+        run.eval_env.close()
 
 
 def evaluation_summary(cfg: DictConfig, spec: ScenarioSpec, method: str, final: dict[str, float],

@@ -461,6 +461,20 @@ def attribute_docs(cls: type) -> dict[str, str]:
     return {k: v.rstrip(".") for k, v in docs.items()}
 
 
+def help_requested(argv: list[str], doc: str, schema: type) -> bool:
+    """With ``--help`` / ``-h`` on the command line, print ``doc`` and every key of ``schema``
+    (:func:`describe`) and return ``True``; a recipe's ``main`` then returns without running.
+
+    Examples:
+        >>> help_requested(["seed=1"], "doc", EnvConfig)
+        False
+    """
+    if "--help" not in argv and "-h" not in argv:
+        return False
+    print(doc + "\nKeys (key, default, what it accepts, meaning):\n  " + "\n  ".join(describe(schema)))
+    return True
+
+
 def describe(schema: type, prefix: str = "") -> list[str]:
     """``key = default  # what is allowed; help`` for every leaf (a recipe's ``--help``).
 
