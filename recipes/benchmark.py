@@ -39,7 +39,7 @@ from typing import Any
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 from common.config import SCENARIO_NAMES  # noqa: E402
-from summarize_runs import find_summaries, mean_std  # noqa: E402
+from summarize_runs import find_summaries, mean_std, welch_test  # noqa: E402
 
 RECIPES_DIR = os.path.dirname(os.path.abspath(__file__))
 REPO_ROOT = os.path.dirname(RECIPES_DIR)
@@ -47,6 +47,15 @@ REPO_ROOT = os.path.dirname(RECIPES_DIR)
 #: the table's rows, in the paper's order, and the recipe of each
 METHOD_ORDER = ("expert", "random", "sac", "bc", "gail", "dac", "valuedice", "sqil", "iqlearn", "csirl-b", "csirl")
 CSIRL_RECIPE, IMITATION_RECIPE = "csirl_highway", "imitation_highway"
+#: CSIRL and its ablations (issue 17, section 4): cells of the CSIRL recipe with these switches
+CSIRL_METHODS: dict[str, tuple[str, ...]] = {
+    "csirl": (),
+    "csirl-b": ("csirl.intrinsic=false",),  # no learned reward r_w
+    "csirl-nocur": ("csirl.fixed_subgoal=true",),  # no curriculum: the subgoal is the last state
+    "csirl-noexp": ("replay_buffer.expert_fraction=0",),  # no expert transitions in the SAC batch
+}
+#: the ablation rows (not in the paper's table, so not in a default sweep): after csirl in a report
+ABLATIONS = ("csirl-nocur", "csirl-noexp")
 REFERENCE_METHODS = ("random", "expert")
 #: methods whose run does not depend on the seed (the expert driver is deterministic): first seed only
 SEED_FREE_METHODS = ("expert",)
@@ -76,14 +85,14 @@ class BenchmarkError(ValueError):
 # ---------------------------------------------------------------------------------------- cells
 def recipe_of(method: str) -> str:
     """The recipe that runs ``method``."""
-    return CSIRL_RECIPE if method in ("csirl", "csirl-b") else IMITATION_RECIPE
+    return CSIRL_RECIPE if method in CSIRL_METHODS else IMITATION_RECIPE
 
 
 def known_methods() -> tuple[str, ...]:
     """Every method a cell can run: CSIRL's and those ``imitation_highway.py`` accepts."""
     from imitation_utils import METHODS
 
-    return ("csirl", "csirl-b", *METHODS)
+    return (*CSIRL_METHODS, *METHODS)
 
 
 @dataclass(frozen=True)
@@ -138,8 +147,8 @@ def make_cell(method: str, scenario: str, seed: int, output_dir: str, overrides:
     args = [f"env.scenario={scenario}", f"seed={seed}", "logger.progress_bar=false", *overrides]
     if recipe_of(method) == IMITATION_RECIPE:
         args.insert(0, f"method={method}")
-    elif method == "csirl-b":
-        args.append("csirl.intrinsic=false")
+    else:
+        args += CSIRL_METHODS[method]
     resumed = has_checkpoint(run_dir)
     if resumed:
         args = [f"checkpoint.resume={run_dir}", *(a for a in args if not a.startswith("method="))]
@@ -231,7 +240,8 @@ def sweep_main(argv: list[str]) -> int:
     parser = argparse.ArgumentParser(prog="benchmark.py", description="methods x scenarios x seeds as Ray Tune trials")
     available = [m for m in METHOD_ORDER if m in known_methods()]
     parser.add_argument("--methods", nargs="+", default=available, metavar="METHOD",
-                        help=f"default: all ({' '.join(available)})")
+                        help=f"default: the paper's rows ({' '.join(available)}); CSIRL's ablations: "
+                             f"{' '.join(ABLATIONS)}")
     parser.add_argument("--scenarios", nargs="+", default=list(SCENARIO_ORDER), metavar="SCENARIO")
     parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
     parser.add_argument("--output-dir", default="runs/benchmark")
@@ -255,13 +265,23 @@ def sweep_main(argv: list[str]) -> int:
 
 
 # ---------------------------------------------------------------------------------------- report
+def cell_method(summary: dict[str, Any], run_dir: str) -> str:
+    """The method of a run: the one its sweep cell's name ``<scenario>-<method>-s<seed>`` gives
+    (the ablations' runs say ``csirl`` in their summary), else the summary's own."""
+    for method in sorted(known_methods(), key=len, reverse=True):
+        if os.path.basename(run_dir) == f"{summary.get('scenario')}-{method}-s{summary.get('seed')}":
+            return method
+    return summary["method"]
+
+
 def read_runs(paths: list[str]) -> list[dict[str, Any]]:
-    """The summaries of the finished runs under ``paths``, each with its run directory."""
+    """The summaries of the finished runs under ``paths``, each with its run directory and method."""
     runs = []
     for path in find_summaries(paths):
         with open(path) as f:
             summary = json.load(f)
         summary["run_dir"] = os.path.dirname(path)
+        summary["method"] = cell_method(summary, summary["run_dir"])
         runs.append(summary)
     return runs
 
@@ -271,7 +291,7 @@ def table_rows(runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
     groups: dict[tuple[str, str], list[dict]] = defaultdict(list)
     for run in runs:
         groups[(run["method"], run["scenario"])].append(run)
-    rank = {m: i for i, m in enumerate(METHOD_ORDER)}
+    rank = {m: i for i, m in enumerate((*METHOD_ORDER, *ABLATIONS))}
     rows = []
     for (method, scenario), group in sorted(groups.items(), key=lambda kv: (rank.get(kv[0][0], 99), kv[0])):
         row: dict[str, Any] = {"method": method, "scenario": scenario, "seeds": " ".join(
@@ -282,7 +302,24 @@ def table_rows(runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
             row[f"{field}_mean"], row[f"{field}_std"] = stats["mean"], stats["std"]
         row["paper"] = PAPER_TABLE.get(method, {}).get(scenario)
         rows.append(row)
+    add_comparison_to_csirl(rows, groups)
     return rows
+
+
+def add_comparison_to_csirl(rows: list[dict[str, Any]], groups: dict[tuple[str, str], list[dict]]) -> None:
+    """Each row's difference from ``csirl`` on its scenario (expert-normalised, Welch's t-test over
+    seeds, :func:`~summarize_runs.welch_test`): ``vs_csirl``, ``vs_csirl_t``, ``vs_csirl_beyond_noise``."""
+    def values(method: str, scenario: str) -> list[float]:
+        return [float(r["normalized_accomplish_rate"]) for r in groups.get((method, scenario), [])
+                if r.get("normalized_accomplish_rate") is not None]
+
+    for row in rows:
+        test = None
+        if row["method"] != "csirl":
+            test = welch_test(values(row["method"], row["scenario"]), values("csirl", row["scenario"]))
+        row["vs_csirl"] = None if test is None else test["difference"]
+        row["vs_csirl_t"] = None if test is None else test["t"]
+        row["vs_csirl_beyond_noise"] = None if test is None else test["beyond_noise"]
 
 
 def _pm(mean: float | None, std: float | None) -> str:
@@ -316,6 +353,20 @@ def markdown_table(rows: list[dict[str, Any]]) -> str:
             ups = r["updates_per_s_mean"]
             entries.append(f"{r['total_wall_s_mean'] / 60:.1f} min" + (f", {ups:.0f} upd/s" if ups else ""))
         lines.append(f"| {method} | " + " | ".join(entries) + " |")
+    compared = [m for m in methods if any(cell[(m, s)].get("vs_csirl") is not None for s in scenarios if (m, s) in cell)]
+    if compared:
+        lines += ["", "Difference from csirl (expert-normalised; Welch's t over seeds; **bold**: beyond seed noise, "
+                  "two-sided 5 %).", "", "| method | " + " | ".join(scenarios) + " |", "|---" * (len(scenarios) + 1) + "|"]
+        for method in compared:
+            entries = []
+            for s in scenarios:
+                r = cell.get((method, s))
+                if r is None or r.get("vs_csirl") is None:
+                    entries.append("—")
+                    continue
+                text = f"{r['vs_csirl']:+.3f} (t {r['vs_csirl_t']:.1f})"
+                entries.append(f"**{text}**" if r["vs_csirl_beyond_noise"] else text)
+            lines.append(f"| {method} | " + " | ".join(entries) + " |")
     return "\n".join(lines)
 
 

@@ -186,6 +186,32 @@ def test_benchmark_resumes_a_killed_cell_from_its_checkpoint(tmp_path):
     assert [c.name for c in todo] == ["merge-expert-s0"]  # deterministic: one seed
 
 
+def test_benchmark_runs_csirl_ablations_and_tells_which_differences_exceed_seed_noise(tmp_path):
+    todo, _ = benchmark.plan_cells(["csirl-nocur", "csirl-noexp", "csirl-b"], ["merge"], [0], str(tmp_path), [])
+    switches = {c.method: [a for a in c.command if a.startswith("csirl.") or a.startswith("replay_buffer.")]
+                for c in todo}
+    assert switches == {"csirl-nocur": ["csirl.fixed_subgoal=true"],
+                        "csirl-noexp": ["replay_buffer.expert_fraction=0"], "csirl-b": ["csirl.intrinsic=false"]}
+    assert all(c.command[1].endswith("csirl_highway.py") for c in todo)
+    # finished runs as the sweep leaves them: every summary says "csirl", the cell name says which ablation
+    scores = {"csirl": [0.93, 0.94, 0.92], "csirl-nocur": [0.97, 0.95, 0.94], "csirl-noexp": [0.67, 0.70, 0.64]}
+    for method, values in scores.items():
+        for seed, value in enumerate(values):
+            run_dir = tmp_path / f"merge-{method}-s{seed}"
+            run_dir.mkdir()
+            (run_dir / "summary.json").write_text(json.dumps({
+                "scenario": "merge", "method": "csirl", "seed": seed, "normalized_accomplish_rate": value,
+                "accomplish_rate": value * 0.937, "success_rate": 0.9, "total_wall_s": 1200.0}))
+    rows = {r["method"]: r for r in benchmark.table_rows(benchmark.read_runs([str(tmp_path)]))}
+    assert list(rows) == ["csirl", "csirl-nocur", "csirl-noexp"] and rows["csirl-nocur"]["runs"] == 3
+    assert rows["csirl"]["vs_csirl"] is None
+    assert rows["csirl-nocur"]["vs_csirl"] == pytest.approx(0.0233, abs=1e-3)
+    assert not rows["csirl-nocur"]["vs_csirl_beyond_noise"]  # +0.023 with these spreads: within noise
+    assert rows["csirl-noexp"]["vs_csirl_beyond_noise"] and rows["csirl-noexp"]["vs_csirl"] < -0.2
+    table = benchmark.markdown_table(list(rows.values()))
+    assert "Difference from csirl" in table and "| csirl-noexp | **-0.260 (t " in table
+
+
 def test_help_lists_every_key_with_its_help(capsys):
     from common.config import flatten_config
 
