@@ -81,8 +81,9 @@ class CSIRLConfig:
         help="expert: r_w measured against its mean over 256 expert states (no constant shift can be learned; "
              "ExpertCenteredReward); none: the paper")
     reward_scale: float = option(1.0, above=0.0, help="multiplies the expert-centred r_w (reward_reference=expert)")
-    matching_target: str = option("final", choices=("final", "next"),
-                                  help="final (the paper's text) | next (published code)")
+    matching_target: str = option("final", choices=("final", "next", "path"),
+                                  help="final (the paper's text) | next (published code) | path (final's targets, "
+                                       "distances along the expert's path)")
     matching_features: str = option("position", choices=("ego", "position"),
                                     help="nearest expert state on: position | ego (the whole ego row: paper, code)")
     failure_resets_progress: bool = option(

@@ -356,6 +356,41 @@ def test_matching_reward_reads_the_subgoal_of_its_owner():
         SubgoalMatchingReward(expert, subgoal="three")
 
 
+def test_path_rule_measures_progress_along_the_route_and_does_not_pay_cutting_a_corner():
+    from torchrl_csirl.data import curriculum_trajectory
+    from torchrl_csirl.envs import SCENARIOS
+
+    # a straight route: the same reward as "final"
+    line = torch.arange(6.0).unsqueeze(-1)
+    s, s_next = torch.tensor([[0.5], [2.0], [4.5]]), torch.tensor([[1.5], [2.5], [4.0]])
+    rewards = {rule: matching_reward(s, s_next, line, 3, scale=10.0, target=rule) for rule in ("final", "path")}
+    torch.testing.assert_close(rewards["path"], rewards["final"])
+    # the intersection's left turn: from before the turn, a step straight at the exit is worth the
+    # most under "final" and less than following the route under "path"
+    spec = SCENARIOS["intersection"]
+    expert = curriculum_trajectory("intersection")["observation"]
+    pos = list(spec.position_feature_indices)
+    before_turn = expert[8:9]
+    step = (expert[9:10] - expert[8:9])[:, pos].norm()
+    straight = before_turn.clone()
+    towards_exit = expert[-1, pos] - before_turn[0, pos]
+    straight[0, pos] += step * towards_exit / towards_exit.norm()
+
+    def reward(s_next, rule):
+        return matching_reward(before_turn, s_next, expert, 0, position_feature_indices=pos, target=rule).item()
+
+    assert reward(straight, "final") > reward(expert[9:10], "final")  # the straight line pays the cut
+    assert reward(straight, "path") < reward(expert[9:10], "path")  # the path does not
+    assert reward(expert[9:10], "path") == pytest.approx(step.item(), rel=1e-4)  # one step along it
+    # a whole expert trajectory earns its route's length, and SubgoalMatchingReward takes the rule
+    transform = SubgoalMatchingReward(expert, subgoal=0, position_feature_indices=pos, target="path")
+    td = TensorDict({"observation": expert[:-1], "next": {"observation": expert[1:]}}, [expert.shape[0] - 1])
+    route = (expert[1:, pos] - expert[:-1, pos]).norm(dim=-1).sum()
+    assert transform(td)["next", "matching_reward"].sum().item() == pytest.approx(route.item(), rel=1e-4)
+    with pytest.raises(ValueError, match="target must be one of"):
+        SubgoalMatchingReward(expert, target="geodesic")
+
+
 def test_a_failed_termination_pays_back_the_progress_made():
     from torchrl_csirl.transforms import failed_termination_potential
 
@@ -382,8 +417,7 @@ def test_a_failed_termination_pays_back_the_progress_made():
     episode = TensorDict({"observation": path[:-1], "next": {
         "observation": path[1:], "crashed": torch.tensor([False, False, False, True]).unsqueeze(-1)}}, [4])
     assert transform(episode)["next", "matching_reward"].sum().item() == 0.0
-    assert failed_termination_potential(torch.tensor([0.5]), torch.tensor([0.0]), torch.tensor([[4.0]]),
-                                        torch.tensor([True])).item() == 4.0
+    assert failed_termination_potential(torch.tensor([0.5]), torch.tensor([4.0]), torch.tensor([True])).item() == 4.0
 
 
 def test_a_crash_in_highway_fast_pays_back_the_progress_in_the_env():

@@ -5,8 +5,12 @@ For a transition ``(s, s')``, the curriculum trajectory ``s^e_0 .. s^e_{L-1}`` a
 1. :func:`nearest_expert_index`: ``j* = argmin_j || e(s) - e(s^e_j) ||_2`` on the ego features
    ``e`` (ties go to the later index);
 2. :func:`matching_target_index`: ``t = g if j* < g`` else ``min(j* + 1, L - 1)`` (rule
-   ``"next"``, the published code) or ``L - 1`` (rule ``"final"``, the paper's "head for s_T");
-3. :func:`matching_potential`: ``psi(x) = || h(x) - h(s^e_t) ||_2`` on the position features ``h``;
+   ``"next"``, the published code) or ``L - 1`` (rules ``"final"``, the paper's "head for s_T",
+   and ``"path"``);
+3. :func:`matching_potential`: ``psi(x) = || h(x) - h(s^e_t) ||_2`` on the position features ``h``
+   (the straight line to the target); with rule ``"path"``, :func:`path_potential`: the distance
+   to the target *along the expert's path* (the offset from the path plus the arc length between
+   the projection and the target), so that a curved route is not cut across;
 4. :func:`matching_reward`: ``r_m = sign * scale * (psi(s) - psi(s'))`` (``sign=+1``: positive when
    ``s'`` is closer to the target than ``s``).
 
@@ -32,9 +36,11 @@ __all__ = [
     "distinct_expert_states",
     "failed_termination_potential",
     "nearest_expert_index",
+    "path_potential",
+    "project_on_path",
 ]
 
-_TARGET_RULES = ("next", "final")
+_TARGET_RULES = ("next", "final", "path")
 
 
 def nearest_expert_index(states: torch.Tensor, expert_states: torch.Tensor) -> torch.Tensor:
@@ -89,13 +95,13 @@ def matching_target_index(
 
     ``t = g`` while the agent is behind the subgoal (``j* < g``); once at or past it,
     ``t = min(j* + 1, L - 1)`` (``rule="next"``, published code) or ``t = L - 1``
-    (``rule="final"``, the paper).
+    (``rule="final"``, the paper; ``rule="path"`` has the same targets).
 
     Args:
         nearest (torch.Tensor): ``[B]`` nearest expert indices ``j*``.
         subgoal (int): the current subgoal ``g``.
         length (int): the curriculum trajectory length ``L``.
-        rule (str): ``"next"`` (default) or ``"final"``.
+        rule (str): ``"next"`` (default), ``"final"`` or ``"path"``.
 
     Examples:
         >>> import torch
@@ -106,7 +112,7 @@ def matching_target_index(
     """
     if rule == "next":
         past = torch.clamp(nearest + 1, max=length - 1)
-    elif rule == "final":
+    elif rule in ("final", "path"):
         past = torch.full_like(nearest, length - 1)
     else:
         raise ValueError(f"target rule must be one of {_TARGET_RULES}, got {rule!r}.")
@@ -126,6 +132,62 @@ def matching_potential(positions: torch.Tensor, target_positions: torch.Tensor) 
         [5.0]
     """
     return torch.linalg.vector_norm(positions - target_positions, dim=-1)
+
+
+def project_on_path(positions: torch.Tensor, path: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Closest point of the polyline ``path`` to each position: its arc length and the distance.
+
+    Args:
+        positions (torch.Tensor): ``[B, P]`` position features.
+        path (torch.Tensor): ``[L, P]`` the expert's positions, in order (consecutive repeats allowed).
+
+    Returns:
+        (torch.Tensor, torch.Tensor): ``[B]`` arc length from ``path[0]`` to the closest point,
+        and ``[B]`` the distance to it (the offset from the path).
+
+    Examples:
+        >>> import torch
+        >>> corner = torch.tensor([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0]])  # an L-shaped route
+        >>> arc, offset = project_on_path(torch.tensor([[1.0, 0.5], [3.0, 1.0]]), corner)
+        >>> arc.tolist(), offset.tolist()
+        ([1.0, 3.0], [0.5, 1.0])
+    """
+    path = path.to(positions.dtype)
+    if path.shape[0] == 1:
+        return positions.new_zeros(positions.shape[0]), torch.linalg.vector_norm(positions - path, dim=-1)
+    start, step = path[:-1], path[1:] - path[:-1]  # [L-1, P] segments
+    length = torch.linalg.vector_norm(step, dim=-1)
+    along = ((positions.unsqueeze(-2) - start) * step).sum(-1) / (length * length).clamp_min(1e-12)
+    along = along.clamp(0.0, 1.0)  # [B, L-1]: where on each segment the closest point lies
+    distance = torch.linalg.vector_norm(positions.unsqueeze(-2) - (start + along.unsqueeze(-1) * step), dim=-1)
+    offset, segment = distance.min(dim=-1)
+    cumulative = torch.cat([length.new_zeros(1), length.cumsum(0)])
+    arc = cumulative[segment] + along.gather(-1, segment.unsqueeze(-1)).squeeze(-1) * length[segment]
+    return arc, offset
+
+
+def path_potential(positions: torch.Tensor, path: torch.Tensor, target_index: torch.Tensor) -> torch.Tensor:
+    """The potential of rule ``"path"``: the distance to ``path[t]`` along the path,
+    ``psi(x) = offset(x) + | C_t - arc(x) |`` (:func:`project_on_path`; ``C_t`` the arc length of
+    the target). On a straight route it equals :func:`matching_potential` to the target; on a
+    curved one, cutting across the curve does not shorten it (the straight line does).
+
+    Args:
+        positions (torch.Tensor): ``[B, P]`` position features.
+        path (torch.Tensor): ``[L, P]`` the expert's positions.
+        target_index (torch.Tensor): ``[B]`` each position's target ``t``.
+
+    Examples:
+        >>> import torch
+        >>> corner = torch.tensor([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0]])
+        >>> # to the end of the L: 4 from its start (straight line: 2.83), 0.5 + 3 from (1, 0.5) (1.80)
+        >>> path_potential(torch.tensor([[0.0, 0.0], [1.0, 0.5]]), corner, torch.tensor([2, 2])).tolist()
+        [4.0, 3.5]
+    """
+    arc, offset = project_on_path(positions, path)
+    step = torch.linalg.vector_norm(path[1:] - path[:-1], dim=-1).to(positions.dtype)
+    cumulative = torch.cat([step.new_zeros(1), step.cumsum(0)])
+    return offset + (cumulative[target_index] - arc).abs()
 
 
 def matching_reward(
@@ -152,7 +214,7 @@ def matching_reward(
         ego_feature_indices: features used for the nearest-state search (default: all).
         position_feature_indices: features of the potential (default: all).
         scale (float): reward scale. Defaults to ``1.0``.
-        target (str): target rule, ``"next"`` or ``"final"``.
+        target (str): target rule, ``"next"``, ``"final"`` or ``"path"``.
         sign (float): ``+1`` (default, shaping toward the target) or ``-1``.
 
     Returns:
@@ -211,18 +273,25 @@ def _matching_reward_from_features(
     """
     nearest = _nearest_distinct(ego, expert_rows, expert_row_index)
     target_index = matching_target_index(nearest, subgoal, expert_position.shape[0], target)
-    target_position = expert_position[target_index]
-    next_potential = matching_potential(next_position, target_position)
+    if target == "path":
+        def potential(x: torch.Tensor) -> torch.Tensor:
+            return path_potential(x, expert_position, target_index)
+    else:
+        target_position = expert_position[target_index]
+
+        def potential(x: torch.Tensor) -> torch.Tensor:
+            return matching_potential(x, target_position)
+    next_potential = potential(next_position)
     if failed is not None:
-        next_potential = failed_termination_potential(next_potential, expert_position[0], target_position, failed)
-    delta = matching_potential(position, target_position) - next_potential
+        start_potential = potential(expert_position[:1].expand_as(next_position))
+        next_potential = failed_termination_potential(next_potential, start_potential, failed)
+    delta = potential(position) - next_potential
     return delta.mul_(factor)
 
 
 def failed_termination_potential(
     next_potential: torch.Tensor,
-    start_position: torch.Tensor,
-    target_position: torch.Tensor,
+    start_potential: torch.Tensor,
     failed: torch.Tensor,
 ) -> torch.Tensor:
     """The potential of ``s'`` when a transition ends the episode in failure (e.g. a crash).
@@ -236,8 +305,7 @@ def failed_termination_potential(
 
     Args:
         next_potential (torch.Tensor): ``[B]`` the ordinary ``psi(s')``.
-        start_position (torch.Tensor): ``[P]`` position features of ``s^e_0``.
-        target_position (torch.Tensor): ``[B, P]`` position features of each transition's target.
+        start_potential (torch.Tensor): ``[B]`` ``psi(s^e_0)`` toward each transition's target.
         failed (torch.Tensor): ``[B]`` bool, the transitions that end in failure.
 
     Returns:
@@ -245,12 +313,10 @@ def failed_termination_potential(
 
     Examples:
         >>> import torch
-        >>> target = torch.tensor([[10.0], [10.0]])
-        >>> failed_termination_potential(torch.tensor([2.0, 2.0]), torch.tensor([0.0]), target,
+        >>> failed_termination_potential(torch.tensor([2.0, 2.0]), torch.tensor([10.0, 10.0]),
         ...                               torch.tensor([False, True])).tolist()
         [2.0, 10.0]
     """
-    start_potential = matching_potential(start_position.expand_as(target_position), target_position)
     return torch.where(failed, torch.maximum(next_potential, start_potential), next_potential)
 
 
@@ -299,7 +365,9 @@ class SubgoalMatchingReward(TransitionRewardTransform):
             (e.g. ``ScenarioSpec.position_feature_indices``). Defaults to all features.
         scale (float): reward scale (published: 700 highway, 500 merge, 100 roundabout and
             intersection). Defaults to ``1.0``.
-        target (str): ``"next"`` (default, published code) or ``"final"`` (paper).
+        target (str): ``"next"`` (default, published code), ``"final"`` (paper: the straight line
+            to ``s^e_T`` past the subgoal) or ``"path"`` (the same targets, distances measured
+            along the expert's path: :func:`path_potential`).
         sign (float): ``+1`` (default) or ``-1``.
         in_key (NestedKey): observation key. Defaults to ``"observation"``.
         out_key (NestedKey): output key inside ``"next"``. Defaults to ``"matching_reward"``.
