@@ -268,7 +268,7 @@ def sweep_main(argv: list[str]) -> int:
 def cell_method(summary: dict[str, Any], run_dir: str) -> str:
     """The method of a run: the one its sweep cell's name ``<scenario>-<method>-s<seed>`` gives
     (the ablations' runs say ``csirl`` in their summary), else the summary's own."""
-    for method in sorted(known_methods(), key=len, reverse=True):
+    for method in known_methods():
         if os.path.basename(run_dir) == f"{summary.get('scenario')}-{method}-s{summary.get('seed')}":
             return method
     return summary["method"]
@@ -353,7 +353,7 @@ def markdown_table(rows: list[dict[str, Any]]) -> str:
             ups = r["updates_per_s_mean"]
             entries.append(f"{r['total_wall_s_mean'] / 60:.1f} min" + (f", {ups:.0f} upd/s" if ups else ""))
         lines.append(f"| {method} | " + " | ".join(entries) + " |")
-    compared = [m for m in methods if any(cell[(m, s)].get("vs_csirl") is not None for s in scenarios if (m, s) in cell)]
+    compared = list(dict.fromkeys(r["method"] for r in rows if r["vs_csirl"] is not None))
     if compared:
         lines += ["", "Difference from csirl (expert-normalised; Welch's t over seeds; **bold**: beyond seed noise, "
                   "two-sided 5 %).", "", "| method | " + " | ".join(scenarios) + " |", "|---" * (len(scenarios) + 1) + "|"]

@@ -190,7 +190,7 @@ class CSIRLDrivingMixin:
         return bool(
             self.vehicle.crashed
             or (self.config["offroad_terminal"] and self.is_offroad())
-            or (self.config.get("arrival_terminal", True) and self.has_arrived_at_finish())
+            or (self.config["arrival_terminal"] and self.has_arrived_at_finish())
             or self._scene_terminated()
         )
 
@@ -313,8 +313,8 @@ class CSIRLMergeEnv(CSIRLDrivingMixin, MergeEnv):
         if self.config.get("fast", True):
             self.road.__class__ = CachedRoad  # same state, cached neighbour search
 
-    def _scene_terminated(self) -> bool:
-        return bool(self.vehicle.position[0] > self.config["merge_end_x"])
+    def _scene_terminated(self) -> bool:  # the scene's own end, also with arrival_terminal=False
+        return self.has_arrived_at_finish()
 
     def has_arrived_at_finish(self) -> bool:
         return bool(self.vehicle.position[0] > self.config["merge_end_x"])

@@ -48,6 +48,8 @@ from torchrl_csirl.transforms.subgoal_matching import (
     matching_reward,
     matching_target_index,
     nearest_expert_index,
+    path_potential,
+    project_on_path,
 )
 
 __all__ = [
@@ -66,5 +68,7 @@ __all__ = [
     "matching_reward",
     "matching_target_index",
     "nearest_expert_index",
+    "path_potential",
     "progress_reward",
+    "project_on_path",
 ]

@@ -152,16 +152,26 @@ def project_on_path(positions: torch.Tensor, path: torch.Tensor) -> tuple[torch.
         >>> arc.tolist(), offset.tolist()
         ([1.0, 3.0], [0.5, 1.0])
     """
-    path = path.to(positions.dtype)
-    if path.shape[0] == 1:
-        return positions.new_zeros(positions.shape[0]), torch.linalg.vector_norm(positions - path, dim=-1)
-    start, step = path[:-1], path[1:] - path[:-1]  # [L-1, P] segments
+    return _project(positions, *_path_geometry(path.to(positions.dtype)))
+
+
+def _path_geometry(path: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """``(start [L-1, P], step [L-1, P], length [L-1], cumulative [L])`` of the polyline's segments;
+    ``cumulative[k]`` is the arc length from ``path[0]`` to ``path[k]``."""
+    if path.shape[0] == 1:  # one state: a zero-length segment at it
+        path = path.expand(2, -1)
+    start, step = path[:-1], path[1:] - path[:-1]
     length = torch.linalg.vector_norm(step, dim=-1)
+    return start, step, length, torch.cat([length.new_zeros(1), length.cumsum(0)])
+
+
+def _project(positions: torch.Tensor, start: torch.Tensor, step: torch.Tensor, length: torch.Tensor,
+             cumulative: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """:func:`project_on_path` on the segments of :func:`_path_geometry`."""
     along = ((positions.unsqueeze(-2) - start) * step).sum(-1) / (length * length).clamp_min(1e-12)
     along = along.clamp(0.0, 1.0)  # [B, L-1]: where on each segment the closest point lies
     distance = torch.linalg.vector_norm(positions.unsqueeze(-2) - (start + along.unsqueeze(-1) * step), dim=-1)
     offset, segment = distance.min(dim=-1)
-    cumulative = torch.cat([length.new_zeros(1), length.cumsum(0)])
     arc = cumulative[segment] + along.gather(-1, segment.unsqueeze(-1)).squeeze(-1) * length[segment]
     return arc, offset
 
@@ -184,10 +194,13 @@ def path_potential(positions: torch.Tensor, path: torch.Tensor, target_index: to
         >>> path_potential(torch.tensor([[0.0, 0.0], [1.0, 0.5]]), corner, torch.tensor([2, 2])).tolist()
         [4.0, 3.5]
     """
-    arc, offset = project_on_path(positions, path)
-    step = torch.linalg.vector_norm(path[1:] - path[:-1], dim=-1).to(positions.dtype)
-    cumulative = torch.cat([step.new_zeros(1), step.cumsum(0)])
-    return offset + (cumulative[target_index] - arc).abs()
+    return _path_potential(positions, _path_geometry(path.to(positions.dtype)), target_index)
+
+
+def _path_potential(positions: torch.Tensor, geometry: tuple[torch.Tensor, ...], target_index: torch.Tensor) -> torch.Tensor:
+    """:func:`path_potential` on the segments of :func:`_path_geometry` (computed once per batch)."""
+    arc, offset = _project(positions, *geometry)
+    return offset + (geometry[-1][target_index] - arc).abs()
 
 
 def matching_reward(
@@ -274,8 +287,10 @@ def _matching_reward_from_features(
     nearest = _nearest_distinct(ego, expert_rows, expert_row_index)
     target_index = matching_target_index(nearest, subgoal, expert_position.shape[0], target)
     if target == "path":
+        geometry = _path_geometry(expert_position.to(position.dtype))
+
         def potential(x: torch.Tensor) -> torch.Tensor:
-            return path_potential(x, expert_position, target_index)
+            return _path_potential(x, geometry, target_index)
     else:
         target_position = expert_position[target_index]
 
