@@ -233,7 +233,7 @@ def deterministic_action(policy) -> float:
 
 
 @pytest.mark.parametrize(("name", "hyperparameters", "updates"), [
-    ("iqlearn", {"batch_size": 64, "lr": 1e-3}, 100),
+    ("iqlearn", {"batch_size": 64, "lr": 1e-3, "actor_lr": 1e-3}, 100),
     # the paper's actor rate (1e-5) is too slow for a unit test; at 1e-3 the tanh policy overshoots and saturates
     ("valuedice", {"batch_size": 64, "actor_lr": 1e-4}, 150),
 ])
@@ -264,6 +264,27 @@ def test_iqlearn_losses_reach_only_their_networks():
         assert touched == {reached}, (key, touched)
     with pytest.raises(ValueError, match="num_qvalue_nets must be >= 2"):
         build("iqlearn", {"num_qvalue_nets": 1})
+
+
+@pytest.mark.parametrize("use_target_value", [True, False])
+def test_iqlearn_reads_the_successor_value_from_the_target_critics(use_target_value):
+    """The authors' setting: ``V(s')`` from the Polyak-averaged critics; ``Q(s, a)`` from the trained ones."""
+    from torchrl_csirl.objectives._imitation import sample
+
+    method = build("iqlearn", {"batch_size": 16, "use_target_value": use_target_value})
+    online, expert = buffers(method, *expert_vs_random(40))
+    loss = method.states["loss"]
+    td = TensorDict({"expert": sample(expert, 8), "collector": sample(online, 8)}, [])
+    torch.manual_seed(0)
+    before = loss(td)["loss_qvalue"].detach()
+    with torch.no_grad():
+        for param in loss.target_qvalue_network_params.values(True, True):
+            param.add_(0.5)
+    torch.manual_seed(0)  # the same sampled actions
+    after = loss(td)["loss_qvalue"].detach()
+    assert (not torch.allclose(before, after)) == use_target_value
+    # the actor learns at the authors' slower rate, the critics at SAC's
+    assert sorted(group["lr"] for group in method.states["optim_sac"].param_groups) == [3e-5, 3e-4]
 
 
 def test_valuedice_update_moves_each_network_by_its_own_objective():

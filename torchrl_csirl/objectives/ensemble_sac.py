@@ -248,16 +248,24 @@ class EnsembleSACLoss(SACLoss):
         return members
 
     # ------------------------------------------------------------------ ensemble queries
-    def qvalues(self, tensordict: TensorDictBase) -> torch.Tensor:
+    def qvalues(self, tensordict: TensorDictBase, *, target: bool = False) -> torch.Tensor:
         """Per-critic ``Q_k(s, a)`` for the observation/action entries of ``tensordict``.
 
         Gradients flow to the critic parameters unless called under ``torch.no_grad()``.
+
+        Args:
+            tensordict: holds the critic's input keys.
+
+        Keyword Args:
+            target (bool): evaluate the target critics (the Polyak-averaged copies that SAC's TD
+                target reads) instead of the trained ones. Defaults to ``False``.
 
         Returns:
             a ``[N, *batch]`` tensor.
         """
         td_in = tensordict.select(*self.qvalue_network.in_keys, strict=True)
-        td_out = vmap_qvalue_networks(self, td_in, self.qvalue_network_params)
+        params = self.target_qvalue_network_params if target else self.qvalue_network_params
+        td_out = vmap_qvalue_networks(self, td_in, params)
         return td_out.get(self.tensor_keys.state_action_value).squeeze(-1)
 
     def qvalue_dispersion(

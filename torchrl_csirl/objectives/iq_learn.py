@@ -9,14 +9,17 @@ objective
 ``J(Q) = E_{rho_E}[phi(Q(s, a) - gamma V^pi(s'))] - (1 - gamma) E_{rho_0}[V^pi(s_0)]``,
 
 with the chi-squared divergence's ``phi(x) = x - x^2 / (4 c)``; and the policy is updated as in
-SAC on the learned Q (the actor-critic form of the paper's continuous-action algorithm). Two
-choices of the paper for online imitation are used:
+SAC on the learned Q (the actor-critic form of the paper's continuous-action algorithm). Three
+choices of the authors for online imitation are used:
 
 * the **"value" initial-state term**: ``(1 - gamma) E_{rho_0}[V(s_0)] = E_{(s, s') ~ mu}[V(s) - gamma V(s')]``
   for the occupancy ``mu`` of any policy (a telescoping sum), estimated on the mixture of expert
   and replay transitions instead of the few expert initial states;
 * the **chi-squared regulariser on the mixture**: the quadratic term of ``phi`` is averaged over
-  expert *and* replay transitions, which bounds the implicit reward on the agent's data as well.
+  expert *and* replay transitions, which bounds the implicit reward on the agent's data as well;
+* the **target critics for** ``V(s')`` (the authors' posted continuous-control settings use a target
+  network, ``train.use_target=True``; where it enters is our reading: the successor values, as in SAC's
+  TD target, while ``Q(s, a)`` and ``V(s)`` use the trained critics).
 
 The SAC parts (actor and temperature losses, critic ensemble) are TorchRL's, through
 :class:`~torchrl_csirl.objectives.EnsembleSACLoss`.
@@ -51,9 +54,13 @@ class IQLearnHyperparameters(SACHyperparameters):
             minimum (2, clipped double-Q as in the other SAC-based baselines; the paper describes
             a single Q-function. :class:`EnsembleSACLoss` needs at least 2: with one critic
             TorchRL's SACLoss does not register the critic's parameters).
-        alpha_init: SAC temperature, fixed at 0.01 (the paper's small entropy temperature for
-            continuous control).
-        fixed_alpha: keep the temperature fixed.
+        alpha_init: SAC temperature, fixed at 0.01 (the authors' settings fix a small temperature per
+            task, 1e-3 to 1e-2 on MuJoCo; docs/BASELINES.md gives the sources).
+        fixed_alpha: keep the temperature fixed (the authors found SAC's learned temperature unstable
+            with IQ-Learn).
+        actor_lr: Adam learning rate of the actor (3e-5, the authors' continuous-control setting; the
+            critics use ``lr``, 3e-4).
+        use_target_value: ``V(s')`` from the target critics (the authors' setting).
     """
 
     chi2_coefficient: float = 0.5
@@ -61,6 +68,8 @@ class IQLearnHyperparameters(SACHyperparameters):
     num_qvalue_nets: int = 2
     alpha_init: float = 0.01
     fixed_alpha: bool = True
+    actor_lr: float = 3e-5
+    use_target_value: bool = True
 
 
 def inverse_soft_q_objective(expert_reward: torch.Tensor, value_difference: torch.Tensor,
@@ -88,7 +97,8 @@ class IQLearnLoss(EnsembleSACLoss):
     The input holds two sub-tensordicts, ``"expert"`` and ``"collector"`` (replay), each with
     observation, action, ``("next", "observation")`` and ``("next", "terminated")`` (no reward is
     read). ``V^pi`` is estimated with one action sampled from the policy per state (detached: the
-    critic loss does not reach the actor); ``V(s') = 0`` after a termination. With several critics
+    critic loss does not reach the actor); ``V(s') = 0`` after a termination, and it is read from the
+    target critics unless ``use_target_value=False``. With several critics
     each one gets its own objective (summed).
 
     Outputs ``loss_qvalue`` (``-J(Q)``, :func:`inverse_soft_q_objective`), ``loss_actor`` and
@@ -104,6 +114,8 @@ class IQLearnLoss(EnsembleSACLoss):
         chi2_coefficient (float): ``c`` of the chi-squared regulariser. Defaults to ``0.5``.
         num_qvalue_nets (int): critics, at least 2. Defaults to ``2``.
         alpha_init (float): SAC temperature. Defaults to ``0.01``.
+        use_target_value (bool): ``V(s')`` from the target critics (updated by the caller's
+            :class:`~torchrl.objectives.SoftUpdate`). Defaults to ``True``.
         **kwargs: forwarded to :class:`~torchrl_csirl.objectives.EnsembleSACLoss`.
 
     Examples:
@@ -136,7 +148,7 @@ class IQLearnLoss(EnsembleSACLoss):
     default_keys = _AcceptedKeys
 
     def __init__(self, actor_network, qvalue_network, *, chi2_coefficient: float = 0.5, num_qvalue_nets: int = 2,
-                 alpha_init: float = 0.01, **kwargs) -> None:
+                 alpha_init: float = 0.01, use_target_value: bool = True, **kwargs) -> None:
         _check_num_critics(num_qvalue_nets)
         if not chi2_coefficient > 0:
             raise ValueError(f"chi2_coefficient must be positive, got {chi2_coefficient}.")
@@ -144,9 +156,13 @@ class IQLearnLoss(EnsembleSACLoss):
                          **kwargs)
         self.chi2_coefficient = float(chi2_coefficient)
         self.discount = float(kwargs.get("gamma", 0.99))
+        self.use_target_value = bool(use_target_value)
 
-    def soft_value(self, observation: torch.Tensor) -> torch.Tensor:
-        """``V(s) = Q_k(s, a) - alpha log pi(a | s)``, ``a ~ pi(s)`` detached, per critic: ``[N, B]``."""
+    def soft_value(self, observation: torch.Tensor, *, target: bool = False) -> torch.Tensor:
+        """``V(s) = Q_k(s, a) - alpha log pi(a | s)``, ``a ~ pi(s)`` detached, per critic: ``[N, B]``.
+
+        With ``target=True`` the target critics give ``Q_k`` (no gradient).
+        """
         obs_key = self.qvalue_network.in_keys[0]
         td = TensorDict({obs_key: observation}, observation.shape[:1])
         with torch.no_grad(), set_exploration_type(ExplorationType.RANDOM), \
@@ -154,13 +170,16 @@ class IQLearnLoss(EnsembleSACLoss):
             # SACLoss's own sampler: the log-probability of the tanh-squashed sample, computed stably
             action, log_prob = compute_rsample_log_prob(self.actor_network.get_dist(td))
         td.set(self.tensor_keys.action, action)
-        return self.qvalues(td) - sac_alpha(self) * log_prob
+        with torch.set_grad_enabled(torch.is_grad_enabled() and not target):
+            qvalues = self.qvalues(td, target=target)
+        return qvalues - sac_alpha(self) * log_prob
 
     def _implicit_reward(self, transitions: TensorDictBase) -> tuple[torch.Tensor, torch.Tensor]:
         """``(r, V(s) - gamma V(s'))`` per critic, ``[N, B]`` each."""
         obs_key = self.qvalue_network.in_keys[0]
         not_done = 1.0 - transitions.get(("next", self.tensor_keys.terminated)).float().reshape(1, -1)
-        next_value = self.discount * not_done * self.soft_value(transitions.get(("next", obs_key)))
+        next_value = self.discount * not_done * self.soft_value(transitions.get(("next", obs_key)),
+                                                                target=self.use_target_value)
         reward = self.qvalues(transitions) - next_value
         return reward, self.soft_value(transitions.get(obs_key)) - next_value
 

@@ -68,8 +68,18 @@ class ImitationMethod:
     hyperparameters: Any = None
 
 
-def _adam(module: nn.Module, lr: float) -> torch.optim.Optimizer:
-    return torch.optim.Adam([p for p in module.parameters() if p.requires_grad], lr=lr)
+def _adam(module: nn.Module, lr: float, lr_by_prefix: dict[str, float] | None = None) -> torch.optim.Optimizer:
+    """Adam over ``module``'s trainable parameters at ``lr``, or at ``lr_by_prefix[prefix]`` for the
+    parameters whose name starts with ``prefix``."""
+    groups = {prefix: [] for prefix in lr_by_prefix or {}}
+    rest = []
+    for name, param in module.named_parameters():
+        if param.requires_grad:
+            prefix = next((p for p in groups if name.startswith(p)), None)
+            (groups[prefix] if prefix is not None else rest).append(param)
+    param_groups = [{"params": rest}] + [{"params": params, "lr": lr_by_prefix[prefix]}
+                                         for prefix, params in groups.items() if params]
+    return torch.optim.Adam(param_groups, lr=lr)
 
 
 def _identity(tensordict):
@@ -143,8 +153,10 @@ def _make_dac(actor, make_qvalue, hp: DACHyperparameters, device) -> ImitationMe
 # ------------------------------------------------------------------------------ IQ-Learn
 def _make_iqlearn(actor, make_qvalue, hp: IQLearnHyperparameters, device) -> ImitationMethod:
     loss = IQLearnLoss(actor, make_qvalue(), chi2_coefficient=hp.chi2_coefficient, num_qvalue_nets=hp.num_qvalue_nets,
-                       alpha_init=hp.alpha_init, fixed_alpha=hp.fixed_alpha, gamma=hp.gamma).to(device)
-    optimizer, target_updater = _adam(loss, hp.lr), SoftUpdate(loss, tau=hp.tau)
+                       alpha_init=hp.alpha_init, fixed_alpha=hp.fixed_alpha, gamma=hp.gamma,
+                       use_target_value=hp.use_target_value).to(device)
+    optimizer = _adam(loss, hp.lr, {"actor_network_params": hp.actor_lr})
+    target_updater = SoftUpdate(loss, tau=hp.tau)
     num_expert = round(hp.expert_fraction * hp.batch_size)
     if not 0 < num_expert < hp.batch_size:
         raise ValueError(f"expert_fraction={hp.expert_fraction} leaves no expert or no replay sample in a batch of {hp.batch_size}.")
