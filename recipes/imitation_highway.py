@@ -20,9 +20,15 @@ import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-from common.builders import final_summary, resume_run, start_run, train_and_finish  # noqa: E402
+from common.builders import (  # noqa: E402
+    final_summary,
+    open_configured_run,
+    requested_config,
+    start_run,
+    train_and_finish,
+)
 from common.config import help_requested  # noqa: E402
-from common.run import resolve_resume, run_script, write_summary  # noqa: E402
+from common.run import run_script, write_summary  # noqa: E402
 from imitation_utils import (  # noqa: E402
     REFERENCE_METHODS,
     ImitationHighwayConfig,
@@ -31,16 +37,6 @@ from imitation_utils import (  # noqa: E402
     load_run_config,
     make_trainer,
 )
-
-
-def train_and_summarize(cfg) -> dict[str, object]:
-    """A trained method (new or resumed): the training loop, then the final evaluation, policy,
-    curve and summary."""
-    if cfg.checkpoint.resume is None:
-        run = start_run(cfg, cfg.method, make_trainer)
-    else:
-        run = resume_run(cfg, *resolve_resume(cfg.checkpoint.resume), make_trainer)
-    return train_and_finish(run, summarize)
 
 
 def summarize(run) -> dict[str, object]:
@@ -53,16 +49,12 @@ def main(argv: list[str] | None = None) -> dict[str, object]:
     if help_requested(argv, __doc__, ImitationHighwayConfig):
         return {}
     start = time.perf_counter()
-    resume = next((a.split("=", 1)[1] for a in argv if a.startswith("checkpoint.resume=")), None)
-    if resume is not None and resume != "null":  # the saved run's configuration (and method), updated
-        cfg = load_run_config(resolve_resume(resume)[0], [a for a in argv if not a.startswith("checkpoint.resume=")])
-        cfg.checkpoint.resume = resume
-    else:
-        cfg = load_config(argv)
+    cfg = requested_config(argv, load_config, load_run_config)  # a resumed run keeps its method
     if cfg.method in REFERENCE_METHODS:
         summary = start_run(cfg, cfg.method, evaluate_reference)
     else:
-        summary = train_and_summarize(cfg)
+        run = open_configured_run(cfg, lambda cfg: cfg.method, make_trainer)
+        summary = train_and_finish(run, summarize)
     summary["total_wall_s"] = round(time.perf_counter() - start, 1)
     print(f"{summary['scenario']} / {summary['method']}: accomplish rate {summary['accomplish_rate']:.3f} "
           f"(success {summary['success_rate']:.2f}) after {summary['frames']} frames / {summary['updates']} updates",

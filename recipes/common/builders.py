@@ -456,19 +456,33 @@ def resume_run(cfg: DictConfig, run_dir: str, checkpoint: str, make_trainer: Cal
     return run
 
 
+def requested_config(argv: list[str], load: Callable[[list[str]], DictConfig],
+                     load_run: Callable[[str, list[str]], DictConfig]) -> DictConfig:
+    """The configuration a recipe's command line asks for: ``load(argv)`` for a new run, or with
+    ``checkpoint.resume=`` the saved run's configuration updated by the rest of the command line
+    (``load_run(run_dir, argv)``, e.g. a larger ``collector.total_frames``), ``checkpoint.resume`` kept."""
+    resume = next((a.split("=", 1)[1] for a in argv if a.startswith("checkpoint.resume=")), None)
+    if resume is None or resume == "null":
+        return load(argv)
+    cfg = load_run(resolve_resume(resume)[0], [a for a in argv if not a.startswith("checkpoint.resume=")])
+    cfg.checkpoint.resume = resume
+    return cfg
+
+
+def open_configured_run(cfg: DictConfig, method: Callable[[DictConfig], str], make_trainer: Callable[..., Run]) -> Run:
+    """A new run (:func:`start_run`, its directory named by ``method(cfg)``), or the run of
+    ``cfg.checkpoint.resume`` with its checkpoint restored (:func:`resume_run`)."""
+    if cfg.checkpoint.resume is None:
+        return start_run(cfg, method(cfg), make_trainer)
+    return resume_run(cfg, *resolve_resume(cfg.checkpoint.resume), make_trainer)
+
+
 def open_run(argv: list[str], method: Callable[[DictConfig], str], make_trainer: Callable[..., Run],
              load: Callable[[list[str]], DictConfig],
              load_run: Callable[[str, list[str]], DictConfig]) -> Run:
-    """The run a recipe's command line asks for: a new one (:func:`start_run` on ``load(argv)``), or
-    with ``checkpoint.resume=`` the saved run, its configuration updated by the rest of the command
-    line (``load_run(run_dir, argv)``, e.g. a larger ``collector.total_frames``) and its checkpoint
-    restored (:func:`resume_run`). ``method(cfg)`` names a new run's directory."""
-    cfg = load(argv)
-    if cfg.checkpoint.resume is None:
-        return start_run(cfg, method(cfg), make_trainer)
-    run_dir, checkpoint = resolve_resume(cfg.checkpoint.resume)
-    cfg = load_run(run_dir, [a for a in argv if not a.startswith("checkpoint.resume=")])
-    return resume_run(cfg, run_dir, checkpoint, make_trainer)
+    """The run a recipe's command line asks for (:func:`requested_config`, then
+    :func:`open_configured_run`)."""
+    return open_configured_run(requested_config(argv, load, load_run), method, make_trainer)
 
 
 # ---------------------------------------------------------------------------------------- training and summary
