@@ -46,8 +46,9 @@ class IQLearnHyperparameters(SACHyperparameters):
     """IQ-Learn's settings (continuous control).
 
     Attributes:
+        lr: Adam learning rate of the critics (3e-4; the actor has ``actor_lr``).
         chi2_coefficient: ``c`` of ``phi(x) = x - x^2 / (4 c)`` (the chi-squared divergence; the
-            paper's ``alpha`` of the regulariser), 0.5 for continuous control in the paper.
+            paper's ``alpha`` of the regulariser), 0.5 (the authors' ``r^2 / (4 * 0.5)``).
         expert_fraction: share of expert transitions per batch (half, as the paper's batches of
             expert and policy samples).
         num_qvalue_nets: soft Q-functions, each trained on its own objective, the actor on their
