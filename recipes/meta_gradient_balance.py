@@ -25,16 +25,17 @@ import torch
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-from common.builders import load_experts  # noqa: E402
+from common.builders import load_experts, requested_config  # noqa: E402
+from common.run import resolve_resume  # noqa: E402
 from csirl_utils import load_config, load_run_config, make_loss_modules, make_matching  # noqa: E402
 
 from torchrl_csirl.envs import SCENARIOS, make_env  # noqa: E402
 from torchrl_csirl.objectives import MetaRewardLoss  # noqa: E402
 
 
-def load_trained(modules, run_dir: str) -> None:
-    """Actor, critics and reward network of a run's last checkpoint."""
-    state = torch.load(os.path.join(run_dir, "checkpoints", "last", "state.pt"), weights_only=False)
+def load_trained(modules, checkpoint: str) -> None:
+    """Actor, critics and reward network of a run's checkpoint directory."""
+    state = torch.load(os.path.join(checkpoint, "state.pt"), weights_only=False)
     modules.sac.load_state_dict(state["states"]["loss"])
     modules.reward_network.load_state_dict(state["states"]["reward_network"])
 
@@ -44,16 +45,14 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     parser.add_argument("--frames", type=int, default=600, help="frames rolled out with the actor")
     parser.add_argument("--steps", type=int, default=10, help="meta-losses averaged")
     args, overrides = parser.parse_known_args(argv)
-    resume = next((o.split("=", 1)[1] for o in overrides if o.startswith("checkpoint.resume=")), None)
-    overrides = [o for o in overrides if not o.startswith("checkpoint.resume=")]
     # a trained run: its own configuration (networks, scenario), updated by the command line
-    cfg = load_run_config(resume, overrides) if resume else load_config(overrides)
+    cfg = requested_config(overrides, load_config, load_run_config)
     torch.manual_seed(cfg.seed)
     spec = SCENARIOS[cfg.env.scenario]
     demos = load_experts(cfg.expert, spec)
     modules = make_loss_modules(cfg, spec, demos=demos)
-    if resume:
-        load_trained(modules, resume)
+    if cfg.checkpoint.resume is not None:
+        load_trained(modules, resolve_resume(cfg.checkpoint.resume)[1])
     curriculum_obs = demos.trajectory_observations(0, include_final=True)
     matching = make_matching(cfg, spec, curriculum_obs, subgoal=min(5, len(curriculum_obs) - 1))
     env = make_env(spec.name, seed=cfg.seed)
@@ -72,7 +71,7 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
             sums[key] += float(out[key]) / args.steps
     summary = {
         "scenario": spec.name,
-        "checkpoint": resume,
+        "checkpoint": cfg.checkpoint.resume,
         "reward_l1_coef": cfg.csirl.reward_l1_coef,
         "lr_inner": cfg.csirl.lr_inner,
         **{k: float(f"{v:.4g}") for k, v in sums.items()},
