@@ -33,6 +33,7 @@ import torch
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "recipes"))
 
 import csirl_utils  # noqa: E402
+from common.run import resolve_device  # noqa: E402
 
 
 def _fill(run, frames: int) -> None:
@@ -74,6 +75,7 @@ def main() -> None:
             trainer.updates = 0  # a multiple of meta_every: the meta-gradient step
             update(trainer)
 
+        sync = torch.cuda.synchronize if resolve_device(cfg.device).type == "cuda" else None
         steps = {"sample": sample, "sac_step": sac_step}
         if meta_every is not None:
             steps["joint_step"] = joint_step
@@ -82,9 +84,12 @@ def main() -> None:
             for name, step in steps.items():
                 start = time.perf_counter()
                 step()
+                if sync is not None:
+                    sync()  # the GPU works asynchronously: time the work, not its launch
                 if i >= args.warmup:
                     times[name].append((time.perf_counter() - start) * 1e3)
-        result = {"threads": torch.get_num_threads(), "iters": args.iters, "overrides": args.overrides,
+        result = {"threads": torch.get_num_threads(), "device": "cuda" if sync else "cpu", "iters": args.iters,
+                  "overrides": args.overrides,
                   "batch": cfg.replay_buffer.batch_size, "meta_every": meta_every}
         result.update({f"{name}_ms": round(statistics.median(ts), 2) for name, ts in times.items()})
         if meta_every is None:

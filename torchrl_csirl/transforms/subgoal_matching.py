@@ -450,8 +450,9 @@ class SubgoalMatchingReward(TransitionRewardTransform):
         pos = _check_indices(position_feature_indices, dim, "position_feature_indices")
         expert = expert.detach().clone()
         self.register_buffer("expert_observations", expert)
-        ego = ego if ego is not None else torch.arange(dim)
-        pos = pos if pos is not None else torch.arange(dim)
+        # the indices live with the expert states (a GPU learner keeps them there)
+        ego = (ego if ego is not None else torch.arange(dim)).to(expert.device)
+        pos = (pos if pos is not None else torch.arange(dim)).to(expert.device)
         # features selected once: a call costs one [B, L] distance matrix and a few [B] ops
         rows, row_index = distinct_expert_states(expert.index_select(-1, ego))
         self.register_buffer("_expert_rows", rows)
