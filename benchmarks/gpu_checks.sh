@@ -3,8 +3,9 @@
 #
 #   bash benchmarks/gpu_checks.sh [OUT_DIR]        # default OUT_DIR: gpu-checks/
 #
-# 1. tests: the device-parametrised unit tests on CUDA (the meta-gradient against finite
-#    differences, the joint update, the fused critic ensemble against vmap);
+# 1. tests: the device-parametrised unit tests on CUDA (the reward transforms in a replay buffer on
+#    the GPU, the meta-gradient against finite differences, the joint update, the fused critic
+#    ensemble against vmap);
 # 2. recipes: csirl_highway.py end to end with device=cuda on a tiny budget, then resumed from its
 #    checkpoint; a baseline (imitation_highway.py method=iqlearn) and the AntMaze expert's SAC
 #    (train_ant_expert.py) with device=cuda;
@@ -43,7 +44,8 @@ TINY_CSIRL=(collector.frames_per_batch=100 collector.init_random_frames=100 repl
 'tensordict', tensordict.__version__, 'highway-env', highway_env.__version__, 'cuda', torch.cuda.is_available(),
 torch.cuda.get_device_name() if torch.cuda.is_available() else '')" 2>&1 | tail -n 1
 
-step tests "$PY" -m pytest -q -p no:cacheprovider -k cuda tests/test_meta_loss.py tests/test_ensemble_sac.py
+step tests "$PY" -m pytest -q -p no:cacheprovider -k cuda tests/test_meta_loss.py tests/test_ensemble_sac.py \
+  tests/test_transforms.py
 step csirl "$PY" recipes/csirl_highway.py "${TINY_CSIRL[@]}" collector.total_frames=400 logger.exp_name=csirl
 step csirl_resume "$PY" recipes/csirl_highway.py "checkpoint.resume=$RUNS/csirl" collector.total_frames=600
 step iqlearn "$PY" recipes/imitation_highway.py method=iqlearn "device=$DEVICE" collector.frames_per_batch=100 \

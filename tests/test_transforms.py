@@ -21,6 +21,8 @@ from torchrl_csirl.transforms import (
     nearest_expert_index,
 )
 
+from devices import DEVICES
+
 OBS_DIM = 7  # ContinuousActionVecMockEnv
 
 
@@ -288,6 +290,27 @@ class TestReplayBufferTransforms:
             net.module.mlp[-1].bias.fill_(0.5)
         sample = rb.sample()
         torch.testing.assert_close(sample["next", "intrinsic_reward"], torch.full((16, 1), float(np.tanh(0.5))))
+
+
+@pytest.mark.parametrize("device", DEVICES)
+@pytest.mark.parametrize("target", ["next", "final", "path"])
+def test_reward_transforms_on_the_learners_device(device, target):
+    """As in the recipe with ``device=cuda``: expert states, buffer and reward network on the device."""
+    env = ContinuousActionVecMockEnv()
+    env.set_seed(1)
+    data = env.rollout(32, break_when_any_done=False)
+    rb = TensorDictReplayBuffer(storage=LazyTensorStorage(32, device=device), batch_size=16)
+    rb.extend(data)
+    matching = SubgoalMatchingReward(_expert().to(device), subgoal=3, ego_feature_indices=[0, 1, 2],
+                                     position_feature_indices=[0, 1], scale=10.0, target=target)
+    net = make_reward_network(OBS_DIM).to(device)
+    rb.append_transform(Compose(matching, IntrinsicReward(net), CombineRewards(["matching_reward", "intrinsic_reward"])))
+    sample = rb.sample()
+    assert sample["next", "reward"].device.type == device
+    on_cpu = SubgoalMatchingReward(_expert(), subgoal=3, ego_feature_indices=[0, 1, 2],
+                                   position_feature_indices=[0, 1], scale=10.0, target=target)
+    want = on_cpu(sample.cpu().exclude(("next", "matching_reward")))["next", "matching_reward"]
+    torch.testing.assert_close(sample["next", "matching_reward"].cpu(), want, rtol=1e-5, atol=1e-5)
 
 
 class TestIntrinsicReward:
