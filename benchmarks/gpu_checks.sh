@@ -23,6 +23,7 @@ export PYTHONPATH="$PWD:$PWD/recipes${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERE
 PY=${PYTHON:-python3}
 DEVICE=${DEVICE:-cuda}  # DEVICE=cpu: a dry run of the recipe steps on a machine without a GPU
 RUNS=$(mktemp -d)
+trap 'rm -rf "$RUNS"' EXIT  # the tiny runs are checks, not results
 FAILED=0
 
 step() {  # step NAME COMMAND...: run, log, record rc and seconds
