@@ -6,8 +6,8 @@ reward, curriculum, meta-learned reward, outputs, logging, checkpoints, resume a
 line; the task's spec supplies the dimensions, the matching features ``h(s)`` and the episode
 limit. Differences from the driving recipe's configuration:
 
-* ``expert.curriculum=expert`` (Relocate's shipped file, 25 DAPG trajectories); AntMaze has no
-  shipped expert data yet (docs/ROBOTICS.md): pass ``expert.path=<ExpertDemonstrations .npz>``;
+* ``expert.curriculum=expert``: the task's shipped file (Relocate: 25 DAPG trajectories; AntMaze:
+  25 trajectories of the waypoint-driven ant, docs/EXPERTS.md), or ``expert.path=<.npz>``;
 * ``model.ego_relative_features=false`` (that input map is the driving scenes');
 * ``collector.frames_per_batch=1400`` so that each of 2 workers' environments runs whole
   AntMaze episodes (700 steps; collection resets every environment at each batch start);
@@ -15,7 +15,7 @@ limit. Differences from the driving recipe's configuration:
   rate is the task's progress measure; the curriculum picture is the maze from above with the
   subgoals (AntMaze) or the matching features along the curriculum trajectory (Relocate).
 
-Budgets are not tuned yet: no result is claimed for these tasks (docs/ROBOTICS.md).
+Budgets are not tuned yet (docs/ROBOTICS.md, docs/RESULTS.md).
 """
 from __future__ import annotations
 
@@ -33,10 +33,9 @@ import csirl_highway  # noqa: E402
 from common import config as config_lib  # noqa: E402
 from common.builders import Run, check_collector  # noqa: E402
 from common.config import CollectorConfig, ConfigError, ExpertConfig, ModelConfig, option  # noqa: E402
-from common.run import ExpertDataError, resolve_device, run_script  # noqa: E402
+from common.run import resolve_device, run_script  # noqa: E402
 from csirl_utils import CSIRLHighwayConfig  # noqa: E402
 
-from torchrl_csirl.data.shipped import TASK_CURRICULA  # noqa: E402
 from torchrl_csirl.envs.robotics import ROBOTICS_TASKS  # noqa: E402
 
 __all__ = ["CSIRLRoboticsConfig", "load_config", "load_run_config", "main"]
@@ -52,7 +51,8 @@ class RoboticsEnvConfig:
 @dataclass
 class RoboticsExpertConfig(ExpertConfig):
     curriculum: str = option("expert", choices=("expert",),
-                             help="the shipped file's (Relocate: 25 DAPG trajectories; trajectory 0 is the curriculum)")
+                             help="the shipped file (Relocate: 25 DAPG trajectories; AntMaze: 25 of the "
+                                  "waypoint-driven ant); trajectory 0 is the curriculum")
 
 
 @dataclass
@@ -79,7 +79,7 @@ def resolve_task(cfg: DictConfig, overrides: list[str] | None) -> None:
     """``env.task`` and ``env.scenario`` name the same thing: one value for both, or a ConfigError.
 
     Examples:
-        >>> cfg = load_config(["env.task=antmaze-umaze", "expert.path=x.npz"])
+        >>> cfg = load_config(["env.task=antmaze-umaze"])
         >>> cfg.env.scenario, cfg.env.task
         ('antmaze-umaze', 'antmaze-umaze')
     """
@@ -98,10 +98,6 @@ def _check(cfg: DictConfig, overrides: list[str] | None = None) -> DictConfig:
     resolve_device(cfg.device)
     if cfg.model.ego_relative_features:
         raise ConfigError("model.ego_relative_features=true: the other-vehicle offsets exist in driving scenes only")
-    if cfg.expert.path is None and cfg.env.scenario not in TASK_CURRICULA:
-        raise ExpertDataError(
-            f"env.scenario={cfg.env.scenario}: no shipped expert data for this task yet (docs/ROBOTICS.md); "
-            "pass expert.path=<ExpertDemonstrations .npz>")
     return cfg
 
 

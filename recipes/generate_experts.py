@@ -1,8 +1,8 @@
 """Roll a task's expert and write expert demonstrations (``ExpertDemonstrations`` ``.npz``).
 
 Experts: the privileged expert driver on the driving scenarios, the DAPG policy on ``relocate``,
-the waypoint-driven goal-reaching ant on ``antmaze-umaze`` (``--ant-policy``: a run of
-``recipes/train_ant_expert.py``).
+the waypoint-driven goal-reaching ant on ``antmaze-umaze`` (the shipped ant, or ``--ant-policy``: a
+run of ``recipes/train_ant_expert.py``).
 
 Episode ``i`` is reset with seed ``--seed + i``; the expert itself is deterministic, so the same
 command writes the same bytes. The script ends with ONE JSON line with the statistics of every
@@ -26,7 +26,11 @@ Examples:
     python recipes/generate_experts.py --scenario relocate --episodes 25 --seed 0 --only-successful \
         --out torchrl_csirl/data/experts/relocate/expert_25.npz
     python recipes/generate_experts.py --scenario relocate --episodes 20 --seed 10000
-    # AntMaze: the waypoint expert with a trained goal-reaching ant, on unseen seeds
+    # AntMaze: the waypoint expert (the shipped ant) on unseen seeds; the shipped 25 trajectories
+    python recipes/generate_experts.py --scenario antmaze-umaze --episodes 100 --seed 10000
+    python recipes/generate_experts.py --scenario antmaze-umaze --episodes 25 --seed 0 --only-successful \
+        --out torchrl_csirl/data/experts/antmaze-umaze/expert_25.npz
+    # ... or with another goal-reaching ant
     python recipes/generate_experts.py --scenario antmaze-umaze --ant-policy runs/ant-goal-sac-s0-... \
         --episodes 100 --seed 10000
 """
@@ -53,7 +57,8 @@ ACTION_UNITS = {
 
 
 def expert_options(scenario: str, ant_policy: str | None) -> dict[str, Any]:
-    """The keywords of ``make_expert(scenario, ...)``: the ant's policy for AntMaze, else none."""
+    """The keywords of ``make_expert(scenario, ...)``: the ant's policy for AntMaze (``None``: the
+    shipped ant), else none."""
     return {"policy": ant_policy} if scenario == "antmaze-umaze" else {}
 
 
@@ -233,12 +238,13 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     parser.add_argument("--shipped", action="store_true", help="write the shipped datasets of --scenario")
     parser.add_argument("--shipped-dir", default=None, help="output folder of --shipped (default: the package's)")
     parser.add_argument("--ant-policy", default=None,
-                        help="antmaze-umaze: the goal-reaching ant (policy.pt or a run of recipes/train_ant_expert.py)")
+                        help="antmaze-umaze: the goal-reaching ant (policy.pt or a run of recipes/train_ant_expert.py; "
+                             "default: the shipped one)")
     args = parser.parse_args(argv)
     if args.episodes < 1:
         parser.error("--episodes must be >= 1")
-    if (args.scenario == "antmaze-umaze") != (args.ant_policy is not None):
-        parser.error("--ant-policy is required with --scenario antmaze-umaze and applies to it only")
+    if args.ant_policy is not None and args.scenario != "antmaze-umaze":
+        parser.error("--ant-policy applies to --scenario antmaze-umaze only")
     options = expert_options(args.scenario, args.ant_policy)
 
     if args.shipped:

@@ -1,5 +1,5 @@
-"""recipes/csirl_robotics.py end to end on a tiny budget (Relocate from the shipped data, AntMaze from a
-test-only dataset), and its configuration and data errors."""
+"""recipes/csirl_robotics.py end to end on a tiny budget (both tasks from their shipped data), and its
+configuration and data errors."""
 from __future__ import annotations
 
 import json
@@ -7,7 +7,6 @@ import os
 import sys
 
 import pytest
-import torch
 
 RECIPES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "recipes")
 sys.path.insert(0, RECIPES)
@@ -17,8 +16,8 @@ from common import builders  # noqa: E402
 from common.config import ConfigError  # noqa: E402
 from common.run import ExpertDataError  # noqa: E402
 
-from torchrl_csirl.data import ExpertDemonstrations  # noqa: E402
-from torchrl_csirl.envs import make_env, resolve_scenario  # noqa: E402
+from torchrl_csirl.data import load_expert_demonstrations  # noqa: E402
+from torchrl_csirl.envs import resolve_scenario  # noqa: E402
 
 # one worker, one env, 200-frame batches (one Relocate episode), rounds of 10 updates, 1 test episode
 TINY = [
@@ -57,22 +56,14 @@ def test_relocate_end_to_end_from_the_shipped_dapg_data(tmp_path):
     assert summary["curriculum_length"] == 201  # the first DAPG trajectory: 200 steps + its last state
 
 
-def test_antmaze_end_to_end_from_a_test_dataset(tmp_path):
-    """AntMaze has no expert yet: two short random-action episodes exercise the plumbing, not learning."""
-    env = make_env("antmaze-umaze", seed=0)
-    torch.manual_seed(0)
-    episodes = [env.rollout(30, break_when_any_done=False) for _ in range(2)]
-    path = ExpertDemonstrations.from_episodes(episodes, metadata={"scenario": "antmaze-umaze"}).save(
-        tmp_path / "ant.npz")
-    summary = csirl_robotics.main(["env.scenario=antmaze-umaze", f"expert.path={path}", "expert.num_trajectories=2",
-                                   *TINY, f"logger.output_dir={tmp_path}"])
+def test_antmaze_end_to_end_from_the_shipped_ant_data(tmp_path):
+    summary = csirl_robotics.main(["env.scenario=antmaze-umaze", *TINY, f"logger.output_dir={tmp_path}"])
     _check_run(summary, "antmaze-umaze")
-    assert summary["curriculum_length"] == 31
+    first = load_expert_demonstrations("antmaze-umaze", 1)
+    assert summary["curriculum_length"] == int(first.lengths[0]) + 1  # the first trajectory and its last state
 
 
 def test_configuration_and_data_errors(tmp_path):
-    with pytest.raises(ExpertDataError, match="no shipped expert data for this task yet"):
-        csirl_robotics.load_config(["env.scenario=antmaze-umaze"])
     with pytest.raises(ConfigError, match="model.ego_relative_features=true"):
         csirl_robotics.load_config(["model.ego_relative_features=true"])
     with pytest.raises(ConfigError, match="env.scenario=merge"):

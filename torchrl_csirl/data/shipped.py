@@ -3,7 +3,8 @@
 Layout: ``torchrl_csirl/data/experts/<task>/<curriculum>_25.npz``. Driving scenarios (our expert
 driver): ``curriculum`` in ``"empty"`` (trajectory 0 recorded on an empty road, as in the paper)
 and ``"traffic"`` (trajectory 0 recorded with traffic); both files share trajectories 1..24
-(successful expert episodes with traffic). Relocate (the DAPG policy): one file, ``"expert"``. The paper's dataset sizes N in {1, 5, 10, 15, 20, 25} are the nested
+(successful expert episodes with traffic). Relocate (the DAPG policy) and AntMaze (the waypoint-driven
+ant): one file each, ``"expert"``. The paper's dataset sizes N in {1, 5, 10, 15, 20, 25} are the nested
 prefixes: the dataset of size N is the first N trajectories, so every size contains the
 curriculum trajectory. See ``docs/EXPERTS.md`` for how the files were generated.
 
@@ -42,6 +43,7 @@ CURRICULA = ("empty", "traffic")
 SCENARIO_NAMES = ("highway-fast", "merge", "roundabout", "intersection")
 TASK_CURRICULA: dict[str, tuple[str, ...]] = {
     **{name: CURRICULA for name in SCENARIO_NAMES},
+    "antmaze-umaze": ("expert",),
     "relocate": ("expert",),
 }
 """Task -> the curricula of its shipped files (the first is the default)."""
@@ -53,7 +55,7 @@ def available_expert_datasets() -> dict[str, list[str]]:
 
     Examples:
         >>> sorted(available_expert_datasets())
-        ['highway-fast', 'intersection', 'merge', 'relocate', 'roundabout']
+        ['antmaze-umaze', 'highway-fast', 'intersection', 'merge', 'relocate', 'roundabout']
     """
     found: dict[str, list[str]] = {}
     for scenario, task_curricula in TASK_CURRICULA.items():
@@ -70,7 +72,7 @@ def _path(scenario: str, curriculum: str) -> str:
 def expert_dataset_path(scenario: str, curriculum: str | None = None) -> str:
     """Path of the shipped file of a task (raises a clear error when unknown/missing).
 
-    ``curriculum=None`` picks the task's default (driving ``"empty"``, Relocate ``"expert"``).
+    ``curriculum=None`` picks the task's default (driving ``"empty"``, robotics ``"expert"``).
 
     Examples:
         >>> os.path.basename(expert_dataset_path("relocate"))

@@ -828,8 +828,8 @@ def make_expert(name: str, **overrides: Any) -> Any:
     """Build the expert of a task: the driver of a driving scenario (optionally overriding
     fields of its :class:`ExpertConfig`) or a robotics task's policy (``"relocate"``: the DAPG
     expert, :class:`~torchrl_csirl.envs.robotics.expert.DAPGRelocateExpert`; ``"antmaze-umaze"``:
-    :class:`~torchrl_csirl.envs.robotics.WaypointAntExpert`, whose goal-reaching policy must be
-    given as ``policy=<policy.pt or run directory of recipes/train_ant_expert.py>`` until one ships).
+    :class:`~torchrl_csirl.envs.robotics.WaypointAntExpert` driving the shipped goal-reaching ant, or
+    ``policy=<policy.pt or run directory of recipes/train_ant_expert.py>``).
 
     Every expert has ``reset(env)`` and ``act(env) -> action``.
 
@@ -843,11 +843,9 @@ def make_expert(name: str, **overrides: Any) -> Any:
     robotics = _robotics_experts()
     if name == "antmaze-umaze":
         unknown = sorted(set(overrides) - {"policy"})
-        if unknown or "policy" not in overrides:
-            raise ValueError(
-                "The 'antmaze-umaze' expert needs policy=<the goal-reaching ant policy: policy.pt or a run directory "
-                f"of recipes/train_ant_expert.py> (no trained ant ships yet, docs/ROBOTICS.md); got {sorted(overrides)}.")
-        return robotics[name](overrides["policy"])
+        if unknown:
+            raise ValueError(f"The 'antmaze-umaze' expert takes only policy=<policy.pt or run directory>, got {unknown}.")
+        return robotics[name](overrides.get("policy"))
     if name in robotics:
         if overrides:
             raise ValueError(f"The {name!r} expert takes no options, got {sorted(overrides)}.")

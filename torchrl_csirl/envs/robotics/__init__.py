@@ -10,7 +10,7 @@
 """
 from __future__ import annotations
 
-from torchrl_csirl.envs.robotics.ant_goal import ANT_GOAL_SPEC, AntGoalEnv, WaypointAntExpert, next_waypoint
+from torchrl_csirl.envs.robotics.ant_goal import ANT_GOAL_SPEC, ANT_POLICY_PATH, AntGoalEnv, WaypointAntExpert, next_waypoint
 from torchrl_csirl.envs.robotics.tasks import (
     ANTMAZE_UMAZE_MAP,
     ROBOTICS_TASKS,
@@ -23,6 +23,7 @@ from torchrl_csirl.envs.robotics.tasks import (
 
 __all__ = [
     "ANT_GOAL_SPEC",
+    "ANT_POLICY_PATH",
     "ANTMAZE_UMAZE_MAP",
     "AntGoalEnv",
     "WaypointAntExpert",

@@ -18,15 +18,11 @@ import torch
 from tensordict.nn import TensorDictModule
 from torch import nn
 
+from torchrl_csirl.data.shipped import EXPERTS_DIR
+
 __all__ = ["DAPG_POLICY_PATH", "DAPGRelocateExpert", "DAPGRelocatePolicy"]
 
-DAPG_POLICY_PATH = os.path.join(
-    os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
-    "data",
-    "experts",
-    "relocate",
-    "relocate_dapg_policy.npz",
-)
+DAPG_POLICY_PATH = os.path.join(EXPERTS_DIR, "relocate", "relocate_dapg_policy.npz")
 """The shipped DAPG weights (float64 arrays ``w0, b0, w1, b1, w2, b2``, ``in_shift``, ``in_scale``,
 ``out_shift``, ``out_scale``, ``log_std``)."""
 
