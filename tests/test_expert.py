@@ -198,7 +198,8 @@ def test_merge_expert_nudges_past_two_slow_vehicles_side_by_side():
 
 # ---------------------------------------------------------------------------------------------- shipped data
 def test_all_shipped_datasets_available():
-    assert available_expert_datasets() == {**{s: list(CURRICULA) for s in SCENARIO_NAMES}, "relocate": ["expert"]}
+    assert available_expert_datasets() == {**{s: list(CURRICULA) for s in SCENARIO_NAMES}, "antmaze-umaze": ["expert"],
+                                           "relocate": ["expert"]}
 
 
 @pytest.mark.parametrize("scenario", SCENARIO_NAMES)

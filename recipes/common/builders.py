@@ -29,7 +29,7 @@ from torchrl.envs import Compose, EnvBase, Transform
 from common.config import ConfigError
 from common.run import ExpertDataError, default_run_name, make_run_dir, resolve_resume
 from torchrl_csirl.data import ExpertDemonstrations, import_published, load_expert_demonstrations
-from torchrl_csirl.envs import ScenarioSpec, make_serial_env, resolve_scenario
+from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, make_serial_env, resolve_scenario  # noqa: F401 (doctests)
 from torchrl_csirl.envs import make_env as make_scenario_env
 from torchrl_csirl.trainers import (
     CheckpointHook,
