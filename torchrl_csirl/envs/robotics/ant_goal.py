@@ -200,12 +200,14 @@ class AntGoalEnv(AntMazeUMazeEnv):
             if self._distance > 2.0 * ANTMAZE_SUCCESS_RADIUS:
                 break
 
+    def _distance_and_success(self) -> tuple[float, bool]:
+        return self._distance, self._hops >= CHAIN_HOPS
+
     def _info(self) -> dict[str, Any]:
-        success = self._hops >= CHAIN_HOPS
-        hop = 1.0 if success else min(max(1.0 - self._distance / self._initial_distance, 0.0), 1.0)
-        progress = min(self._hops + hop, CHAIN_HOPS) / CHAIN_HOPS
-        return {"distance_to_finish": self._distance, "progress": progress, "arrived": success, "success": success,
-                "hops": self._hops}
+        info = super()._info()  # its progress is the current hop's (distance against the hop's start)
+        hop = 0.0 if info["success"] else info["progress"]
+        info.update(progress=(self._hops + hop) / CHAIN_HOPS, hops=self._hops)
+        return info
 
     def _flatten(self, raw: np.ndarray) -> np.ndarray:
         return raw  # _inner_step's, already the policy's input
