@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any, Callable, Optional
 
 import torch
 from omegaconf import DictConfig
@@ -81,6 +81,8 @@ class CSIRLConfig:
         help="expert: r_w measured against its mean over 256 expert states (no constant shift can be learned; "
              "ExpertCenteredReward); none: the paper")
     reward_scale: float = option(1.0, above=0.0, help="multiplies the expert-centred r_w (reward_reference=expert)")
+    matching_scale: Optional[float] = option(
+        None, above=0.0, help="multiplies the matching potential (null: the scenario's or task's published value)")
     matching_target: str = option("final", choices=("final", "next", "path"),
                                   help="final (the paper's text) | next (published code) | path (final's targets, "
                                        "distances along the expert's path)")
@@ -220,7 +222,7 @@ def make_matching(cfg: DictConfig, spec: ScenarioSpec, curriculum_obs: torch.Ten
         subgoal=subgoal,
         ego_feature_indices=matching_feature_indices(cfg, spec),
         position_feature_indices=spec.position_feature_indices,
-        scale=spec.matching_scale,
+        scale=spec.matching_scale if cfg.csirl.matching_scale is None else cfg.csirl.matching_scale,
         target=cfg.csirl.matching_target,
         failure_keys=FAILURE_KEYS if cfg.csirl.failure_resets_progress else (),
     )

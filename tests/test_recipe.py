@@ -147,6 +147,19 @@ def test_fixed_subgoal_switch_keeps_the_subgoal_at_the_last_curriculum_state(tmp
         run.close()
 
 
+def test_matching_scale_defaults_to_the_scenario_and_can_be_overridden(tmp_path):
+    from torchrl_csirl.envs import SCENARIOS
+
+    spec = SCENARIOS["merge"]
+    curriculum = torch.zeros(5, spec.obs_dim)
+    curriculum[:, spec.position_feature_indices[0]] = torch.linspace(0.0, 0.4, 5)
+    default = csirl_utils.make_matching(_tiny_cfg(tmp_path), spec, curriculum, 2)
+    scaled = csirl_utils.make_matching(_tiny_cfg(tmp_path, "csirl.matching_scale=10"), spec, curriculum, 2)
+    assert default.scale == spec.matching_scale and scaled.scale == 10.0
+    with pytest.raises(config.ConfigError, match="matching_scale"):
+        _tiny_cfg(tmp_path, "csirl.matching_scale=0")
+
+
 def test_automatic_temperature_is_trained_and_logged(tmp_path):
     cfg = _tiny_cfg(tmp_path, "csirl.fixed_alpha=false", "collector.total_frames=300")
     run = csirl_utils.make_trainer(cfg, str(tmp_path))
