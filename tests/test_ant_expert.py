@@ -152,6 +152,8 @@ def test_waypoint_expert_checks_its_policy(tmp_path):
     assert isinstance(make_expert("antmaze-umaze"), WaypointAntExpert)  # the shipped ant
     with pytest.raises(ValueError, match="takes only policy="):
         make_expert("antmaze-umaze", horizon=3)
+    first = make_expert("antmaze-umaze", lookahead=None, action_gain=1.0)  # the controller before 2026-11-26
+    assert first.lookahead is None and first.action_gain == 1.0
     with pytest.raises(FileNotFoundError):
         make_expert("antmaze-umaze", policy=str(tmp_path / "none.pt"))
     path = tmp_path / "wrong.pt"

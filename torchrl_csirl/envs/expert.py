@@ -829,7 +829,8 @@ def make_expert(name: str, **overrides: Any) -> Any:
     fields of its :class:`ExpertConfig`) or a robotics task's policy (``"relocate"``: the DAPG
     expert, :class:`~torchrl_csirl.envs.robotics.expert.DAPGRelocateExpert`; ``"antmaze-umaze"``:
     :class:`~torchrl_csirl.envs.robotics.WaypointAntExpert` driving the shipped goal-reaching ant, or
-    ``policy=<policy.pt or run directory of recipes/train_ant_expert.py>``).
+    ``policy=<policy.pt or run directory of recipes/train_ant_expert.py>``, and its ``lookahead=``
+    and ``action_gain=``).
 
     Every expert has ``reset(env)`` and ``act(env) -> action``.
 
@@ -842,10 +843,14 @@ def make_expert(name: str, **overrides: Any) -> Any:
     """
     robotics = _robotics_experts()
     if name == "antmaze-umaze":
-        unknown = sorted(set(overrides) - {"policy"})
+        unknown = sorted(set(overrides) - {"policy", "lookahead", "action_gain"})
         if unknown:
-            raise ValueError(f"The 'antmaze-umaze' expert takes only policy=<policy.pt or run directory>, got {unknown}.")
-        return robotics[name](overrides.get("policy"))
+            raise ValueError(
+                "The 'antmaze-umaze' expert takes only policy=<policy.pt or run directory>, lookahead= and "
+                f"action_gain=, got {unknown}."
+            )
+        policy = overrides.pop("policy", None)
+        return robotics[name](policy, **overrides)
     if name in robotics:
         if overrides:
             raise ValueError(f"The {name!r} expert takes no options, got {sorted(overrides)}.")
