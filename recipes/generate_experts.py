@@ -62,16 +62,21 @@ def expert_options(scenario: str, ant_policy: str | None) -> dict[str, Any]:
     return {"policy": ant_policy} if scenario == "antmaze-umaze" else {}
 
 
-def expert_metadata(scenario: str, **options: Any) -> dict[str, str]:
-    """The ``generator`` (the expert's class) and ``action_units`` entries of a task's datasets."""
+def expert_metadata(scenario: str, **options: Any) -> dict[str, Any]:
+    """The ``generator`` (the expert's class) and ``action_units`` entries of a task's datasets, and
+    ``expert_settings`` for an expert that has ``settings`` (the AntMaze controller's)."""
     from torchrl_csirl.envs import resolve_scenario
     from torchrl_csirl.envs.expert import make_expert
 
-    expert_class = type(make_expert(scenario, **options))
-    return {
+    expert = make_expert(scenario, **options)
+    expert_class = type(expert)
+    meta: dict[str, Any] = {
         "generator": f"{expert_class.__module__}.{expert_class.__qualname__}",
         "action_units": ACTION_UNITS[resolve_scenario(scenario).family],
     }
+    if hasattr(expert, "settings"):
+        meta["expert_settings"] = dict(expert.settings)
+    return meta
 
 
 def _progress(iterable: Any, total: int, desc: str) -> Any:

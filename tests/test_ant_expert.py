@@ -191,6 +191,7 @@ def test_shipped_antmaze_dataset_is_reproduced(tmp_path):
     demos = load_expert_demonstrations("antmaze-umaze", 25)
     assert demos.num_trajectories == 25 and demos.observation_dim == 29 and demos.action_dim == 8
     assert demos.metadata["generator"].endswith("WaypointAntExpert")
+    assert demos.metadata["expert_settings"] == {"lookahead": 3.0, "action_gain": 0.6}
     assert all(e["success"] for e in demos.metadata["episodes"])
     # the first trajectory again, with the command that wrote the file (from its seed: failed seeds were skipped)
     seed = demos.metadata["episodes"][0]["seed"]

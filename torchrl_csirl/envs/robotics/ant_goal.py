@@ -424,6 +424,11 @@ class WaypointAntExpert:
             action = self.policy(TensorDict({"observation": obs}, []))["action"]
         return (self.action_gain * action).numpy().astype(np.float32)
 
+    @property
+    def settings(self) -> dict[str, float | None]:
+        """The controller's settings (recorded in the datasets it writes)."""
+        return {"lookahead": self.lookahead, "action_gain": self.action_gain}
+
     def waypoint(self, position: np.ndarray, goal: np.ndarray, maze: Any) -> np.ndarray:
         """The goal the ant policy is shown: :func:`pursuit_waypoint`, or :func:`next_waypoint` without look-ahead."""
         if self.lookahead is None:
