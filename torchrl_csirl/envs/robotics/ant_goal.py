@@ -262,6 +262,18 @@ def _ant_goal_spec() -> RoboticsTaskSpec:
 ANT_GOAL_SPEC = _ant_goal_spec()
 
 
+def _route_points(position: np.ndarray, goal: np.ndarray, maze: Any) -> list[np.ndarray]:
+    """Centres of the cells from the ant's cell to the goal's, the last replaced by the goal."""
+    cell = tuple(int(v) for v in maze.cell_xy_to_rowcol(position))
+    goal_cell = tuple(int(v) for v in maze.cell_xy_to_rowcol(goal))
+    if maze.maze_map[cell[0]][cell[1]] == 1:  # inside a wall cell (a leg over the edge): head for the goal
+        return [goal]
+    route = maze_cell_route(maze.maze_map, cell, goal_cell)
+    points = [np.asarray(maze.cell_rowcol_to_xy(np.array(c)), dtype=np.float64) for c in route]
+    points[-1] = goal
+    return points
+
+
 def next_waypoint(position: np.ndarray, goal: np.ndarray, maze: Any) -> np.ndarray:
     """The waypoint toward ``goal``: the centre of the next cell on the cell route, or the goal itself.
 
@@ -276,26 +288,8 @@ def next_waypoint(position: np.ndarray, goal: np.ndarray, maze: Any) -> np.ndarr
         >>> next_waypoint(np.array([-4.0, 4.0]), np.array([-4.0, -4.0]), maze).tolist()
         [0.0, 4.0]
     """
-    cell = tuple(int(v) for v in maze.cell_xy_to_rowcol(np.asarray(position, dtype=np.float64)))
-    goal_cell = tuple(int(v) for v in maze.cell_xy_to_rowcol(np.asarray(goal, dtype=np.float64)))
-    if cell == goal_cell or maze.maze_map[cell[0]][cell[1]] == 1:
-        return np.asarray(goal, dtype=np.float64)
-    route = maze_cell_route(maze.maze_map, cell, goal_cell)
-    if len(route) == 2:  # the goal's cell is next: head for the goal itself
-        return np.asarray(goal, dtype=np.float64)
-    return np.asarray(maze.cell_rowcol_to_xy(np.array(route[1])), dtype=np.float64)
-
-
-def _route_points(position: np.ndarray, goal: np.ndarray, maze: Any) -> list[np.ndarray]:
-    """Centres of the cells from the ant's cell to the goal's, the last replaced by the goal."""
-    cell = tuple(int(v) for v in maze.cell_xy_to_rowcol(position))
-    goal_cell = tuple(int(v) for v in maze.cell_xy_to_rowcol(goal))
-    if maze.maze_map[cell[0]][cell[1]] == 1:  # inside a wall cell (a leg over the edge): head for the goal
-        return [goal]
-    route = maze_cell_route(maze.maze_map, cell, goal_cell)
-    points = [np.asarray(maze.cell_rowcol_to_xy(np.array(c)), dtype=np.float64) for c in route]
-    points[-1] = goal
-    return points
+    points = _route_points(np.asarray(position, dtype=np.float64), np.asarray(goal, dtype=np.float64), maze)
+    return points[min(1, len(points) - 1)]  # the next cell's centre, or the goal from its cell and the one before
 
 
 def _nearest_on_polyline(points: list[np.ndarray], position: np.ndarray) -> tuple[int, np.ndarray]:
