@@ -28,7 +28,7 @@ from torchrl.envs import Compose, EnvBase, Transform
 
 from common.config import ConfigError
 from common.run import ExpertDataError, default_run_name, make_run_dir, resolve_resume
-from torchrl_csirl.data import ExpertDemonstrations, import_published, load_expert_demonstrations
+from torchrl_csirl.data import ExpertDemonstrations, FilledRowsCheckpointer, import_published, load_expert_demonstrations
 from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, make_serial_env, resolve_scenario  # noqa: F401 (doctests)
 from torchrl_csirl.envs import make_env as make_scenario_env
 from torchrl_csirl.trainers import (
@@ -286,10 +286,14 @@ class PolicyMirror:
 
 # ---------------------------------------------------------------------------------------- buffers, logging
 def make_online_buffer(size: int, batch_size: int, transforms: list[Transform], device: torch.device) -> TensorDictReplayBuffer:
-    """The online buffer, stored on the learner's device; ``transforms`` run at sampling time."""
+    """The online buffer, stored on the learner's device; ``transforms`` run at sampling time.
+
+    Its checkpoints hold the filled rows only (:class:`~torchrl_csirl.data.FilledRowsCheckpointer`).
+    """
     return TensorDictReplayBuffer(
         storage=LazyTensorStorage(size, device=device),
         batch_size=batch_size,
+        checkpointer=FilledRowsCheckpointer(),
         transform=Compose(*transforms) if transforms else None,
     )
 

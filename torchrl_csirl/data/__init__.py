@@ -1,7 +1,9 @@
 """Expert demonstrations: the :class:`ExpertDemonstrations` container, its ``.npz`` format, importers
-and Minari interop (:mod:`torchrl_csirl.data.minari`)."""
+and Minari interop (:mod:`torchrl_csirl.data.minari`), and the replay-buffer checkpointer that writes
+the filled rows only (:class:`FilledRowsCheckpointer`)."""
 from __future__ import annotations
 
+from torchrl_csirl.data.checkpointing import FilledRowsCheckpointer
 from torchrl_csirl.data.expert import FORMAT_VERSION, ExpertDemonstrations
 from torchrl_csirl.data.minari import load_minari_dataset, minari_experience_replay, save_minari_dataset
 from torchrl_csirl.data.mixing import DemonstrationMixer
@@ -17,6 +19,7 @@ __all__ = [
     "DemonstrationMixer",
     "ExpertDemonstrations",
     "FORMAT_VERSION",
+    "FilledRowsCheckpointer",
     "RestrictedUnpickler",
     "available_expert_datasets",
     "curriculum_trajectory",

@@ -44,6 +44,7 @@ from torchrl_csirl.envs.robotics.tasks import (
     ROBOTICS_TASKS,
     AntMazeUMazeEnv,
     RoboticsTaskSpec,
+    Route,
     maze_cell_route,
 )
 
@@ -292,21 +293,6 @@ def next_waypoint(position: np.ndarray, goal: np.ndarray, maze: Any) -> np.ndarr
     return points[min(1, len(points) - 1)]  # the next cell's centre, or the goal from its cell and the one before
 
 
-def _nearest_on_polyline(points: list[np.ndarray], position: np.ndarray) -> tuple[int, np.ndarray]:
-    """The segment index and the point of the polyline ``points`` nearest to ``position``."""
-    best = (math.inf, 0, points[0])
-    for k in range(len(points) - 1):
-        a, b = points[k], points[k + 1]
-        ab = b - a
-        length2 = float(ab @ ab)
-        u = 0.0 if length2 == 0.0 else float(np.clip((position - a) @ ab / length2, 0.0, 1.0))
-        foot = a + u * ab
-        distance = float(np.hypot(*(foot - position)))
-        if distance < best[0]:
-            best = (distance, k, foot)
-    return best[1], best[2]
-
-
 def pursuit_waypoint(position: np.ndarray, goal: np.ndarray, maze: Any, lookahead: float = 3.0) -> np.ndarray:
     """Pure pursuit along the cell route: the point ``lookahead`` metres on from the ant's foot on it.
 
@@ -337,15 +323,7 @@ def pursuit_waypoint(position: np.ndarray, goal: np.ndarray, maze: Any, lookahea
     points = _route_points(position, np.asarray(goal, dtype=np.float64), maze)
     if len(points) == 1:
         return points[0]
-    k, point = _nearest_on_polyline(points, position)
-    remaining = float(lookahead)
-    while k + 1 < len(points):
-        step = float(np.hypot(*(points[k + 1] - point)))
-        if step >= remaining:
-            return point + (points[k + 1] - point) * (remaining / step)
-        remaining -= step
-        k, point = k + 1, points[k + 1]
-    return points[-1]
+    return np.asarray(Route(points).point_ahead(position[0], position[1], float(lookahead)), dtype=np.float64)
 
 
 class WaypointAntExpert:

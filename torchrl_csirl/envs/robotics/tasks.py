@@ -96,15 +96,17 @@ def maze_cell_route(maze_map: Sequence[Sequence[Any]], start: tuple[int, int], g
 
 
 class Route:
-    """A polyline route; :meth:`remaining` is the length left from a position to its end.
+    """A polyline route: :meth:`remaining` length to its end, :meth:`point_ahead` along it.
 
-    The position is projected on the nearest segment; the remaining length is the distance to
-    that projection plus the route length from it to the last point. Segments are precomputed:
-    this runs every step (plain Python: a route has a handful of segments).
+    A position is projected on the nearest segment (the first of equally near ones). Segments are
+    precomputed: this runs every step (plain Python: a route has a handful of segments).
 
     Examples:
-        >>> Route([(0.0, 0.0), (4.0, 0.0), (4.0, -4.0)]).remaining(1.0, 0.5)
+        >>> route = Route([(0.0, 0.0), (4.0, 0.0), (4.0, -4.0)])
+        >>> route.remaining(1.0, 0.5)
         7.5
+        >>> route.point_ahead(3.0, 0.5, 2.0)
+        (4.0, -1.0)
     """
 
     def __init__(self, points: Sequence[Sequence[float]]) -> None:
@@ -122,15 +124,34 @@ class Route:
         self._segments = segments[::-1]
         self.length = after
 
-    def remaining(self, x: float, y: float) -> float:
-        best_off, best = math.inf, 0.0
-        for ax, ay, sx, sy, length, length2, after in self._segments:
+    def _project(self, x: float, y: float) -> tuple[int, float, float]:
+        """The nearest segment's index, the projection's fraction ``t`` along it, and the distance to it."""
+        best_off, best_k, best_t = math.inf, 0, 0.0
+        for k, (ax, ay, sx, sy, _, length2, _) in enumerate(self._segments):
             t = ((x - ax) * sx + (y - ay) * sy) / length2
             t = 0.0 if t < 0.0 else (1.0 if t > 1.0 else t)
             off = math.hypot(x - ax - t * sx, y - ay - t * sy)
             if off < best_off:  # ties (a shared corner) give the same remaining length
-                best_off, best = off, off + (1.0 - t) * length + after
-        return best
+                best_off, best_k, best_t = off, k, t
+        return best_k, best_t, best_off
+
+    def remaining(self, x: float, y: float) -> float:
+        """Distance from ``(x, y)`` to its projection, plus the route's length from there to its end."""
+        k, t, off = self._project(x, y)
+        _, _, _, _, length, _, after = self._segments[k]
+        return off + (1.0 - t) * length + after
+
+    def point_ahead(self, x: float, y: float, distance: float) -> tuple[float, float]:
+        """The point ``distance`` along the route from the projection of ``(x, y)`` (its end if nearer)."""
+        k, t, _ = self._project(x, y)
+        ahead = (1.0 - t) * self._segments[k][4] + self._segments[k][6] - distance  # route left beyond it
+        if ahead <= 0.0:
+            return self.points[-1]
+        for ax, ay, sx, sy, length, _, after in self._segments[k:]:
+            if ahead >= after:  # the point lies on this segment, ``ahead - after`` before its end
+                u = 1.0 - (ahead - after) / length if length > 0.0 else 1.0
+                return ax + u * sx, ay + u * sy
+        return self.points[-1]
 
 
 def route_remaining_length(route: Sequence[Sequence[float]], position: Sequence[float]) -> float:
