@@ -9,6 +9,7 @@ from torchrl.envs.utils import check_env_specs
 from torchrl_csirl.envs import TASKS, TaskSpec, make_env, make_gym_env, resolve_scenario
 from torchrl_csirl.envs.metrics import accomplish_rate_from_rollout, success_from_rollout
 from torchrl_csirl.envs.robotics import ROBOTICS_TASKS, maze_cell_route, route_remaining_length
+from torchrl_csirl.envs.robotics.tasks import Route
 
 ROBOTICS = ("antmaze-umaze", "relocate")
 
@@ -59,6 +60,18 @@ def test_maze_route_and_remaining_length():
     line = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, -4.0]])
     assert route_remaining_length(line, np.array([4.0, -4.0])) == 0.0
     assert route_remaining_length(line, np.array([0.0, 0.0])) == 8.0
+
+
+def test_route_point_ahead_walks_round_corners_and_stops_at_the_end():
+    route = Route([(0.0, 0.0), (4.0, 0.0), (4.0, -4.0), (4.0, -4.0)])  # a zero-length last segment
+    assert route.point_ahead(1.0, 0.7, 0.0) == (1.0, 0.0)  # the projection itself
+    assert route.point_ahead(1.0, 0.7, 2.0) == (3.0, 0.0)
+    assert route.point_ahead(3.0, 0.5, 2.0) == (4.0, -1.0)  # round the corner
+    assert route.point_ahead(-2.0, 1.0, 4.0) == (4.0, 0.0)  # before the start: from the first point
+    assert route.point_ahead(4.0, -3.0, 5.0) == (4.0, -4.0)  # beyond the end: the last point
+    for x, y in ((0.5, 0.3), (3.9, -0.2), (4.2, -3.5)):  # consistent with remaining()
+        ahead = route.point_ahead(x, y, 1.5)
+        assert route.remaining(*ahead) == pytest.approx(max(route.remaining(x, y) - route._project(x, y)[2] - 1.5, 0.0))
 
 
 @pytest.mark.parametrize("name", ROBOTICS)
