@@ -1,6 +1,8 @@
 """The robotics tasks (AntMaze U-maze, Adroit Relocate): envs, specs, the DAPG expert, Minari interop."""
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 import torch
@@ -9,7 +11,7 @@ from torchrl.envs.utils import check_env_specs
 from torchrl_csirl.envs import TASKS, TaskSpec, make_env, make_gym_env, resolve_scenario
 from torchrl_csirl.envs.metrics import accomplish_rate_from_rollout, success_from_rollout
 from torchrl_csirl.envs.robotics import ROBOTICS_TASKS, maze_cell_route, route_remaining_length
-from torchrl_csirl.envs.robotics.tasks import Route
+from torchrl_csirl.envs.robotics.tasks import AntMazeUMazeEnv, Route
 
 ROBOTICS = ("antmaze-umaze", "relocate")
 
@@ -60,6 +62,15 @@ def test_maze_route_and_remaining_length():
     line = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, -4.0]])
     assert route_remaining_length(line, np.array([4.0, -4.0])) == 0.0
     assert route_remaining_length(line, np.array([0.0, 0.0])) == 8.0
+
+
+def test_antmaze_leaves_no_model_file_in_the_temp_folder():
+    env = AntMazeUMazeEnv()
+    path = env._inner.tmp_xml_file_path
+    assert path.endswith(".xml") and not os.path.exists(path)  # gymnasium-robotics leaves it otherwise
+    env.reset(seed=0)
+    env.step(env.action_space.sample())
+    env.close()
 
 
 def test_route_point_ahead_walks_round_corners_and_stops_at_the_end():

@@ -22,6 +22,7 @@ See ``docs/SCENARIOS.md``.
 """
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 from collections import deque
@@ -164,6 +165,17 @@ def route_remaining_length(route: Sequence[Sequence[float]], position: Sequence[
     return Route(route).remaining(float(position[0]), float(position[1]))
 
 
+def _remove_maze_xml(maze_env: Any) -> None:
+    """Deletes the model file a gymnasium-robotics maze env left in the temp folder once MuJoCo read it.
+
+    ``Maze.make_maze`` writes ``ant_maze<time>.xml`` next to (not inside) a temporary directory
+    and never removes it: one 8 kB file per environment built, thousands over a test suite or a
+    sweep. The model is loaded when the env is built, so the file is not needed afterwards.
+    """
+    with contextlib.suppress(OSError, AttributeError, TypeError):
+        os.remove(maze_env.tmp_xml_file_path)
+
+
 class _RoboticsTaskEnv(gym.Env):
     """A gymnasium-robotics environment with a flat observation, its own step limit and CSIRL info."""
 
@@ -247,6 +259,7 @@ class AntMazeUMazeEnv(_RoboticsTaskEnv):
             include_cfrc_ext_in_observation=False,
         )
         self._inner.position_noise_range = float(position_noise)
+        _remove_maze_xml(self._inner)
         self.action_space = self._inner.action_space
         self.observation_space = spaces.Box(-np.inf, np.inf, (29,), np.float32)
         maze = self._inner.maze
