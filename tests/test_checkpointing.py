@@ -76,3 +76,20 @@ def test_a_capacity_mismatch_is_refused_by_name(tmp_path):
     saved.dumps(tmp_path)
     with pytest.raises(ValueError, match="capacity 100; this storage holds 50"):
         _buffer(50, FilledRowsCheckpointer()).loads(tmp_path)
+
+
+def test_save_hooks_get_torchrls_own_format(tmp_path):
+    calls = []
+
+    def hook(data, path):
+        calls.append(path)
+        return data
+
+    saved = _buffer(50, FilledRowsCheckpointer())
+    saved.register_save_hook(hook)
+    saved.extend(_transitions(10))
+    saved.dumps(tmp_path)
+    assert len(calls) == 1  # the hook ran: the parent's path, whole storage
+    restored = _buffer(50, FilledRowsCheckpointer())
+    restored.loads(tmp_path)
+    assert len(restored) == 10 and (restored[:10] == saved[:10]).all()

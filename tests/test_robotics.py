@@ -80,6 +80,9 @@ def test_route_point_ahead_walks_round_corners_and_stops_at_the_end():
     assert route.point_ahead(3.0, 0.5, 2.0) == (4.0, -1.0)  # round the corner
     assert route.point_ahead(-2.0, 1.0, 4.0) == (4.0, 0.0)  # before the start: from the first point
     assert route.point_ahead(4.0, -3.0, 5.0) == (4.0, -4.0)  # beyond the end: the last point
+    with pytest.raises(ValueError, match="distance must be >= 0"):
+        route.point_ahead(1.0, 0.0, -1.0)
+    assert route.remaining(float("nan"), 0.0) == float("inf")  # not "at the goal"
     for x, y in ((0.5, 0.3), (3.9, -0.2), (4.2, -3.5)):  # consistent with remaining()
         ahead = route.point_ahead(x, y, 1.5)
         assert route.remaining(*ahead) == pytest.approx(max(route.remaining(x, y) - route._project(x, y)[2] - 1.5, 0.0))

@@ -26,7 +26,9 @@ class FilledRowsCheckpointer(TensorStorageCheckpointer):
 
     A round-robin writer fills rows in order, so until the storage is full its data are exactly
     the first ``len`` rows; once full, every row is written (as TorchRL does). Other storages
-    (pytrees, several batch dimensions) fall back to the parent class.
+    (pytrees, several batch dimensions) and checkpointers with save hooks fall back to the parent
+    class. Checkpoints written by the parent load too; those written here need this checkpointer
+    to load (a buffer built without it fails on the missing ``is_pytree`` entry).
 
     Examples:
         >>> import tempfile, torch
@@ -46,7 +48,7 @@ class FilledRowsCheckpointer(TensorStorageCheckpointer):
     """
 
     def dumps(self, storage: TensorStorage, path: str | Path) -> None:
-        if not self._handles(storage):
+        if self._save_hooks or not self._handles(storage):
             return super().dumps(storage, path)
         path = Path(path)
         path.mkdir(exist_ok=True)
@@ -59,7 +61,7 @@ class FilledRowsCheckpointer(TensorStorageCheckpointer):
         path = Path(path)
         with open(path / _METADATA_FILE) as file:
             metadata = json.load(file)
-        if not metadata.get("filled_rows"):
+        if not metadata.get("filled_rows"):  # written by TorchRL's checkpointer (or ours with hooks)
             return super().loads(storage, path)
         if metadata["max_size"] != storage.max_size:
             raise ValueError(
@@ -70,7 +72,7 @@ class FilledRowsCheckpointer(TensorStorageCheckpointer):
         if rows.shape[0]:
             if not storage.initialized:
                 storage._init(rows[0])
-            storage._storage[: rows.shape[0]].update_(rows.to(storage._storage.device))
+            storage._storage[: rows.shape[0]].update_(rows)  # copies leaf by leaf, to the storage's device
         storage._len = metadata["len"]
 
     @staticmethod

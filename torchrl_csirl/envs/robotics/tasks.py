@@ -137,13 +137,18 @@ class Route:
         return best_k, best_t, best_off
 
     def remaining(self, x: float, y: float) -> float:
-        """Distance from ``(x, y)`` to its projection, plus the route's length from there to its end."""
+        """Distance from ``(x, y)`` to its projection, plus the route's length from there to its end.
+
+        A non-finite position (a simulation gone wrong) is infinitely far: ``inf``.
+        """
         k, t, off = self._project(x, y)
         _, _, _, _, length, _, after = self._segments[k]
         return off + (1.0 - t) * length + after
 
     def point_ahead(self, x: float, y: float, distance: float) -> tuple[float, float]:
-        """The point ``distance`` along the route from the projection of ``(x, y)`` (its end if nearer)."""
+        """The point ``distance`` (>= 0) along the route from the projection of ``(x, y)`` (its end if nearer)."""
+        if not distance >= 0.0:
+            raise ValueError(f"distance must be >= 0 metres, got {distance}.")
         k, t, _ = self._project(x, y)
         ahead = (1.0 - t) * self._segments[k][4] + self._segments[k][6] - distance  # route left beyond it
         if ahead <= 0.0:
