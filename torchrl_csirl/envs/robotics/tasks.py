@@ -150,7 +150,8 @@ class Route:
         if not distance >= 0.0:
             raise ValueError(f"distance must be >= 0 metres, got {distance}.")
         k, t, _ = self._project(x, y)
-        ahead = (1.0 - t) * self._segments[k][4] + self._segments[k][6] - distance  # route left beyond it
+        _, _, _, _, length, _, after = self._segments[k]
+        ahead = (1.0 - t) * length + after - distance  # the route left beyond the point
         if ahead <= 0.0:
             return self.points[-1]
         for ax, ay, sx, sy, length, _, after in self._segments[k:]:
