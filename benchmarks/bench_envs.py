@@ -39,7 +39,7 @@ import torch
 
 from torchrl_csirl.envs import SCENARIOS, make_gym_env
 from torchrl_csirl.envs.robotics import ANTMAZE_UMAZE_MAP, ROBOTICS_TASKS
-from torchrl_csirl.envs.robotics.tasks import ANTMAZE_POSITION_NOISE
+from torchrl_csirl.envs.robotics.tasks import ANTMAZE_POSITION_NOISE, _remove_maze_xml
 
 
 def run_steps(env, n_steps: int, seed: int) -> float:
@@ -80,6 +80,7 @@ def raw_robotics_env(name: str):
         maze_map = [list(row) for row in ANTMAZE_UMAZE_MAP]
         env = gym.make(spec.base_env, maze_map=maze_map, continuing_task=False, include_cfrc_ext_in_observation=False)
         env.unwrapped.position_noise_range = ANTMAZE_POSITION_NOISE  # ours: D4RL's small start/goal noise
+        _remove_maze_xml(env.unwrapped)
         return env
     return gym.make(spec.base_env)
 

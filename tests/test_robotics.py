@@ -112,6 +112,19 @@ def test_progress_and_success_hooks(name):
     assert not td["next", "crashed"].any() and not td["next", "offroad"].any()
 
 
+def test_antmaze_reports_a_flipped_ant_as_crashed_without_ending_the_episode():
+    env = AntMazeUMazeEnv()
+    env.reset(seed=0)
+    ant = env._inner.ant_env
+    qpos, qvel = ant.data.qpos.copy(), ant.data.qvel.copy()
+    qpos[2], qpos[3:7] = 1.0, (0.0, 1.0, 0.0, 0.0)  # on its back, dropped from 1 m
+    ant.set_state(qpos, qvel)
+    flags = [env.step(np.zeros(8, dtype=np.float32)) for _ in range(20)]
+    assert all(info["crashed"] for *_, info in flags)
+    assert not any(terminated or truncated for _, _, terminated, truncated, _ in flags)
+    env.close()
+
+
 def test_headless_rendering():
     env = make_gym_env("relocate", render_mode="rgb_array")
     env.reset(seed=0)

@@ -84,7 +84,8 @@ def make_env(
     Args:
         name: task name ("highway-fast", "merge", "roundabout", "intersection",
             "antmaze-umaze", "relocate") or gym id. The robotics tasks report no
-            ``"crashed"``/``"offroad"`` (always False).
+            ``"offroad"`` (always False); AntMaze's ``"crashed"`` is a flipped ant (the episode
+            goes on), Relocate's is always False.
         seed: seed applied with ``env.set_seed`` (None: unseeded).
         device: device of the output TensorDicts.
         info_keys: which info entries to read.

@@ -17,6 +17,7 @@ from torchrl_csirl.envs.robotics.tasks import (
     AntMazeUMazeEnv,
     RelocateEnv,
     RoboticsTaskSpec,
+    is_flipped,
     maze_cell_route,
     route_remaining_length,
 )
@@ -33,6 +34,7 @@ __all__ = [
     "AntMazeUMazeEnv",
     "RelocateEnv",
     "RoboticsTaskSpec",
+    "is_flipped",
     "maze_cell_route",
     "route_remaining_length",
 ]

@@ -45,6 +45,7 @@ from torchrl_csirl.envs.robotics.tasks import (
     AntMazeUMazeEnv,
     RoboticsTaskSpec,
     Route,
+    is_flipped,
     maze_cell_route,
 )
 
@@ -89,17 +90,6 @@ def heading_of(quaternion: np.ndarray) -> float:
     """
     w, x, y, z = (float(v) for v in quaternion[:4])
     return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-
-
-def is_flipped(quaternion: np.ndarray) -> bool:
-    """Whether the torso's up axis points below the horizon (``(w, x, y, z)`` quaternion).
-
-    Examples:
-        >>> is_flipped(np.array([1.0, 0.0, 0.0, 0.0])), is_flipped(np.array([0.0, 1.0, 0.0, 0.0]))
-        (False, True)
-    """
-    _, x, y, _ = (float(v) for v in quaternion[:4])
-    return 1.0 - 2.0 * (x * x + y * y) < 0.0
 
 
 def ant_goal_observation(ant_values: np.ndarray, position: np.ndarray, goal: np.ndarray) -> np.ndarray:
@@ -284,8 +274,8 @@ def next_waypoint(position: np.ndarray, goal: np.ndarray, maze: Any) -> np.ndarr
         maze: a gymnasium-robotics ``Maze`` (``cell_xy_to_rowcol``, ``cell_rowcol_to_xy``, ``maze_map``).
 
     Examples:
-        >>> from gymnasium_robotics.envs.maze.ant_maze_v5 import AntMazeEnv
-        >>> maze = AntMazeEnv(maze_map=[list(r) for r in ANTMAZE_UMAZE_MAP]).maze
+        >>> from torchrl_csirl.envs.robotics import AntMazeUMazeEnv
+        >>> maze = AntMazeUMazeEnv().maze
         >>> next_waypoint(np.array([-4.0, 4.0]), np.array([-4.0, -4.0]), maze).tolist()
         [0.0, 4.0]
     """
@@ -310,8 +300,8 @@ def pursuit_waypoint(position: np.ndarray, goal: np.ndarray, maze: Any, lookahea
         lookahead: metres along the route ahead of the ant. Defaults to ``3.0`` (cells are 4 m).
 
     Examples:
-        >>> from gymnasium_robotics.envs.maze.ant_maze_v5 import AntMazeEnv
-        >>> maze = AntMazeEnv(maze_map=[list(r) for r in ANTMAZE_UMAZE_MAP]).maze
+        >>> from torchrl_csirl.envs.robotics import AntMazeUMazeEnv
+        >>> maze = AntMazeUMazeEnv().maze
         >>> pursuit_waypoint(np.array([-4.0, 4.0]), np.array([-4.0, -4.0]), maze).tolist()
         [-1.0, 4.0]
         >>> pursuit_waypoint(np.array([3.0, 4.5]), np.array([-4.0, -4.0]), maze).tolist()  # round the corner

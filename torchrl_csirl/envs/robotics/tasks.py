@@ -7,7 +7,9 @@ it the interface of the driving scenarios:
   Relocate: the 39 values of ``AdroitHandRelocate-v1``);
 * the episode limit as ``truncated`` (AntMaze 700 steps, Relocate 200), counted inside;
 * ``info`` entries ``distance_to_finish``, ``progress``, ``arrived``, ``success`` (the same keys
-  as the driving scenarios; ``crashed`` and ``offroad`` do not happen and are not reported).
+  as the driving scenarios); AntMaze also reports ``crashed``: the ant lies on its back
+  (:func:`is_flipped`; it never rights itself, and as in D4RL the episode goes on). ``offroad``
+  does not happen and is not reported.
 
 The progress measure (the accomplish rate's analogue) is ``clip(1 - d / d_0, 0, 1)`` with ``d``
 the remaining distance to the goal and ``d_0`` its value at reset:
@@ -43,6 +45,7 @@ __all__ = [
     "RelocateEnv",
     "RoboticsTaskSpec",
     "Route",
+    "is_flipped",
     "maze_cell_route",
     "route_remaining_length",
 ]
@@ -66,6 +69,17 @@ def _ensure_headless_gl(render_mode: str | None) -> None:
     """Pick MuJoCo's EGL backend for ``rgb_array`` pictures unless ``MUJOCO_GL`` is set."""
     if render_mode == "rgb_array":
         os.environ.setdefault("MUJOCO_GL", "egl")
+
+
+def is_flipped(quaternion: np.ndarray) -> bool:
+    """Whether the torso's up axis points below the horizon (``(w, x, y, z)`` quaternion).
+
+    Examples:
+        >>> is_flipped(np.array([1.0, 0.0, 0.0, 0.0])), is_flipped(np.array([0.0, 1.0, 0.0, 0.0]))
+        (False, True)
+    """
+    _, x, y, _ = (float(v) for v in quaternion[:4])
+    return 1.0 - 2.0 * (x * x + y * y) < 0.0
 
 
 def maze_cell_route(maze_map: Sequence[Sequence[Any]], start: tuple[int, int], goal: tuple[int, int]) -> list[tuple[int, int]]:
@@ -313,6 +327,9 @@ class AntMazeUMazeEnv(_RoboticsTaskEnv):
         gx, gy = self._inner.goal
         reached = math.hypot(x - gx, y - gy) <= ANTMAZE_SUCCESS_RADIUS
         return np.concatenate([ant_obs[2:], ant_obs[:2]]), 1.0 if reached else 0.0, reached
+
+    def _info(self) -> dict[str, Any]:
+        return {**super()._info(), "crashed": is_flipped(self._inner.ant_env.data.qpos[3:7])}
 
     def _distance_and_success(self) -> tuple[float, bool]:
         x, y = self._inner.ant_env.data.qpos[:2]
