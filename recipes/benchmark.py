@@ -204,7 +204,7 @@ def run_cell(config: dict[str, Any]) -> None:
             tail = f.read()[-2000:]
         raise RuntimeError(f"{cell['name']}: exit status {proc.returncode}; see {log_path}:\n{tail}")
     summary = json.loads(proc.stdout.strip().splitlines()[-1])
-    metrics = {k: summary[k] for k in ("accomplish_rate", "normalized_accomplish_rate", "success_rate", "frames",
+    metrics = {k: summary[k] for k in ("accomplish_rate", "normalized_accomplish_rate", "success_rate", "crash_rate", "frames",
                                        "updates", "wall_s") if summary.get(k) is not None}
     tune.report({**metrics, "run_dir": summary["run_dir"]})
 
@@ -298,7 +298,8 @@ def table_rows(runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
     for (method, scenario), group in sorted(groups.items(), key=lambda kv: (rank.get(kv[0][0], 99), kv[0])):
         row: dict[str, Any] = {"method": method, "scenario": scenario, "seeds": " ".join(
             str(s) for s in sorted(int(r["seed"]) for r in group)), "runs": len(group)}
-        for field in ("normalized_accomplish_rate", "accomplish_rate", "success_rate", "total_wall_s", "updates_per_s"):
+        for field in ("normalized_accomplish_rate", "accomplish_rate", "success_rate", "crash_rate", "total_wall_s",
+                      "updates_per_s"):
             values = [float(r[field]) for r in group if r.get(field) is not None]
             stats = mean_std(values) if values else {"mean": None, "std": None}
             row[f"{field}_mean"], row[f"{field}_std"] = stats["mean"], stats["std"]
@@ -328,6 +329,14 @@ def _pm(mean: float | None, std: float | None) -> str:
     return "n/a" if mean is None else f"{mean:.2f} ± {std:.2f}"
 
 
+def _outcomes(row: dict[str, Any] | None) -> str:
+    """``success / crash`` of a table row, ``—`` where a rate is missing."""
+    if row is None or row["success_rate_mean"] is None:
+        return "—"
+    crash = row["crash_rate_mean"]
+    return f"{row['success_rate_mean']:.2f} / " + ("—" if crash is None else f"{crash:.2f}")
+
+
 def markdown_table(rows: list[dict[str, Any]]) -> str:
     """Method rows x scenario columns: ``ours (paper)``, expert-normalised accomplish rate; then the cost."""
     scenarios = [s for s in SCENARIO_ORDER if any(r["scenario"] == s for r in rows)]
@@ -343,6 +352,11 @@ def markdown_table(rows: list[dict[str, Any]]) -> str:
             ours = "—" if r is None else f"{_pm(r['normalized_accomplish_rate_mean'], r['normalized_accomplish_rate_std'])} (n={r['runs']})"
             entries.append(ours + (f" [{paper:.2f}]" if paper is not None else ""))
         lines.append(f"| {method} | " + " | ".join(entries) + " |")
+    lines += ["", "Success rate / crash rate of the test episodes, mean over seeds (an accomplish rate earned by "
+              "driving far and then crashing or stalling is not expert-like).", "",
+              "| method | " + " | ".join(scenarios) + " |", "|---" * (len(scenarios) + 1) + "|"]
+    for method in methods:
+        lines.append(f"| {method} | " + " | ".join(_outcomes(cell.get((method, s))) for s in scenarios) + " |")
     lines += ["", "Cost per run: wall time [min] (start-up and final evaluation included) and updates/s, mean over runs.", "",
               "| method | " + " | ".join(scenarios) + " |", "|---" * (len(scenarios) + 1) + "|"]
     for method in methods:

@@ -201,7 +201,8 @@ def test_benchmark_runs_csirl_ablations_and_tells_which_differences_exceed_seed_
             run_dir.mkdir()
             (run_dir / "summary.json").write_text(json.dumps({
                 "scenario": "merge", "method": "csirl", "seed": seed, "normalized_accomplish_rate": value,
-                "accomplish_rate": value * 0.937, "success_rate": 0.9, "total_wall_s": 1200.0}))
+                "accomplish_rate": value * 0.937, "success_rate": 0.9, "crash_rate": 0.1 * seed,
+                "total_wall_s": 1200.0}))
     rows = {r["method"]: r for r in benchmark.table_rows(benchmark.read_runs([str(tmp_path)]))}
     assert list(rows) == ["csirl", "csirl-nocur", "csirl-noexp"] and rows["csirl-nocur"]["runs"] == 3
     assert rows["csirl"]["vs_csirl"] is None
@@ -210,6 +211,7 @@ def test_benchmark_runs_csirl_ablations_and_tells_which_differences_exceed_seed_
     assert rows["csirl-noexp"]["vs_csirl_beyond_noise"] and rows["csirl-noexp"]["vs_csirl"] < -0.2
     table = benchmark.markdown_table(list(rows.values()))
     assert "Difference from csirl" in table and "| csirl-noexp | **-0.260 (t " in table
+    assert "| csirl-nocur | 0.90 / 0.10 |" in table  # success / crash, mean over seeds
 
 
 def test_help_lists_every_key_with_its_help(capsys):
