@@ -338,7 +338,8 @@ def _outcomes(row: dict[str, Any] | None) -> str:
 
 
 def markdown_table(rows: list[dict[str, Any]]) -> str:
-    """Method rows x scenario columns: ``ours (paper)``, expert-normalised accomplish rate; then the cost."""
+    """Method rows x scenario columns: ``ours [paper]``, expert-normalised accomplish rate; then success / crash, the cost
+    and the difference from ``csirl``."""
     scenarios = [s for s in SCENARIO_ORDER if any(r["scenario"] == s for r in rows)]
     methods = list(dict.fromkeys(r["method"] for r in rows))
     cell = {(r["method"], r["scenario"]): r for r in rows}
