@@ -33,6 +33,7 @@ import os
 import subprocess
 import sys
 from collections import defaultdict
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -329,6 +330,13 @@ def _pm(mean: float | None, std: float | None) -> str:
     return "n/a" if mean is None else f"{mean:.2f} ± {std:.2f}"
 
 
+def _score(row: dict[str, Any] | None, paper: float | None) -> str:
+    """``mean ± std (n=runs) [paper]`` of a table row's expert-normalised accomplish rate."""
+    ours = "—" if row is None else (f"{_pm(row['normalized_accomplish_rate_mean'], row['normalized_accomplish_rate_std'])}"
+                                    f" (n={row['runs']})")
+    return ours + (f" [{paper:.2f}]" if paper is not None else "")
+
+
 def _outcomes(row: dict[str, Any] | None) -> str:
     """``success / crash`` of a table row, ``—`` where a rate is missing."""
     if row is None or row["success_rate_mean"] is None:
@@ -337,53 +345,49 @@ def _outcomes(row: dict[str, Any] | None) -> str:
     return f"{row['success_rate_mean']:.2f} / " + ("—" if crash is None else f"{crash:.2f}")
 
 
+def _cost(row: dict[str, Any] | None) -> str:
+    """``wall min, updates/s`` of a table row, ``—`` without a wall time."""
+    if row is None or row["total_wall_s_mean"] is None:
+        return "—"
+    ups = row["updates_per_s_mean"]
+    return f"{row['total_wall_s_mean'] / 60:.1f} min" + (f", {ups:.0f} upd/s" if ups else "")
+
+
+def _difference(row: dict[str, Any] | None) -> str:
+    """``+d (t x)`` against ``csirl``, in bold beyond seed noise, ``—`` without a comparison."""
+    if row is None or row.get("vs_csirl") is None:
+        return "—"
+    text = f"{row['vs_csirl']:+.3f} (t {row['vs_csirl_t']:.1f})"
+    return f"**{text}**" if row["vs_csirl_beyond_noise"] else text
+
+
+def _method_table(caption: str, methods: list[str], scenarios: list[str],
+                  entry: Callable[[str, str], str]) -> list[str]:
+    """A caption, then method rows x scenario columns with ``entry(method, scenario)`` in each cell."""
+    lines = [caption, "", "| method | " + " | ".join(scenarios) + " |", "|---" * (len(scenarios) + 1) + "|"]
+    return lines + [f"| {m} | " + " | ".join(entry(m, s) for s in scenarios) + " |" for m in methods]
+
+
 def markdown_table(rows: list[dict[str, Any]]) -> str:
     """Method rows x scenario columns: ``ours [paper]``, expert-normalised accomplish rate; then success / crash, the cost
     and the difference from ``csirl``."""
     scenarios = [s for s in SCENARIO_ORDER if any(r["scenario"] == s for r in rows)]
     methods = list(dict.fromkeys(r["method"] for r in rows))
     cell = {(r["method"], r["scenario"]): r for r in rows}
-    lines = ["Expert-normalised test accomplish rate, mean ± std over seeds (the paper's Table I in brackets).", "",
-             "| method | " + " | ".join(scenarios) + " |", "|---" * (len(scenarios) + 1) + "|"]
-    for method in methods:
-        entries = []
-        for s in scenarios:
-            r = cell.get((method, s))
-            paper = PAPER_TABLE.get(method, {}).get(s)
-            ours = "—" if r is None else f"{_pm(r['normalized_accomplish_rate_mean'], r['normalized_accomplish_rate_std'])} (n={r['runs']})"
-            entries.append(ours + (f" [{paper:.2f}]" if paper is not None else ""))
-        lines.append(f"| {method} | " + " | ".join(entries) + " |")
-    lines += ["", "Success rate / crash rate of the test episodes, mean over seeds (an accomplish rate earned by "
-              "driving far and then crashing or stalling is not expert-like).", "",
-              "| method | " + " | ".join(scenarios) + " |", "|---" * (len(scenarios) + 1) + "|"]
-    for method in methods:
-        lines.append(f"| {method} | " + " | ".join(_outcomes(cell.get((method, s))) for s in scenarios) + " |")
-    lines += ["", "Cost per run: wall time [min] (start-up and final evaluation included) and updates/s, mean over runs.", "",
-              "| method | " + " | ".join(scenarios) + " |", "|---" * (len(scenarios) + 1) + "|"]
-    for method in methods:
-        entries = []
-        for s in scenarios:
-            r = cell.get((method, s))
-            if r is None or r["total_wall_s_mean"] is None:
-                entries.append("—")
-                continue
-            ups = r["updates_per_s_mean"]
-            entries.append(f"{r['total_wall_s_mean'] / 60:.1f} min" + (f", {ups:.0f} upd/s" if ups else ""))
-        lines.append(f"| {method} | " + " | ".join(entries) + " |")
+    lines = _method_table("Expert-normalised test accomplish rate, mean ± std over seeds (the paper's Table I in brackets).",
+                          methods, scenarios, lambda m, s: _score(cell.get((m, s)), PAPER_TABLE.get(m, {}).get(s)))
+    lines += [""] + _method_table(
+        "Success rate / crash rate of the test episodes, mean over seeds (an accomplish rate earned by "
+        "driving far and then crashing or stalling is not expert-like).",
+        methods, scenarios, lambda m, s: _outcomes(cell.get((m, s))))
+    lines += [""] + _method_table(
+        "Cost per run: wall time [min] (start-up and final evaluation included) and updates/s, mean over runs.",
+        methods, scenarios, lambda m, s: _cost(cell.get((m, s))))
     compared = list(dict.fromkeys(r["method"] for r in rows if r["vs_csirl"] is not None))
     if compared:
-        lines += ["", "Difference from csirl (expert-normalised; Welch's t over seeds; **bold**: beyond seed noise, "
-                  "two-sided 5 %).", "", "| method | " + " | ".join(scenarios) + " |", "|---" * (len(scenarios) + 1) + "|"]
-        for method in compared:
-            entries = []
-            for s in scenarios:
-                r = cell.get((method, s))
-                if r is None or r.get("vs_csirl") is None:
-                    entries.append("—")
-                    continue
-                text = f"{r['vs_csirl']:+.3f} (t {r['vs_csirl_t']:.1f})"
-                entries.append(f"**{text}**" if r["vs_csirl_beyond_noise"] else text)
-            lines.append(f"| {method} | " + " | ".join(entries) + " |")
+        lines += [""] + _method_table(
+            "Difference from csirl (expert-normalised; Welch's t over seeds; **bold**: beyond seed noise, two-sided 5 %).",
+            compared, scenarios, lambda m, s: _difference(cell.get((m, s))))
     return "\n".join(lines)
 
 
