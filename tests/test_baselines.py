@@ -13,6 +13,7 @@ from torchrl.envs import Compose
 from torchrl_csirl.data import ExpertDemonstrations
 from torchrl_csirl.modules import make_actor, make_qvalue
 from torchrl_csirl.trainers.imitation import IMITATION_METHODS, make_imitation_method
+from torchrl_csirl.transforms import absorbing_self_loops
 
 OBS, ACT, HIDDEN = 3, 1, (32, 32)
 
@@ -166,26 +167,31 @@ def test_discriminator_step_touches_only_the_discriminator(name):
     assert any(p.grad is not None and p.grad.abs().sum() > 0 for p in discriminator.parameters())
 
 
-def test_dac_absorbing_states_on_expert_and_online_batches():
+@pytest.mark.parametrize("absorbing_observation", ["placeholder", "terminal"])
+def test_dac_absorbing_states_on_expert_and_online_batches(absorbing_observation):
     from torchrl_csirl.objectives._imitation import sample
 
-    hp = {"batch_size": 16, "gamma": 0.9}
+    hp = {"batch_size": 16, "gamma": 0.9, "absorbing_observation": absorbing_observation}
     method = build("dac", hp)
     online, expert = buffers(method, transitions(40, 0.0, 0.0, terminated_every=4), transitions(40, 1.0, 0.8, 10))
     for data, transforms in ((transitions(40, 1.0, 0.0, 4), method.online_transforms[:1]),
                              (expert.storage[:], method.expert_transforms)):
         into = Compose(*transforms)(data.clone())["next", "absorbing"].squeeze(-1)
         torch.testing.assert_close(into, data["next", "terminated"].squeeze(-1))
-    for buffer in (online, expert):
+    # the absorbing state's observation: the placeholder, or the terminal observation (s + 0.1 here)
+    for buffer, terminal_observation in ((online, 0.1), (expert, 1.1)):
         batch = sample(buffer, 40)
         into = batch["next", "absorbing"].squeeze(-1)
-        assert not batch["absorbing"].any() and batch["next", "observation"][into].eq(0).all()
+        expected = 0.0 if absorbing_observation == "placeholder" else terminal_observation
+        assert not batch["absorbing"].any()
+        torch.testing.assert_close(batch["next", "observation"][into], torch.full((int(into.sum()), OBS), expected))
     # the absorbing state has its own learned reward r_a; entering it pays r + gamma r_a / (1 - gamma)
     discriminator, loss = method.states["discriminator"], method.make_update_step(online, expert).discriminator_step.loss
     with torch.no_grad():
         discriminator.module.indicator_weight.fill_(3.0)
-    loop = TensorDict({"observation": torch.zeros(1, OBS), "absorbing": torch.ones(1, 1, dtype=torch.bool),
-                       "action": torch.zeros(1, ACT)}, [1])
+    loop_observation = 0.0 if absorbing_observation == "placeholder" else 0.1
+    loop = TensorDict({"observation": torch.full((1, OBS), loop_observation),
+                       "absorbing": torch.ones(1, 1, dtype=torch.bool), "action": torch.zeros(1, ACT)}, [1])
     r_a = float(discriminator(loop)["discriminator_logit"])
     batch = sample(online, 40)
     into = batch["next", "absorbing"].squeeze(-1)
@@ -201,6 +207,31 @@ def test_dac_absorbing_states_on_expert_and_online_batches():
     for key in ("loss_discriminator", "loss_gradient_penalty"):  # r_a is learned, and regularised
         (grad,) = torch.autograd.grad(out[key], discriminator.module.indicator_weight, retain_graph=True)
         assert grad.abs().item() > 0, key
+
+
+@pytest.mark.parametrize("absorbing_observation", ["placeholder", "terminal"])
+def test_dac_absorbing_reward_of_an_expert_success_and_an_agent_failure(absorbing_observation):
+    """Demonstrations ending in a terminating success (at s = 1.1), an agent terminating early (at s = 0.1).
+
+    With the paper's single absorbing state both endings share one learned reward ``r_a``; with
+    one absorbing state per terminal observation the discriminator tells the expert's ending
+    (expert-like, ``r_a > 0``) from the agent's (``r_a < 0``).
+    """
+    from torchrl_csirl.objectives._imitation import sample
+
+    method = build("dac", {"batch_size": 64, "discriminator_batch_size": 64,
+                           "absorbing_observation": absorbing_observation})
+    online, expert = buffers(method, transitions(200, 0.0, 0.0, terminated_every=4),
+                             transitions(200, 1.0, 0.8, terminated_every=20))
+    run_updates(method.make_update_step(online, expert).discriminator_step, trainer(online), 200)
+    discriminator = method.states["discriminator"]
+    with torch.no_grad():
+        r_a = [discriminator(absorbing_self_loops(sample(buffer, 200)).select(*discriminator.in_keys))[
+            "discriminator_logit"].mean().item() for buffer in (online, expert)]
+    if absorbing_observation == "placeholder":
+        assert r_a[0] == pytest.approx(r_a[1])
+    else:
+        assert r_a[0] < -0.3 and r_a[1] > 0.3
 
 
 def test_dac_gradient_penalty_one_weight_per_sample():

@@ -30,7 +30,7 @@ from torch import nn
 from torchrl.objectives import LossModule
 
 from torchrl_csirl.objectives._imitation import SACHyperparameters, gradient_penalty, require_keys
-from torchrl_csirl.transforms.absorbing_states import absorbing_self_loops
+from torchrl_csirl.transforms.absorbing_states import AbsorbingStates, absorbing_self_loops
 
 __all__ = ["AbsorbingLogit", "DACDiscriminatorLoss", "DACHyperparameters", "dac_discriminator_loss", "make_dac_discriminator"]
 
@@ -46,6 +46,11 @@ class DACHyperparameters(SACHyperparameters):
         discriminator_every: a discriminator step every this many actor-critic updates.
         gp_lambda: gradient-penalty weight (10, after Gulrajani et al. 2017).
         absorbing_states: the absorbing-state treatment of terminal transitions.
+        absorbing_observation: which absorbing state a termination enters: ``"terminal"`` (one
+            per terminal state, observed as the terminal observation: our default, since every
+            driving demonstration ends in a terminating success while the learner also terminates
+            by crashing) or ``"placeholder"`` (the paper's single absorbing state, a zero
+            observation). docs/BASELINES.md, "DAC's absorbing states", gives the evidence.
     """
 
     discriminator_lr: float = 1e-3
@@ -53,13 +58,26 @@ class DACHyperparameters(SACHyperparameters):
     discriminator_every: int = 1
     gp_lambda: float = 10.0
     absorbing_states: bool = True
+    absorbing_observation: str = "terminal"
+
+    def __post_init__(self) -> None:
+        if self.absorbing_observation not in ABSORBING_OBSERVATIONS:
+            raise ValueError(f"absorbing_observation must be one of {ABSORBING_OBSERVATIONS}, "
+                             f"got {self.absorbing_observation!r}.")
+
+    def make_absorbing_states(self) -> AbsorbingStates:
+        """The :class:`~torchrl_csirl.transforms.AbsorbingStates` transform of these settings."""
+        return AbsorbingStates(absorbing_observation=None if self.absorbing_observation == "terminal" else 0.0)
+
+
+ABSORBING_OBSERVATIONS = ("terminal", "placeholder")
 
 
 class AbsorbingLogit(nn.Module):
     """A discriminator logit that reads DAC's absorbing-state indicator as an input feature.
 
     ``logit(s, i, a) = f(s, a) + w * i`` with ``i`` the indicator (0 for real states, 1 for the
-    absorbing state, whose samples carry the placeholder observation and a zero action, see
+    absorbing state, whose samples carry its observation and a zero action, see
     :func:`~torchrl_csirl.transforms.absorbing_states.absorbing_self_loops`): the paper appends
     the indicator to the network's input; here it enters linearly through the learned weight
     ``w``, so that ``f`` keeps the critic's architecture. The absorbing state's logit
@@ -150,7 +168,8 @@ class DACDiscriminatorLoss(LossModule):
         >>> def pairs(n):  # as written by AbsorbingStates: real states, none entering s_a
         ...     return TensorDict({"observation": torch.randn(n, 3), "action": torch.rand(n, 1),
         ...                        "absorbing": torch.zeros(n, 1, dtype=torch.bool),
-        ...                        "next": {"absorbing": torch.zeros(n, 1, dtype=torch.bool)}}, [n])
+        ...                        "next": {"observation": torch.randn(n, 3),
+        ...                                 "absorbing": torch.zeros(n, 1, dtype=torch.bool)}}, [n])
         >>> td = TensorDict({"expert": pairs(4), "collector": pairs(6)}, [])
         >>> sorted(loss(td).keys())
         ['agent_probability', 'expert_probability', 'loss_discriminator', 'loss_gradient_penalty']
@@ -208,7 +227,8 @@ class DACDiscriminatorLoss(LossModule):
         real = samples.select(*self.discriminator_network.in_keys)
         if not self._reads_absorbing:
             return real
-        require_keys(samples, [("next", self.tensor_keys.absorbing)], "DAC discriminator (absorbing states)")
+        require_keys(samples, [("next", self.tensor_keys.absorbing), ("next", self.tensor_keys.observation)],
+                     "DAC discriminator (absorbing states)")
         keys = (self.tensor_keys.observation, self.tensor_keys.action)
         loops = absorbing_self_loops(samples, absorbing_key=self.tensor_keys.absorbing, keys=keys)
         return torch.cat([real, loops.select(*real.keys(True, True))], 0)

@@ -32,7 +32,6 @@ from torchrl_csirl.objectives.iq_learn import IQLearnHyperparameters, IQLearnLos
 from torchrl_csirl.objectives.sqil import SQILHyperparameters, sqil_reward_labels
 from torchrl_csirl.objectives.valuedice import ValueDICEHyperparameters, ValueDICELoss, initial_observations
 from torchrl_csirl.trainers.imitation_updates import AdversarialImitationUpdate, DiscriminatorStep, ValueDICEUpdate
-from torchrl_csirl.transforms.absorbing_states import AbsorbingStates
 from torchrl_csirl.transforms.discriminator_reward import DiscriminatorReward
 from torchrl_csirl.trainers.trainer import CSIRLTrainer
 from torchrl_csirl.trainers.updates import SACUpdate
@@ -142,8 +141,8 @@ def _make_dac(actor, make_qvalue, hp: DACHyperparameters, device) -> ImitationMe
     discriminator_loss = DACDiscriminatorLoss(discriminator, gp_lambda=hp.gp_lambda)
     optimizer = _adam(discriminator, hp.discriminator_lr)
     loss_keys = {"loss_discriminator": "loss_discriminator", "loss_gradient_penalty": "loss_gradient_penalty"}
-    online_transforms = [AbsorbingStates()] if hp.absorbing_states else []
-    expert_transforms = [AbsorbingStates()] if hp.absorbing_states else []
+    online_transforms = [hp.make_absorbing_states()] if hp.absorbing_states else []
+    expert_transforms = [hp.make_absorbing_states()] if hp.absorbing_states else []
     online_transforms.append(DiscriminatorReward(discriminator, "logit",
                                                  absorbing_gamma=hp.gamma if hp.absorbing_states else None))
     return _adversarial("dac", actor, hp, loss, discriminator_loss, discriminator, optimizer, _dac_input, loss_keys,

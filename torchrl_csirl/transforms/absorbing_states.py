@@ -32,7 +32,17 @@ class AbsorbingStates(Transform):
     ``s_a`` that loops on itself with a *learned* reward ``r_a``. On a batch of transitions this
     transform writes the indicator features: ``"absorbing"`` (``False``, the state ``s`` is real)
     and ``("next", "absorbing")`` (``True`` where the transition is terminal), and sets the
-    successor observation of terminal transitions to the placeholder ``absorbing_value`` of ``s_a``.
+    successor observation of terminal transitions to the observation of the absorbing state
+    entered:
+
+    * ``absorbing_observation=0.0`` (a number): the paper's single absorbing state, the same
+      placeholder observation after every termination;
+    * ``absorbing_observation=None``: one absorbing state per terminal state, observed as the
+      terminal observation itself (the successor observation is left as recorded). Use it where
+      demonstrations end in a terminal *success* (a goal reached) and the learner can also
+      terminate by failing (a crash): with a single absorbing state both endings share one
+      learned reward, and the failure inherits the reward of the expert's success
+      (docs/BASELINES.md, "DAC's absorbing states").
 
     The batch keeps its size (TorchRL's replay buffers need that): the absorbing state's self-loop
     transitions, one per terminal transition as in the paper's replay buffer, are built where
@@ -41,14 +51,15 @@ class AbsorbingStates(Transform):
     constant ``gamma r_a / (1 - gamma)`` (:func:`absorbing_value`), the critic target of a
     terminal transition adds it in closed form
     (:class:`~torchrl_csirl.transforms.DiscriminatorReward` with ``absorbing_gamma``) instead of
-    bootstrapping through a critic evaluated at the placeholder; ``terminated`` therefore stays set.
-    Apply it to the expert and the online replay buffers alike (sampling time). Truncated
-    (time-limit) transitions are not terminal and are left alone.
+    bootstrapping through a critic evaluated at the absorbing state; ``terminated`` therefore
+    stays set. Apply it to the expert and the online replay buffers alike (sampling time).
+    Truncated (time-limit) transitions are not terminal and are left alone.
 
     Keyword Args:
         absorbing_key (NestedKey): the indicator entry. Defaults to ``"absorbing"``.
         observation_key (NestedKey): Defaults to ``"observation"``.
-        absorbing_observation (float): the placeholder observation of ``s_a``. Defaults to ``0.0``.
+        absorbing_observation (float, optional): the placeholder observation of the single
+            ``s_a``, or ``None`` for one absorbing state per terminal observation. Defaults to ``0.0``.
 
     Examples:
         >>> import torch
@@ -56,19 +67,21 @@ class AbsorbingStates(Transform):
         >>> term = torch.tensor([[False], [True]])
         >>> td = TensorDict({"observation": torch.ones(2, 2), "action": torch.ones(2, 1),
         ...                  "next": {"observation": torch.ones(2, 2), "terminated": term}}, [2])
-        >>> out = AbsorbingStates()(td)
+        >>> out = AbsorbingStates()(td.clone())
         >>> out["absorbing"].squeeze(-1).tolist(), out["next", "absorbing"].squeeze(-1).tolist()
         ([False, False], [False, True])
         >>> out["next", "observation"][1].tolist()
         [0.0, 0.0]
+        >>> AbsorbingStates(absorbing_observation=None)(td.clone())["next", "observation"][1].tolist()
+        [1.0, 1.0]
     """
 
     def __init__(self, *, absorbing_key: NestedKey = "absorbing", observation_key: NestedKey = "observation",
-                 absorbing_observation: float = 0.0) -> None:
+                 absorbing_observation: float | None = 0.0) -> None:
         super().__init__(in_keys=[observation_key], out_keys=[absorbing_key])
         self.absorbing_key = absorbing_key
         self.observation_key = observation_key
-        self.absorbing_observation = float(absorbing_observation)
+        self.absorbing_observation = None if absorbing_observation is None else float(absorbing_observation)
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         missing = [key for key in (self.observation_key, ("next", self.observation_key), ("next", "terminated"))
@@ -78,6 +91,8 @@ class AbsorbingStates(Transform):
         terminated = tensordict.get(("next", "terminated")).bool()
         tensordict.set(self.absorbing_key, torch.zeros_like(terminated))
         tensordict.set(("next", self.absorbing_key), terminated)
+        if self.absorbing_observation is None:  # one absorbing state per terminal observation
+            return tensordict
         next_obs = tensordict.get(("next", self.observation_key))
         placeholder = torch.full_like(next_obs, self.absorbing_observation)
         tensordict.set(("next", self.observation_key), torch.where(terminated, placeholder, next_obs))
@@ -88,25 +103,28 @@ class AbsorbingStates(Transform):
 
 
 def absorbing_self_loops(transitions: TensorDictBase, *, absorbing_key: NestedKey = "absorbing",
-                         keys: tuple[NestedKey, ...] = ("observation", "action"),
-                         absorbing_observation: float = 0.0) -> TensorDictBase:
+                         keys: tuple[NestedKey, ...] = ("observation", "action")) -> TensorDictBase:
     """One self-loop sample ``(s_a, 0)`` with indicator ``True`` per transition entering ``s_a``.
 
-    Reads ``("next", absorbing_key)`` (written by :class:`AbsorbingStates`); returns the entries
-    ``keys`` (placeholder observation, zero action) and ``absorbing_key``.
+    Reads ``("next", absorbing_key)`` and the absorbing state's observation, the successor
+    observation ``("next", keys[0])``, both as written by :class:`AbsorbingStates` (the
+    placeholder, or the terminal observation); returns the entries ``keys`` (that observation,
+    zero for the others, the action) and ``absorbing_key``.
 
     Examples:
         >>> import torch
         >>> from tensordict import TensorDict
         >>> td = TensorDict({"observation": torch.ones(3, 2), "action": torch.ones(3, 1),
-        ...                  "next": {"absorbing": torch.tensor([[True], [False], [True]])}}, [3])
+        ...                  "next": {"observation": torch.zeros(3, 2),
+        ...                           "absorbing": torch.tensor([[True], [False], [True]])}}, [3])
         >>> loops = absorbing_self_loops(td)
         >>> loops.batch_size, loops["absorbing"].all().item(), loops["observation"].abs().sum().item()
         (torch.Size([2]), True, 0.0)
     """
     into = transitions.get(("next", absorbing_key)).reshape(transitions.batch_size).bool()
-    loops = transitions.select(*keys)[into].clone()
-    loops.set(keys[0], torch.full_like(loops.get(keys[0]), absorbing_observation))
+    entering = transitions[into]
+    loops = entering.select(*keys).clone()
+    loops.set(keys[0], entering.get(("next", keys[0])).clone())
     for key in keys[1:]:
         loops.set(key, torch.zeros_like(loops.get(key)))
     loops.set(absorbing_key, torch.ones(*loops.batch_size, 1, dtype=torch.bool, device=loops.device))
