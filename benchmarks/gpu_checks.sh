@@ -7,14 +7,15 @@
 #    the GPU, the meta-gradient against finite differences, the joint update, the fused critic
 #    ensemble against vmap);
 # 2. recipes: csirl_highway.py end to end with device=cuda on a tiny budget, then resumed from its
-#    checkpoint; a baseline (imitation_highway.py method=iqlearn) and the AntMaze expert's SAC
-#    (train_ant_expert.py) with device=cuda;
+#    checkpoint; every trained baseline (imitation_highway.py method=<m>) and the termination probe
+#    on DAC's run; the AntMaze expert's SAC (train_ant_expert.py) with device=cuda;
 # 3. cost: the learner's update (benchmarks/bench_update.py) and the recipe's own updates
 #    (benchmarks/bench_recipe_update.py), CPU and GPU on the same machine, so their ratio holds.
 #
 # Each step's exit status and seconds go to OUT_DIR/steps.jsonl, its output to OUT_DIR/<step>.log;
 # the last line printed is a JSON summary. PYTHON (default python3) picks the interpreter,
-# STEP_TIMEOUT (default 240) bounds each step.
+# STEP_TIMEOUT (default 240) bounds each step. Leave MUJOCO_GL unset unless the EGL libraries are
+# installed: with MUJOCO_GL=egl and no libEGL, `import torchrl` fails (it imports MuJoCo's renderer).
 set -u
 OUT=${1:-gpu-checks}
 mkdir -p "$OUT"
@@ -49,10 +50,14 @@ step tests "$PY" -m pytest -q -p no:cacheprovider -k cuda tests/test_meta_loss.p
   tests/test_transforms.py
 step csirl "$PY" recipes/csirl_highway.py "${TINY_CSIRL[@]}" collector.total_frames=400 logger.exp_name=csirl
 step csirl_resume "$PY" recipes/csirl_highway.py "checkpoint.resume=$RUNS/csirl" collector.total_frames=600
-step iqlearn "$PY" recipes/imitation_highway.py method=iqlearn "device=$DEVICE" collector.frames_per_batch=100 \
-  collector.init_random_frames=100 collector.num_workers=1 replay_buffer.warmup_frames=100 iqlearn.batch_size=32 \
-  updates_per_round=20 collector.total_frames=200 eval.episodes=1 eval.final_episodes=1 logger.progress_bar=false \
-  logger.backend=csv "logger.output_dir=$RUNS" logger.exp_name=iqlearn
+for method in sac bc sqil gail dac iqlearn valuedice; do  # every trained baseline, learner on the device
+  step "imitation_$method" "$PY" recipes/imitation_highway.py "method=$method" "device=$DEVICE" \
+    collector.frames_per_batch=100 collector.init_random_frames=100 collector.num_workers=1 \
+    replay_buffer.warmup_frames=100 updates_per_round=20 collector.total_frames=200 eval.episodes=1 \
+    eval.final_episodes=1 logger.progress_bar=false logger.backend=csv "logger.output_dir=$RUNS" \
+    "logger.exp_name=$method"
+done
+step termination_probe "$PY" recipes/termination_probe.py "$RUNS/dac" --samples 64
 step ant "$PY" recipes/train_ant_expert.py collector.total_frames=800 collector.frames_per_batch=400 \
   collector.num_workers=1 collector.init_random_frames=200 replay_buffer.warmup_frames=200 sac.batch_size=32 \
   updates_per_round=100 eval.episodes=1 eval.final_episodes=1 expert_eval.episodes=1 "device=$DEVICE" \

@@ -16,6 +16,7 @@ sys.path.insert(0, RECIPES)
 import benchmark  # noqa: E402
 import imitation_highway  # noqa: E402
 import imitation_utils  # noqa: E402
+import termination_probe  # noqa: E402
 from common.run import run_script  # noqa: E402
 
 # the tiniest budget that still has two rounds: 100-frame batches, rounds of 20 updates, 1 test episode
@@ -68,6 +69,16 @@ def test_trained_baseline_end_to_end(method, tmp_path):
         assert os.path.isfile(os.path.join(run_dir, name)), name
     with open(os.path.join(run_dir, "summary.json")) as f:
         assert json.load(f)["accomplish_rate"] == out["accomplish_rate"]
+    if method in termination_probe.PROBED_METHODS:  # the critic on terminating vs continuing transitions
+        stats = termination_probe.main([run_dir, "--samples", "64"])
+        for side in ("agent", "expert"):
+            assert 0.0 <= stats[side]["terminal_fraction"] <= 1.0 and stats[side]["q_continuing"] is not None
+        assert {"dac": "absorbing_reward", "iqlearn": "implicit_reward_continuing"}.get(method, "q_continuing") in stats["agent"]
+        with open(os.path.join(run_dir, "termination_probe.json")) as f:
+            assert json.load(f)["agent"] == stats["agent"]
+    else:
+        with pytest.raises(imitation_utils.ConfigError, match="no soft-Q critic"):
+            termination_probe.main([run_dir])
 
 
 def test_progress_reward_is_the_distance_gained_toward_the_finish():

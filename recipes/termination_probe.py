@@ -1,0 +1,142 @@
+"""Does a trained baseline prefer ending the episode? Its critic on terminating vs continuing transitions.
+
+``python recipes/termination_probe.py <run dir> [key=value ...] [--samples 4096] [--seed 0]``
+
+Reads a run of ``recipes/imitation_highway.py`` (its last checkpoint, with the replay buffer)
+and samples its replay (the learner's own transitions) and its demonstrations. For each it
+reports the fraction of transitions that end the episode (``terminated``) and the critics'
+value ``Q(s, a)`` (the minimum over the ensemble, as SAC's actor reads it) on the terminating
+and on the continuing ones: a learner whose ``Q`` is higher where the episode ends has been
+taught that ending it pays, whatever the expert did. Per method, the reward it learns:
+
+* ``dac``: the discriminator reward of a step and ``r_a``, the learned reward of the absorbing
+  state(s) entered (a termination pays ``gamma r_a / (1 - gamma)`` on top: with ``r_a`` above
+  the per-step reward, ending the episode beats going on);
+* ``iqlearn``: the implicit reward ``r = Q(s, a) - gamma V(s')`` (``V(s') = 0`` at a termination).
+
+``key=value`` overrides the run's configuration as ``checkpoint.resume`` would (e.g.
+``dac.absorbing_observation=placeholder`` for a run saved before that key existed). Methods with
+a soft-Q critic: ``sac``, ``sqil``, ``gail``, ``dac``, ``iqlearn``. The run itself is
+not touched (its configuration and checkpoint are read in a temporary copy). The last line is
+JSON; it is also written to ``<run dir>/termination_probe.json``. docs/BASELINES.md, "Ending the
+episode", reads it for DAC and IQ-Learn on merge.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import sys
+import tempfile
+
+import torch
+from tensordict import TensorDictBase
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+from common.builders import resume_run  # noqa: E402
+from common.config import ConfigError  # noqa: E402
+from common.run import run_script  # noqa: E402
+from imitation_utils import load_run_config, make_trainer  # noqa: E402
+
+from torchrl_csirl.objectives import EnsembleSACLoss  # noqa: E402
+from torchrl_csirl.transforms import absorbing_self_loops  # noqa: E402
+
+PROBED_METHODS = ("sac", "sqil", "gail", "dac", "iqlearn")
+
+
+def _mean(values: torch.Tensor, mask: torch.Tensor) -> float | None:
+    return round(values[mask].mean().item(), 4) if bool(mask.any()) else None
+
+
+def critic_on_endings(loss: EnsembleSACLoss, transitions: TensorDictBase) -> dict[str, float | None]:
+    """Fraction of terminating transitions and the critics' min ``Q`` on terminating / continuing ones."""
+    ends = transitions.get(("next", "terminated")).reshape(-1).bool()
+    q = loss.qvalues(transitions).min(0).values.reshape(-1)
+    return {"terminal_fraction": round(ends.float().mean().item(), 4), "q_terminating": _mean(q, ends),
+            "q_continuing": _mean(q, ~ends)}
+
+
+def dac_rewards(discriminator, transitions: TensorDictBase) -> dict[str, float | None]:
+    """DAC's per-step reward (the discriminator logit) and ``r_a`` of the absorbing states entered."""
+    keys = discriminator.in_keys
+    per_step = discriminator(transitions.select(*keys).clone()).get("discriminator_logit").reshape(-1)
+    loops = absorbing_self_loops(transitions)
+    r_a = discriminator(loops.select(*keys).clone()).get("discriminator_logit").reshape(-1)
+    return {"step_reward": round(per_step.mean().item(), 4),
+            "absorbing_reward": round(r_a.mean().item(), 4) if r_a.numel() else None}
+
+
+def iqlearn_rewards(loss, transitions: TensorDictBase) -> dict[str, float | None]:
+    """IQ-Learn's implicit reward on terminating / continuing transitions (mean over the critics)."""
+    ends = transitions.get(("next", "terminated")).reshape(-1).bool()
+    reward = loss._implicit_reward(transitions)[0].mean(0).reshape(-1)
+    return {"implicit_reward_terminating": _mean(reward, ends), "implicit_reward_continuing": _mean(reward, ~ends)}
+
+
+def probe(run, samples: int) -> dict[str, object]:
+    """The probe's figures for the replay (``"agent"``) and the demonstrations (``"expert"``)."""
+    method = run.method
+    loss = method.states.get("loss")
+    if not isinstance(loss, EnsembleSACLoss):
+        raise ConfigError(f"termination_probe: method {method.name!r} has no soft-Q critic; "
+                          f"probed methods: {', '.join(PROBED_METHODS)}")
+    out: dict[str, object] = {"method": method.name, "scenario": run.spec.name}
+    with torch.no_grad():
+        for side, buffer in (("agent", run.online_buffer), ("expert", run.expert_buffer)):
+            if len(buffer) == 0:
+                raise ConfigError(f"termination_probe: the run's {side} buffer is empty "
+                                  f"(was it saved? checkpoint.save_buffer)")
+            transitions = buffer.sample(samples)
+            figures = critic_on_endings(loss, transitions)
+            if method.name == "dac" and "discriminator" in method.states:
+                figures.update(dac_rewards(method.states["discriminator"], transitions))
+            if method.name == "iqlearn":
+                figures.update(iqlearn_rewards(loss, transitions))
+            out[side] = figures
+    return out
+
+
+def open_copy(run_dir: str, workdir: str, overrides: list[str] = ()):
+    """The run rebuilt from a copy of its configuration and last checkpoint under ``workdir``."""
+    checkpoint = os.path.join(run_dir, "checkpoints", "last")
+    if not os.path.isfile(os.path.join(checkpoint, "state.pt")):
+        raise ConfigError(f"termination_probe: {run_dir} has no checkpoint (looked for {checkpoint}/state.pt)")
+    copy = os.path.join(workdir, "run")
+    os.makedirs(copy)
+    shutil.copy(os.path.join(run_dir, "config.yaml"), copy)
+    shutil.copytree(checkpoint, os.path.join(copy, "checkpoints", "last"))
+    cfg = load_run_config(copy, [f"checkpoint.resume={copy}", "logger.backend=csv", *overrides])
+    if cfg.method not in PROBED_METHODS:
+        raise ConfigError(f"termination_probe: method {cfg.method!r} has no soft-Q critic; "
+                          f"probed methods: {', '.join(PROBED_METHODS)}")
+    return resume_run(cfg, copy, os.path.join(copy, "checkpoints", "last"), make_trainer)
+
+
+def main(argv: list[str] | None = None) -> dict[str, object]:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("run_dir", help="a run directory of recipes/imitation_highway.py")
+    parser.add_argument("overrides", nargs="*", help="key=value overrides of the run's configuration")
+    parser.add_argument("--samples", type=int, default=4096, help="transitions sampled from each buffer")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the sampling")
+    args = parser.parse_args(argv)
+    if args.samples <= 0:
+        raise ConfigError(f"--samples must be positive, got {args.samples}")
+    torch.manual_seed(args.seed)
+    with tempfile.TemporaryDirectory() as workdir:
+        run = open_copy(os.path.abspath(args.run_dir), workdir, args.overrides)
+        try:
+            torch.manual_seed(args.seed)
+            out = probe(run, args.samples)
+        finally:
+            run.close()
+    out["run_dir"] = os.path.abspath(args.run_dir)
+    with open(os.path.join(args.run_dir, "termination_probe.json"), "w") as f:
+        json.dump(out, f, indent=1)
+    print(json.dumps(out))
+    return out
+
+
+if __name__ == "__main__":
+    run_script(main)
