@@ -318,6 +318,42 @@ def test_iqlearn_reads_the_successor_value_from_the_target_critics(use_target_va
     assert sorted(group["lr"] for group in method.states["optim_sac"].param_groups) == [3e-5, 3e-4]
 
 
+@pytest.mark.parametrize("absorbing_states", [True, False])
+def test_valuedice_residual_after_a_termination(absorbing_states):
+    """With absorbing states (the paper's): ``nu(s, a) - gamma nu(s_a, 0)`` after a termination and one
+    self-loop sample ``(1 - gamma) nu(s_a, 0)`` per termination; without: ``nu(s, a)``."""
+    from torchrl_csirl.objectives._imitation import sample
+
+    gamma = 0.9
+    method = build("valuedice", {"batch_size": 16, "gamma": gamma, "absorbing_states": absorbing_states})
+    online, _ = buffers(method, transitions(40, 0.0, 0.3, terminated_every=4), transitions(40, 1.0, 0.8, 10))
+    loss = method.states["loss"]
+    assert loss.reads_absorbing == absorbing_states
+    batch = sample(online, 40)
+    ends = batch["next", "terminated"].squeeze(-1)
+    with torch.no_grad():
+        residual, successor = loss._residual(batch)
+        here = loss.nu(batch["observation"], batch["action"])
+        terminal_obs = batch["next", "observation"][ends]  # 0.1: the absorbing state's observation
+        if absorbing_states:
+            s_a = loss.nu(terminal_obs, torch.zeros(len(terminal_obs), ACT), torch.ones(len(terminal_obs), 1))
+            assert residual.shape == (40 + int(ends.sum()),)
+            torch.testing.assert_close(residual[:40][ends], here[ends] - gamma * s_a)
+            torch.testing.assert_close(residual[40:], (1 - gamma) * s_a)
+            assert successor["action"][ends].eq(0).all() and successor["absorbing"].squeeze(-1).eq(ends).all()
+        else:
+            assert residual.shape == (40,)
+            torch.testing.assert_close(residual[ends], here[ends])
+    # the gradient penalty reaches the indicator's weight (it bounds the absorbing state's nu)
+    if absorbing_states:
+        with torch.no_grad():  # at w = 0 the penalty's derivative in w vanishes
+            loss.nu_network.module.indicator_weight.fill_(3.0)
+        td = TensorDict({"expert": sample(online, 16), "collector": batch,
+                         "initial": TensorDict({"observation": torch.zeros(4, OBS)}, [4])}, [])
+        (grad,) = torch.autograd.grad(loss(td)["loss_gradient_penalty"], loss.nu_network.module.indicator_weight)
+        assert grad.abs().item() > 0
+
+
 def test_valuedice_update_moves_each_network_by_its_own_objective():
     from torchrl_csirl.objectives._imitation import sample
     from torchrl_csirl.objectives.valuedice import initial_observations

@@ -8,9 +8,15 @@ from dataclasses import dataclass
 import torch
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModule
+from tensordict.utils import NestedKey
 from torch import nn
 
+from torchrl_csirl.transforms.absorbing_states import AbsorbingStates
+
 __all__ = [
+    "ABSORBING_OBSERVATIONS",
+    "AbsorbingLogit",
+    "AbsorbingStateSettings",
     "SACHyperparameters",
     "concat_shared",
     "gradient_penalty",
@@ -56,11 +62,13 @@ def require_keys(tensordict: TensorDictBase, keys: Sequence, where: str) -> None
         raise KeyError(f"{where}: the batch lacks the keys {missing} (has {sorted(map(str, present))}).")
 
 
-def logit_network(qvalue: TensorDictModule, out_key: str = "discriminator_logit") -> TensorDictModule:
+def logit_network(qvalue: TensorDictModule, out_key: str = "discriminator_logit",
+                  absorbing_key: NestedKey | None = None) -> TensorDictModule:
     """A network of the critic's architecture (and input map) writing a scalar under ``out_key``.
 
     The discriminators and ValueDICE's ``nu`` are built from ``make_qvalue()`` so that every method
-    uses the same network sizes and inputs as the critics.
+    uses the same network sizes and inputs as the critics. With ``absorbing_key`` it also reads
+    DAC's absorbing-state indicator (:class:`AbsorbingLogit`): ``[observation, absorbing, action]``.
 
     Examples:
         >>> import torch
@@ -69,10 +77,16 @@ def logit_network(qvalue: TensorDictModule, out_key: str = "discriminator_logit"
         >>> d = logit_network(make_qvalue(3, 1, hidden=(8,)))
         >>> d(TensorDict({"observation": torch.zeros(4, 3), "action": torch.zeros(4, 1)}, [4]))["discriminator_logit"].shape
         torch.Size([4, 1])
+        >>> logit_network(make_qvalue(3, 1, hidden=(8,)), "nu", absorbing_key="absorbing").in_keys
+        ['observation', 'absorbing', 'action']
     """
     if not isinstance(qvalue, TensorDictModule):
         raise TypeError(f"make_qvalue() must return a TensorDictModule, got {type(qvalue).__name__}.")
-    return TensorDictModule(qvalue.module, in_keys=list(qvalue.in_keys), out_keys=[out_key])
+    if absorbing_key is None:
+        return TensorDictModule(qvalue.module, in_keys=list(qvalue.in_keys), out_keys=[out_key])
+    observation_key, action_key = qvalue.in_keys
+    return TensorDictModule(AbsorbingLogit(qvalue.module), in_keys=[observation_key, absorbing_key, action_key],
+                            out_keys=[out_key])
 
 
 def gradient_penalty(function: Callable[..., torch.Tensor], inputs: Sequence[torch.Tensor], target_norm: float = 1.0) -> torch.Tensor:
@@ -123,6 +137,82 @@ def orthogonal_regularization(module: nn.Module, skip_last: bool = False) -> tor
     if total is None:
         raise ValueError(f"{type(module).__name__} has no nn.Linear layer to regularise.")
     return total
+
+
+# ------------------------------------------------------------------------------ absorbing states
+ABSORBING_OBSERVATIONS = ("terminal", "placeholder")
+
+
+@dataclass
+class AbsorbingStateSettings:
+    """DAC's absorbing states (Kostrikov et al. 2019), as DAC and ValueDICE use them.
+
+    Attributes:
+        absorbing_states: terminal transitions enter an absorbing state with a learned value
+            (:class:`~torchrl_csirl.transforms.AbsorbingStates`); False: nothing follows a
+            termination.
+        absorbing_observation: which absorbing state a termination enters: ``"terminal"`` (one
+            per terminal state, observed as the terminal observation: our default, since every
+            driving demonstration ends in a terminating success while the learner also terminates
+            by crashing) or ``"placeholder"`` (the paper's single absorbing state, a zero
+            observation). docs/BASELINES.md, "DAC's absorbing states", gives the evidence.
+    """
+
+    absorbing_states: bool = True
+    absorbing_observation: str = "terminal"
+
+    def __post_init__(self) -> None:
+        if self.absorbing_observation not in ABSORBING_OBSERVATIONS:
+            raise ValueError(f"absorbing_observation must be one of {ABSORBING_OBSERVATIONS}, "
+                             f"got {self.absorbing_observation!r}.")
+
+    def absorbing_transforms(self) -> list[AbsorbingStates]:
+        """The replay-buffer transforms of these settings: ``[AbsorbingStates(...)]``, or ``[]`` without them.
+
+        Examples:
+            >>> AbsorbingStateSettings(absorbing_observation="placeholder").absorbing_transforms()[0].absorbing_observation
+            0.0
+            >>> AbsorbingStateSettings(absorbing_states=False).absorbing_transforms()
+            []
+        """
+        if not self.absorbing_states:
+            return []
+        return [AbsorbingStates(absorbing_observation=None if self.absorbing_observation == "terminal" else 0.0)]
+
+
+class AbsorbingLogit(nn.Module):
+    """A scalar network (DAC's discriminator, ValueDICE's ``nu``) that reads DAC's absorbing-state indicator.
+
+    ``logit(s, i, a) = f(s, a) + w * i`` with ``i`` the indicator (0 for real states, 1 for the
+    absorbing state, whose samples carry its observation and a zero action, see
+    :func:`~torchrl_csirl.transforms.absorbing_states.absorbing_self_loops`): the paper appends
+    the indicator to the network's input; here it enters linearly through the learned weight
+    ``w``, so that ``f`` keeps the critic's architecture. The absorbing state's logit
+    ``f(s_a, 0) + w`` is regularised like any other output: the gradient penalties of
+    :class:`~torchrl_csirl.objectives.DACDiscriminatorLoss` and
+    :class:`~torchrl_csirl.objectives.ValueDICELoss` interpolate the indicator too and so bound ``w``.
+
+    Args:
+        network: ``network(observation, action) -> [B, 1]`` (e.g. a critic's ``ConcatMLP``).
+
+    Examples:
+        >>> import torch
+        >>> from torchrl_csirl.modules import ConcatMLP
+        >>> m = AbsorbingLogit(ConcatMLP(4, (8,)))
+        >>> _ = torch.nn.init.constant_(m.indicator_weight, 2.0)
+        >>> out = m(torch.zeros(2, 3), torch.tensor([[False], [True]]), torch.zeros(2, 1))
+        >>> out.shape, round(float(out[1] - out[0]), 4)
+        (torch.Size([2, 1]), 2.0)
+    """
+
+    def __init__(self, network: nn.Module) -> None:
+        super().__init__()
+        self.network = network
+        self.indicator_weight = nn.Parameter(torch.zeros(1))
+
+    def forward(self, observation: torch.Tensor, absorbing: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+        logit = self.network(observation, action)
+        return logit + self.indicator_weight * absorbing.reshape(logit.shape).to(logit.dtype)
 
 
 # ------------------------------------------------------------------------------ the SAC learner

@@ -26,18 +26,24 @@ import torch.nn.functional as F
 from tensordict import TensorDict, TensorDictBase
 from tensordict.nn import TensorDictModule
 from tensordict.utils import NestedKey
-from torch import nn
 from torchrl.objectives import LossModule
 
-from torchrl_csirl.objectives._imitation import SACHyperparameters, gradient_penalty, require_keys
-from torchrl_csirl.transforms.absorbing_states import AbsorbingStates, absorbing_self_loops
+from torchrl_csirl.objectives._imitation import (
+    AbsorbingLogit,
+    AbsorbingStateSettings,
+    SACHyperparameters,
+    gradient_penalty,
+    logit_network,
+    require_keys,
+)
+from torchrl_csirl.transforms.absorbing_states import absorbing_self_loops
 
 __all__ = ["AbsorbingLogit", "DACDiscriminatorLoss", "DACHyperparameters", "dac_discriminator_loss", "make_dac_discriminator"]
 
 
 @dataclass
-class DACHyperparameters(SACHyperparameters):
-    """DAC's settings: the SAC learner's (:class:`SACHyperparameters`) plus the discriminator's.
+class DACHyperparameters(AbsorbingStateSettings, SACHyperparameters):
+    """DAC's settings: the SAC learner's (:class:`SACHyperparameters`), the absorbing states' and the discriminator's.
 
     Attributes:
         discriminator_lr: Adam learning rate of the discriminator (1e-3: Adam's default, used by
@@ -45,66 +51,14 @@ class DACHyperparameters(SACHyperparameters):
         discriminator_batch_size: expert and agent transitions per discriminator step (each).
         discriminator_every: a discriminator step every this many actor-critic updates.
         gp_lambda: gradient-penalty weight (10, after Gulrajani et al. 2017).
-        absorbing_states: the absorbing-state treatment of terminal transitions.
-        absorbing_observation: which absorbing state a termination enters: ``"terminal"`` (one
-            per terminal state, observed as the terminal observation: our default, since every
-            driving demonstration ends in a terminating success while the learner also terminates
-            by crashing) or ``"placeholder"`` (the paper's single absorbing state, a zero
-            observation). docs/BASELINES.md, "DAC's absorbing states", gives the evidence.
+
+    The absorbing-state fields are :class:`AbsorbingStateSettings`'s.
     """
 
     discriminator_lr: float = 1e-3
     discriminator_batch_size: int = 256
     discriminator_every: int = 1
     gp_lambda: float = 10.0
-    absorbing_states: bool = True
-    absorbing_observation: str = "terminal"
-
-    def __post_init__(self) -> None:
-        if self.absorbing_observation not in ABSORBING_OBSERVATIONS:
-            raise ValueError(f"absorbing_observation must be one of {ABSORBING_OBSERVATIONS}, "
-                             f"got {self.absorbing_observation!r}.")
-
-    def make_absorbing_states(self) -> AbsorbingStates:
-        """The :class:`~torchrl_csirl.transforms.AbsorbingStates` transform of these settings."""
-        return AbsorbingStates(absorbing_observation=None if self.absorbing_observation == "terminal" else 0.0)
-
-
-ABSORBING_OBSERVATIONS = ("terminal", "placeholder")
-
-
-class AbsorbingLogit(nn.Module):
-    """A discriminator logit that reads DAC's absorbing-state indicator as an input feature.
-
-    ``logit(s, i, a) = f(s, a) + w * i`` with ``i`` the indicator (0 for real states, 1 for the
-    absorbing state, whose samples carry its observation and a zero action, see
-    :func:`~torchrl_csirl.transforms.absorbing_states.absorbing_self_loops`): the paper appends
-    the indicator to the network's input; here it enters linearly through the learned weight
-    ``w``, so that ``f`` keeps the critic's architecture. The absorbing state's logit
-    ``f(s_a, 0) + w`` is regularised like any other output: the gradient penalty of
-    :class:`DACDiscriminatorLoss` interpolates the indicator too and so bounds ``w``.
-
-    Args:
-        network: ``network(observation, action) -> [B, 1]`` (e.g. a critic's ``ConcatMLP``).
-
-    Examples:
-        >>> import torch
-        >>> from torchrl_csirl.modules import ConcatMLP
-        >>> m = AbsorbingLogit(ConcatMLP(4, (8,)))
-        >>> _ = torch.nn.init.constant_(m.indicator_weight, 2.0)
-        >>> out = m(torch.zeros(2, 3), torch.tensor([[False], [True]]), torch.zeros(2, 1))
-        >>> out.shape, round(float(out[1] - out[0]), 4)
-        (torch.Size([2, 1]), 2.0)
-    """
-
-    def __init__(self, network: nn.Module) -> None:
-        super().__init__()
-        self.network = network
-        self.indicator_weight = nn.Parameter(torch.zeros(1))
-
-    def forward(self, observation: torch.Tensor, absorbing: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
-        logit = self.network(observation, action)
-        return logit + self.indicator_weight * absorbing.reshape(logit.shape).to(logit.dtype)
 
 
 def make_dac_discriminator(qvalue: TensorDictModule, absorbing_states: bool = True,
@@ -122,11 +76,7 @@ def make_dac_discriminator(qvalue: TensorDictModule, absorbing_states: bool = Tr
         >>> d.in_keys
         ['observation', 'absorbing', 'action']
     """
-    observation_key, action_key = qvalue.in_keys
-    if not absorbing_states:
-        return TensorDictModule(qvalue.module, in_keys=[observation_key, action_key], out_keys=["discriminator_logit"])
-    return TensorDictModule(AbsorbingLogit(qvalue.module), in_keys=[observation_key, absorbing_key, action_key],
-                            out_keys=["discriminator_logit"])
+    return logit_network(qvalue, "discriminator_logit", absorbing_key if absorbing_states else None)
 
 
 def dac_discriminator_loss(expert_logit: torch.Tensor, agent_logit: torch.Tensor) -> torch.Tensor:

@@ -24,8 +24,16 @@ authors' published code (``google-research/value_dice``, where the initial-state
 expert batch): the identity behind the linear term holds for any starting distribution whose
 trajectories follow the policy, and expert states cover far more of the state space than the few
 trajectory starts. ``initial_states="episode_starts"`` uses only the first state of each expert
-trajectory (:func:`initial_observations`). The paper and its code use absorbing states for
-terminations; here ``B^pi nu = 0`` after a termination instead.
+trajectory (:func:`initial_observations`).
+
+**Absorbing states**, as the paper and its code use them (DAC's, Kostrikov et al. 2019): a
+terminal transition leads to an absorbing state ``s_a`` that loops on itself with the zero action,
+``nu`` reads the absorbing indicator (:class:`~torchrl_csirl.objectives._imitation.AbsorbingLogit`),
+``B^pi nu(s, a) = gamma nu(s_a, 0)`` after a termination, and every transition entering ``s_a``
+adds one self-loop sample, whose residual is ``(1 - gamma) nu(s_a, 0)``, to its side. With the
+absorbing state of :class:`~torchrl_csirl.objectives._imitation.AbsorbingStateSettings`' default,
+one per terminal observation (docs/BASELINES.md, "DAC's absorbing states"). Without them
+(``absorbing_states=False``), ``B^pi nu = 0`` after a termination.
 """
 from __future__ import annotations
 
@@ -39,14 +47,23 @@ from tensordict.utils import NestedKey
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 from torchrl.objectives import LossModule
 
-from torchrl_csirl.objectives._imitation import gradient_penalty, orthogonal_regularization, require_keys
+from torchrl_csirl.objectives._imitation import (
+    AbsorbingStateSettings,
+    gradient_penalty,
+    orthogonal_regularization,
+    require_keys,
+)
+from torchrl_csirl.transforms.absorbing_states import absorbing_self_loops
 
 __all__ = ["ValueDICEHyperparameters", "ValueDICELoss", "initial_observations", "valuedice_objective"]
 
 
 @dataclass
-class ValueDICEHyperparameters:
+class ValueDICEHyperparameters(AbsorbingStateSettings):
     """ValueDICE's settings (Kostrikov et al. 2020, continuous control).
+
+    The absorbing-state fields are :class:`~torchrl_csirl.objectives._imitation.AbsorbingStateSettings`'s
+    (on by default: the paper and the authors' code use DAC's absorbing states).
 
     Attributes:
         actor_lr: Adam learning rate of the policy (1e-5).
@@ -72,6 +89,7 @@ class ValueDICEHyperparameters:
     max_grad_norm: float | None = None
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         if self.initial_states not in INITIAL_STATES:
             raise ValueError(f"initial_states must be one of {INITIAL_STATES}, got {self.initial_states!r}.")
 
@@ -129,7 +147,10 @@ class ValueDICELoss(LossModule):
 
     The input holds ``"expert"`` and ``"collector"`` (replay) transitions (observation, action,
     ``("next", "observation")``, ``("next", "terminated")``) and ``"initial"``, a tensordict of
-    initial observations. Outputs:
+    initial observations. When ``nu_network`` reads the absorbing indicator (built by
+    ``logit_network(qvalue, "nu", absorbing_key="absorbing")``), the transitions also carry the
+    entries of :class:`~torchrl_csirl.transforms.AbsorbingStates` and a termination leads to the
+    absorbing state (module docstring). Outputs:
 
     * ``loss_nu``: ``J`` (:func:`valuedice_objective`), and ``loss_gradient_penalty``, for ``nu``;
     * ``loss_actor``: ``-J``, and ``loss_orthogonal`` (on the actor's hidden layers, as the
@@ -176,6 +197,7 @@ class ValueDICELoss(LossModule):
             observation: Defaults to ``"observation"``.
             action: Defaults to ``"action"``.
             terminated: inside ``"next"``. Defaults to ``"terminated"``.
+            absorbing: the absorbing-state indicator. Defaults to ``"absorbing"``.
             nu: ``nu``'s output. Defaults to ``"nu"``.
         """
 
@@ -185,6 +207,7 @@ class ValueDICELoss(LossModule):
         observation: NestedKey = "observation"
         action: NestedKey = "action"
         terminated: NestedKey = "terminated"
+        absorbing: NestedKey = "absorbing"
         nu: NestedKey = "nu"
 
     tensor_keys: _AcceptedKeys
@@ -214,54 +237,76 @@ class ValueDICELoss(LossModule):
         with set_exploration_type(ExplorationType.RANDOM):
             return self.actor_network.get_dist(td).rsample()
 
-    def nu(self, observation: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
-        """``nu(s, a)``: ``[B]``."""
-        td = TensorDict({self.tensor_keys.observation: observation, self.tensor_keys.action: action},
-                        observation.shape[:1])
-        return self.nu_network(td).get(self.tensor_keys.nu).squeeze(-1)
+    @property
+    def reads_absorbing(self) -> bool:
+        """Whether ``nu`` reads the absorbing indicator (absorbing states on)."""
+        return self.tensor_keys.absorbing in self.nu_network.in_keys
 
-    def _residual(self, transitions: TensorDictBase) -> tuple[torch.Tensor, torch.Tensor]:
-        """``(nu - B^pi nu)(s, a)`` and the policy's next action ``a'``."""
+    def nu(self, observation: torch.Tensor, action: torch.Tensor, absorbing: torch.Tensor | None = None) -> torch.Tensor:
+        """``nu(s, a)`` (``nu(s, i, a)`` with the absorbing indicator ``i``, 0 when not given): ``[B]``."""
+        keys = self.tensor_keys
+        td = TensorDict({keys.observation: observation, keys.action: action}, observation.shape[:1])
+        if self.reads_absorbing:
+            td.set(keys.absorbing, torch.zeros(*observation.shape[:1], 1, device=observation.device)
+                   if absorbing is None else absorbing)
+        return self.nu_network(td).get(keys.nu).squeeze(-1)
+
+    def _residual(self, transitions: TensorDictBase) -> tuple[torch.Tensor, TensorDictBase]:
+        """``(nu - B^pi nu)(s, a)`` on the transitions (then on the absorbing self-loops they enter),
+        and the successor pairs ``(s', i', a')`` with ``a' ~ pi(s')`` (zero in the absorbing state)."""
         keys = self.tensor_keys
         next_obs = transitions.get(("next", keys.observation))
-        next_action = self._policy_action(next_obs)
-        not_terminated = 1.0 - transitions.get(("next", keys.terminated)).float().reshape(-1)
-        residual = (self.nu(transitions.get(keys.observation), transitions.get(keys.action))
-                    - self.gamma * not_terminated * self.nu(next_obs, next_action))
-        return residual, next_action
+        successor = TensorDict({keys.observation: next_obs, keys.action: self._policy_action(next_obs)},
+                               next_obs.shape[:1])
+        if not self.reads_absorbing:
+            not_terminated = 1.0 - transitions.get(("next", keys.terminated)).float().reshape(-1)
+            residual = (self.nu(transitions.get(keys.observation), transitions.get(keys.action))
+                        - self.gamma * not_terminated * self.nu(next_obs, successor.get(keys.action)))
+            return residual, successor
+        into = transitions.get(("next", keys.absorbing)).reshape(-1, 1)
+        successor.set(keys.action, torch.where(into, 0.0, successor.get(keys.action)))
+        successor.set(keys.absorbing, into)
+        residual = (self.nu(transitions.get(keys.observation), transitions.get(keys.action),
+                            transitions.get(keys.absorbing))
+                    - self.gamma * self.nu(next_obs, successor.get(keys.action), into))
+        loops = absorbing_self_loops(transitions, absorbing_key=keys.absorbing, keys=(keys.observation, keys.action))
+        loop_nu = self.nu(loops.get(keys.observation), loops.get(keys.action), loops.get(keys.absorbing))
+        return torch.cat([residual, (1.0 - self.gamma) * loop_nu]), successor
 
-    def _penalty(self, expert: TensorDictBase, replay: TensorDictBase, expert_next_action: torch.Tensor,
-                 replay_next_action: torch.Tensor) -> torch.Tensor:
+    def _penalty(self, expert: TensorDictBase, replay: TensorDictBase, expert_successor: TensorDictBase,
+                 replay_successor: TensorDictBase) -> torch.Tensor:
+        """WGAN-GP on ``nu`` at per-sample interpolations of expert and replay pairs and of their
+        successors (the absorbing indicator interpolated as a number)."""
         keys = self.tensor_keys
         n = min(expert.numel(), replay.numel())
-        eps = torch.rand(n, 1, device=expert_next_action.device)  # one mixing weight per sample
+        eps = torch.rand(n, 1, device=expert.device)  # one mixing weight per sample
+        inputs = [keys.observation, keys.action] + ([keys.absorbing] if self.reads_absorbing else [])
 
-        def mix(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
-            return eps * a[:n].detach() + (1 - eps) * b[:n].detach()
+        def mixed(key: NestedKey) -> torch.Tensor:
+            pairs = [(expert.get(key), replay.get(key)), (expert_successor.get(key), replay_successor.get(key))]
+            return torch.cat([eps * a[:n].detach().float() + (1 - eps) * b[:n].detach().float() for a, b in pairs])
 
-        observation = torch.cat([mix(expert.get(keys.observation), replay.get(keys.observation)),
-                                 mix(expert.get(("next", keys.observation)), replay.get(("next", keys.observation)))])
-        action = torch.cat([mix(expert.get(keys.action), replay.get(keys.action)),
-                            mix(expert_next_action, replay_next_action)])
-        return self.gp_lambda * gradient_penalty(self.nu, [observation, action])
+        return self.gp_lambda * gradient_penalty(self.nu, [mixed(key) for key in inputs])
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         keys = self.tensor_keys
         expert, replay = tensordict.get(keys.expert), tensordict.get(keys.collector)
         needed = [keys.observation, keys.action, ("next", keys.observation), ("next", keys.terminated)]
+        if self.reads_absorbing:  # written by AbsorbingStates on both buffers
+            needed += [keys.absorbing, ("next", keys.absorbing)]
         require_keys(expert, needed, "ValueDICE expert transitions")
         require_keys(replay, needed, "ValueDICE replay transitions")
         initial = tensordict.get(keys.initial)
         require_keys(initial, [keys.observation], "ValueDICE initial states")
-        expert_residual, expert_next_action = self._residual(expert)
-        replay_residual, replay_next_action = self._residual(replay)
+        expert_residual, expert_successor = self._residual(expert)
+        replay_residual, replay_successor = self._residual(replay)
         initial_obs = initial.get(keys.observation)
         initial_nu = self.nu(initial_obs, self._policy_action(initial_obs))
         objective = valuedice_objective(expert_residual, replay_residual, initial_nu, self.gamma,
                                         self.replay_regularization)
         return TensorDict({
             "loss_nu": objective,
-            "loss_gradient_penalty": self._penalty(expert, replay, expert_next_action, replay_next_action),
+            "loss_gradient_penalty": self._penalty(expert, replay, expert_successor, replay_successor),
             "loss_actor": -objective,
             "loss_orthogonal": self.orthogonal_regularization * orthogonal_regularization(self.actor_network,
                                                                                           skip_last=True),

@@ -141,8 +141,7 @@ def _make_dac(actor, make_qvalue, hp: DACHyperparameters, device) -> ImitationMe
     discriminator_loss = DACDiscriminatorLoss(discriminator, gp_lambda=hp.gp_lambda)
     optimizer = _adam(discriminator, hp.discriminator_lr)
     loss_keys = {"loss_discriminator": "loss_discriminator", "loss_gradient_penalty": "loss_gradient_penalty"}
-    online_transforms = [hp.make_absorbing_states()] if hp.absorbing_states else []
-    expert_transforms = [hp.make_absorbing_states()] if hp.absorbing_states else []
+    online_transforms, expert_transforms = hp.absorbing_transforms(), hp.absorbing_transforms()
     online_transforms.append(DiscriminatorReward(discriminator, "logit",
                                                  absorbing_gamma=hp.gamma if hp.absorbing_states else None))
     return _adversarial("dac", actor, hp, loss, discriminator_loss, discriminator, optimizer, _dac_input, loss_keys,
@@ -172,7 +171,7 @@ def _make_iqlearn(actor, make_qvalue, hp: IQLearnHyperparameters, device) -> Imi
 
 # ------------------------------------------------------------------------------ ValueDICE
 def _make_valuedice(actor, make_qvalue, hp: ValueDICEHyperparameters, device) -> ImitationMethod:
-    nu = logit_network(make_qvalue(), "nu")
+    nu = logit_network(make_qvalue(), "nu", "absorbing" if hp.absorbing_states else None)
     loss = ValueDICELoss(actor, nu, gamma=hp.gamma, replay_regularization=hp.replay_regularization,
                          orthogonal_regularization=hp.orthogonal_regularization, gp_lambda=hp.gp_lambda).to(device)
     nu_optimizer, actor_optimizer = _adam(nu, hp.nu_lr), _adam(actor, hp.actor_lr)
@@ -183,7 +182,8 @@ def _make_valuedice(actor, make_qvalue, hp: ValueDICEHyperparameters, device) ->
                                hp.max_grad_norm)
 
     states = {"loss": loss, "optim_nu": nu_optimizer, "optim_actor": actor_optimizer}  # the loss holds actor and nu
-    return ImitationMethod("valuedice", actor, [], [], states, make_update_step, hp)
+    return ImitationMethod("valuedice", actor, hp.absorbing_transforms(), hp.absorbing_transforms(), states,
+                           make_update_step, hp)
 
 
 _BUILDERS: dict[str, tuple[type, Callable[..., ImitationMethod]]] = {
