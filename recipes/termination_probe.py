@@ -12,14 +12,17 @@ taught that ending it pays, whatever the expert did. Per method, the reward it l
 * ``dac``: the discriminator reward of a step and ``r_a``, the learned reward of the absorbing
   state(s) entered (a termination pays ``gamma r_a / (1 - gamma)`` on top: with ``r_a`` above
   the per-step reward, ending the episode beats going on);
-* ``iqlearn``: the implicit reward ``r = Q(s, a) - gamma V(s')`` (``V(s') = 0`` at a termination).
+* ``iqlearn``: the implicit reward ``r = Q(s, a) - gamma V(s')`` (``V(s') = 0`` at a termination);
+* ``valuedice`` (no critic: in place of ``Q``): the Bellman residual ``nu - B^pi nu``, the
+  log-ratio of the expert's to the policy's occupancy that its policy is trained on, on
+  terminating / continuing transitions and on the absorbing self-loops.
 
 ``key=value`` overrides the run's configuration as ``checkpoint.resume`` would (e.g.
-``dac.absorbing_observation=placeholder`` for a run saved before that key existed). Methods with
-a soft-Q critic: ``sac``, ``sqil``, ``gail``, ``dac``, ``iqlearn``. The run itself is
+``dac.absorbing_observation=placeholder`` for a run saved before that key existed). Methods: ``sac``,
+``sqil``, ``gail``, ``dac``, ``iqlearn`` (a soft-Q critic) and ``valuedice``. The run itself is
 not touched (its configuration and checkpoint are read in a temporary copy). The last line is
 JSON; it is also written to ``<run dir>/termination_probe.json``. docs/BASELINES.md, "Ending the
-episode", reads it for DAC and IQ-Learn on merge.
+episode", reads it for DAC, IQ-Learn and ValueDICE on merge.
 """
 from __future__ import annotations
 
@@ -40,17 +43,16 @@ from common.config import ConfigError  # noqa: E402
 from common.run import run_script  # noqa: E402
 from imitation_utils import load_run_config, make_trainer  # noqa: E402
 
-from torchrl_csirl.objectives import EnsembleSACLoss  # noqa: E402
 from torchrl_csirl.transforms import absorbing_self_loops  # noqa: E402
 
-PROBED_METHODS = ("sac", "sqil", "gail", "dac", "iqlearn")
+PROBED_METHODS = ("sac", "sqil", "gail", "dac", "iqlearn", "valuedice")
 
 
 def _mean(values: torch.Tensor, mask: torch.Tensor) -> float | None:
     return round(values[mask].mean().item(), 4) if bool(mask.any()) else None
 
 
-def critic_on_endings(loss: EnsembleSACLoss, transitions: TensorDictBase) -> dict[str, float | None]:
+def critic_on_endings(loss, transitions: TensorDictBase) -> dict[str, float | None]:
     """Fraction of terminating transitions and the critics' min ``Q`` on terminating / continuing ones."""
     ends = transitions.get(("next", "terminated")).reshape(-1).bool()
     q = loss.qvalues(transitions).min(0).values.reshape(-1)
@@ -75,13 +77,20 @@ def iqlearn_rewards(loss, transitions: TensorDictBase) -> dict[str, float | None
     return {"implicit_reward_terminating": _mean(reward, ends), "implicit_reward_continuing": _mean(reward, ~ends)}
 
 
+def valuedice_residuals(loss, transitions: TensorDictBase) -> dict[str, float | None]:
+    """ValueDICE's ``nu - B^pi nu`` on terminating / continuing transitions and on the self-loops."""
+    ends = transitions.get(("next", "terminated")).reshape(-1).bool()
+    residual = loss._residual(transitions)[0]
+    real, loops = residual[:len(ends)], residual[len(ends):]
+    return {"terminal_fraction": round(ends.float().mean().item(), 4), "residual_terminating": _mean(real, ends),
+            "residual_continuing": _mean(real, ~ends),
+            "absorbing_residual": round(loops.mean().item(), 4) if loops.numel() else None}
+
+
 def probe(run, samples: int) -> dict[str, object]:
     """The probe's figures for the replay (``"agent"``) and the demonstrations (``"expert"``)."""
     method = run.method
-    loss = method.states.get("loss")
-    if not isinstance(loss, EnsembleSACLoss):
-        raise ConfigError(f"termination_probe: method {method.name!r} has no soft-Q critic; "
-                          f"probed methods: {', '.join(PROBED_METHODS)}")
+    loss = method.states["loss"]
     out: dict[str, object] = {"method": method.name, "scenario": run.spec.name}
     with torch.no_grad():
         for side, buffer in (("agent", run.online_buffer), ("expert", run.expert_buffer)):
@@ -89,6 +98,9 @@ def probe(run, samples: int) -> dict[str, object]:
                 raise ConfigError(f"termination_probe: the run's {side} buffer is empty "
                                   f"(was it saved? checkpoint.save_buffer)")
             transitions = buffer.sample(samples)
+            if method.name == "valuedice":
+                out[side] = valuedice_residuals(loss, transitions)
+                continue
             figures = critic_on_endings(loss, transitions)
             if method.name == "dac" and "discriminator" in method.states:
                 figures.update(dac_rewards(method.states["discriminator"], transitions))
@@ -109,7 +121,7 @@ def open_copy(run_dir: str, workdir: str, overrides: list[str] = ()):
     shutil.copytree(checkpoint, os.path.join(copy, "checkpoints", "last"))
     cfg = load_run_config(copy, [f"checkpoint.resume={copy}", "logger.backend=csv", *overrides])
     if cfg.method not in PROBED_METHODS:
-        raise ConfigError(f"termination_probe: method {cfg.method!r} has no soft-Q critic; "
+        raise ConfigError(f"termination_probe: method {cfg.method!r} has no critic to probe; "
                           f"probed methods: {', '.join(PROBED_METHODS)}")
     return resume_run(cfg, copy, os.path.join(copy, "checkpoints", "last"), make_trainer)
 

@@ -71,13 +71,14 @@ def test_trained_baseline_end_to_end(method, tmp_path):
         assert json.load(f)["accomplish_rate"] == out["accomplish_rate"]
     if method in termination_probe.PROBED_METHODS:  # the critic on terminating vs continuing transitions
         stats = termination_probe.main([run_dir, "--samples", "64"])
+        continuing = "residual_continuing" if method == "valuedice" else "q_continuing"
         for side in ("agent", "expert"):
-            assert 0.0 <= stats[side]["terminal_fraction"] <= 1.0 and stats[side]["q_continuing"] is not None
-        assert {"dac": "absorbing_reward", "iqlearn": "implicit_reward_continuing"}.get(method, "q_continuing") in stats["agent"]
+            assert 0.0 <= stats[side]["terminal_fraction"] <= 1.0 and stats[side][continuing] is not None
+        assert {"dac": "absorbing_reward", "iqlearn": "implicit_reward_continuing"}.get(method, continuing) in stats["agent"]
         with open(os.path.join(run_dir, "termination_probe.json")) as f:
             assert json.load(f)["agent"] == stats["agent"]
     else:
-        with pytest.raises(imitation_utils.ConfigError, match="no soft-Q critic"):
+        with pytest.raises(imitation_utils.ConfigError, match="no critic to probe"):
             termination_probe.main([run_dir])
 
 
