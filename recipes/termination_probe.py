@@ -43,21 +43,32 @@ from common.config import ConfigError  # noqa: E402
 from common.run import run_script  # noqa: E402
 from imitation_utils import load_run_config, make_trainer  # noqa: E402
 
+from torchrl_csirl.objectives._imitation import sample  # noqa: E402
 from torchrl_csirl.transforms import absorbing_self_loops  # noqa: E402
 
 PROBED_METHODS = ("sac", "sqil", "gail", "dac", "iqlearn", "valuedice")
 
 
-def _mean(values: torch.Tensor, mask: torch.Tensor) -> float | None:
-    return round(values[mask].mean().item(), 4) if bool(mask.any()) else None
+def _mean(values: torch.Tensor, mask: torch.Tensor | None = None) -> float | None:
+    values = values if mask is None else values[mask]
+    return round(values.mean().item(), 4) if values.numel() else None
+
+
+def _ends(transitions: TensorDictBase) -> torch.Tensor:
+    """``[B]`` bool: the transitions that end the episode."""
+    return transitions.get(("next", "terminated")).reshape(-1).bool()
+
+
+def _split(name: str, values: torch.Tensor, ends: torch.Tensor) -> dict[str, float | None]:
+    """``{name}_terminating`` and ``{name}_continuing``: the means of ``values`` on both kinds of transition."""
+    return {f"{name}_terminating": _mean(values, ends), f"{name}_continuing": _mean(values, ~ends)}
 
 
 def critic_on_endings(loss, transitions: TensorDictBase) -> dict[str, float | None]:
     """Fraction of terminating transitions and the critics' min ``Q`` on terminating / continuing ones."""
-    ends = transitions.get(("next", "terminated")).reshape(-1).bool()
+    ends = _ends(transitions)
     q = loss.qvalues(transitions).min(0).values.reshape(-1)
-    return {"terminal_fraction": round(ends.float().mean().item(), 4), "q_terminating": _mean(q, ends),
-            "q_continuing": _mean(q, ~ends)}
+    return {"terminal_fraction": _mean(ends.float()), **_split("q", q, ends)}
 
 
 def dac_rewards(discriminator, transitions: TensorDictBase) -> dict[str, float | None]:
@@ -66,25 +77,22 @@ def dac_rewards(discriminator, transitions: TensorDictBase) -> dict[str, float |
     per_step = discriminator(transitions.select(*keys).clone()).get("discriminator_logit").reshape(-1)
     loops = absorbing_self_loops(transitions)
     r_a = discriminator(loops.select(*keys).clone()).get("discriminator_logit").reshape(-1)
-    return {"step_reward": round(per_step.mean().item(), 4),
-            "absorbing_reward": round(r_a.mean().item(), 4) if r_a.numel() else None}
+    return {"step_reward": _mean(per_step), "absorbing_reward": _mean(r_a)}
 
 
 def iqlearn_rewards(loss, transitions: TensorDictBase) -> dict[str, float | None]:
     """IQ-Learn's implicit reward on terminating / continuing transitions (mean over the critics)."""
-    ends = transitions.get(("next", "terminated")).reshape(-1).bool()
     reward = loss._implicit_reward(transitions)[0].mean(0).reshape(-1)
-    return {"implicit_reward_terminating": _mean(reward, ends), "implicit_reward_continuing": _mean(reward, ~ends)}
+    return _split("implicit_reward", reward, _ends(transitions))
 
 
 def valuedice_residuals(loss, transitions: TensorDictBase) -> dict[str, float | None]:
     """ValueDICE's ``nu - B^pi nu`` on terminating / continuing transitions and on the self-loops."""
-    ends = transitions.get(("next", "terminated")).reshape(-1).bool()
+    ends = _ends(transitions)
     residual = loss._residual(transitions)[0]
     real, loops = residual[:len(ends)], residual[len(ends):]
-    return {"terminal_fraction": round(ends.float().mean().item(), 4), "residual_terminating": _mean(real, ends),
-            "residual_continuing": _mean(real, ~ends),
-            "absorbing_residual": round(loops.mean().item(), 4) if loops.numel() else None}
+    return {"terminal_fraction": _mean(ends.float()), **_split("residual", real, ends),
+            "absorbing_residual": _mean(loops)}
 
 
 def probe(run, samples: int) -> dict[str, object]:
@@ -97,7 +105,7 @@ def probe(run, samples: int) -> dict[str, object]:
             if len(buffer) == 0:
                 raise ConfigError(f"termination_probe: the run's {side} buffer is empty "
                                   f"(was it saved? checkpoint.save_buffer)")
-            transitions = buffer.sample(samples)
+            transitions = sample(buffer, samples)
             if method.name == "valuedice":
                 out[side] = valuedice_residuals(loss, transitions)
                 continue
@@ -135,11 +143,10 @@ def main(argv: list[str] | None = None) -> dict[str, object]:
     args = parser.parse_args(argv)
     if args.samples <= 0:
         raise ConfigError(f"--samples must be positive, got {args.samples}")
-    torch.manual_seed(args.seed)
     with tempfile.TemporaryDirectory() as workdir:
         run = open_copy(os.path.abspath(args.run_dir), workdir, args.overrides)
         try:
-            torch.manual_seed(args.seed)
+            torch.manual_seed(args.seed)  # the samples, whatever the rebuild drew
             out = probe(run, args.samples)
         finally:
             run.close()
