@@ -53,7 +53,6 @@ from torchrl_csirl.objectives._imitation import (
     orthogonal_regularization,
     require_keys,
 )
-from torchrl_csirl.transforms.absorbing_states import absorbing_self_loops
 
 __all__ = ["ValueDICEHyperparameters", "ValueDICELoss", "initial_observations", "valuedice_objective"]
 
@@ -266,12 +265,11 @@ class ValueDICELoss(LossModule):
         into = transitions.get(("next", keys.absorbing)).reshape(-1, 1)
         successor.set(keys.action, torch.where(into, 0.0, successor.get(keys.action)))
         successor.set(keys.absorbing, into)
+        next_nu = self.nu(next_obs, successor.get(keys.action), into)
         residual = (self.nu(transitions.get(keys.observation), transitions.get(keys.action),
-                            transitions.get(keys.absorbing))
-                    - self.gamma * self.nu(next_obs, successor.get(keys.action), into))
-        loops = absorbing_self_loops(transitions, absorbing_key=keys.absorbing, keys=(keys.observation, keys.action))
-        loop_nu = self.nu(loops.get(keys.observation), loops.get(keys.action), loops.get(keys.absorbing))
-        return torch.cat([residual, (1.0 - self.gamma) * loop_nu]), successor
+                            transitions.get(keys.absorbing)) - self.gamma * next_nu)
+        # the self-loops (s_a, 0) -> (s_a, 0): their nu is the successor's where the transition enters s_a
+        return torch.cat([residual, (1.0 - self.gamma) * next_nu[into.reshape(-1)]]), successor
 
     def _penalty(self, expert: TensorDictBase, replay: TensorDictBase, expert_successor: TensorDictBase,
                  replay_successor: TensorDictBase) -> torch.Tensor:

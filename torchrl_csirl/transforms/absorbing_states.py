@@ -122,9 +122,9 @@ def absorbing_self_loops(transitions: TensorDictBase, *, absorbing_key: NestedKe
         (torch.Size([2]), True, 0.0)
     """
     into = transitions.get(("next", absorbing_key)).reshape(transitions.batch_size).bool()
-    entering = transitions[into]
-    loops = entering.select(*keys).clone()
-    loops.set(keys[0], entering.get(("next", keys[0])).clone())
+    entering = transitions.select(*keys, ("next", keys[0]))[into]
+    loops = entering.select(*keys)
+    loops.set(keys[0], entering.get(("next", keys[0])))
     for key in keys[1:]:
         loops.set(key, torch.zeros_like(loops.get(key)))
     loops.set(absorbing_key, torch.ones(*loops.batch_size, 1, dtype=torch.bool, device=loops.device))

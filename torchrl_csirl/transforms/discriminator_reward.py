@@ -107,7 +107,7 @@ class DiscriminatorReward(TransitionRewardTransform):
         into = into.reshape(reward.shape).bool()
         if not into.any():
             return reward
-        loops = absorbing_self_loops(tensordict[into.reshape(tensordict.batch_size)], absorbing_key=self.absorbing_key,
+        loops = absorbing_self_loops(tensordict, absorbing_key=self.absorbing_key,
                                      keys=tuple(k for k in self.discriminator.in_keys if k != self.absorbing_key))
         reward = reward.clone()
         reward[into] += absorbing_value(self._reward(loops).reshape(-1), self.absorbing_gamma)
