@@ -107,6 +107,39 @@ def test_clear_traffic_leaves_only_ego():
     assert rows[0, 0] == 1 and np.all(rows[1:, 0] == 0)  # presence of the other rows
 
 
+def _expert_action_with_vehicle_ahead(distance: float | None) -> np.ndarray:
+    """The highway-fast expert's first action on an empty road, with one stopped vehicle ``distance`` m ahead."""
+    from highway_env.vehicle.kinematics import Vehicle
+
+    env = make_gym_env("highway-fast")
+    env.reset(seed=0)
+    clear_traffic(env)
+    base = env.unwrapped
+    ego = base.vehicle
+    if distance is not None:
+        lane = base.road.network.get_lane(ego.lane_index)
+        s, _ = lane.local_coordinates(ego.position)
+        base.road.vehicles.append(Vehicle(base.road, lane.position(s + distance, 0.0), lane.heading_at(s), 0.0))
+    expert = make_expert("highway-fast")
+    expert.reset(env)
+    action = expert.act(env)
+    env.close()
+    return action
+
+
+def test_expert_controls_with_what_it_perceives():
+    """The executing controller sees the vehicles the look-ahead simulates (``perception_radius``), no more.
+
+    A stopped vehicle 70 m ahead (outside highway-fast's 60 m radius, inside the controller's
+    80 m reach) used to make the expert brake for a vehicle its plan did not contain; one 50 m
+    ahead is perceived and changes the action.
+    """
+    assert make_expert("highway-fast").config.perception_radius == 60.0
+    free = _expert_action_with_vehicle_ahead(None)
+    np.testing.assert_array_equal(_expert_action_with_vehicle_ahead(70.0), free)
+    assert not np.array_equal(_expert_action_with_vehicle_ahead(50.0), free)
+
+
 def test_normalize_action_units_and_clipping():
     np.testing.assert_allclose(normalize_action(7.5, math.pi / 4), [0.5, 0.5])
     np.testing.assert_allclose(normalize_action(-100.0, 10.0), [-1.0, 1.0])

@@ -73,7 +73,9 @@ class ExpertConfig:
         max_acceleration: largest acceleration the expert commands [m/s^2].
         max_braking: largest deceleration the expert commands [m/s^2].
         replan_every: steps between two decisions (the chosen behaviour's controllers run every step).
-        perception_radius: only vehicles within this distance [m] are simulated in the look-ahead.
+        perception_radius: the expert perceives only the vehicles within this distance [m] (per
+            axis): they are the ones simulated in the look-ahead and the ones the executing
+            controllers react to (the same set, so that the plan and its execution agree).
         time_headway: IDM desired time gap to the vehicle ahead [s].
         jam_distance: IDM desired bumper-to-bumper distance at standstill [m].
         close_following: optional ``(time_headway, jam_distance)`` of extra "close following"
@@ -252,6 +254,13 @@ def fast_network(network: Any) -> Any:
     return fast
 
 
+def perceived_vehicles(vehicles: Sequence[Any], center: np.ndarray, radius: float) -> list[Any]:
+    """The vehicles within ``radius`` metres of ``center`` (per axis): what the expert perceives."""
+    if not math.isfinite(radius):
+        return list(vehicles)
+    return [v for v in vehicles if np.abs(v.position - center).max() <= radius]
+
+
 def clone_road(road: Any, center: np.ndarray | None = None, radius: float = math.inf) -> tuple[Any, dict[int, Any]]:
     """Copy a highway-env road so that stepping the copy leaves the original untouched.
 
@@ -279,9 +288,7 @@ def clone_road(road: Any, center: np.ndarray | None = None, radius: float = math
         mapping[id(obj)] = clone
         return clone
 
-    vehicles = road.vehicles
-    if center is not None and math.isfinite(radius):
-        vehicles = [v for v in vehicles if np.abs(v.position - center).max() <= radius]
+    vehicles = road.vehicles if center is None else perceived_vehicles(road.vehicles, center, radius)
     new_road.vehicles = [_copy_object(v) for v in vehicles]
     new_road.objects = [_copy_object(o) for o in road.objects]
     return new_road, mapping
@@ -665,7 +672,8 @@ class ExpertDriver:
             behaviour = self._previous
         self._steps += 1
         self._previous = behaviour
-        acceleration, steering = self._route.control(base.vehicle, base.road.vehicles, behaviour)
+        others = perceived_vehicles(base.road.vehicles, base.vehicle.position, self.config.perception_radius)
+        acceleration, steering = self._route.control(base.vehicle, others, behaviour)
         return normalize_action(acceleration, steering)
 
     __call__ = act
