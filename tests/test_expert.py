@@ -140,6 +140,27 @@ def test_expert_controls_with_what_it_perceives():
     assert not np.array_equal(_expert_action_with_vehicle_ahead(50.0), free)
 
 
+def test_overlaps_lane_counts_a_front_turned_into_the_lane():
+    """The junction-clearance rule's overlap test: a vehicle whose centre is clear of a lane but whose
+    front is turned into it is on the lane; the same vehicle parallel to the lane is not."""
+    from highway_env.road.lane import StraightLane
+    from highway_env.road.road import Road, RoadNetwork
+    from highway_env.vehicle.kinematics import Vehicle
+
+    from torchrl_csirl.envs.expert import _overlaps_lane
+
+    network = RoadNetwork()
+    lane = StraightLane([0.0, 0.0], [100.0, 0.0], width=4.0)
+    network.add_lane("a", "b", lane)
+    road = Road(network)
+    centre = np.array([50.0, 4.5])  # 4.5 m from the centre line: beyond half the lane + half a car
+    turned = Vehicle(road, centre, heading=-math.pi / 2 + 0.3, speed=0.0)
+    parallel = Vehicle(road, centre, heading=0.0, speed=0.0)
+    assert _overlaps_lane(turned, lane)
+    assert not _overlaps_lane(parallel, lane)
+    assert _overlaps_lane(Vehicle(road, np.array([50.0, 2.5]), heading=0.0, speed=0.0), lane)
+
+
 def test_normalize_action_units_and_clipping():
     np.testing.assert_allclose(normalize_action(7.5, math.pi / 4), [0.5, 0.5])
     np.testing.assert_allclose(normalize_action(-100.0, 10.0), [-1.0, 1.0])

@@ -295,11 +295,20 @@ def clone_road(road: Any, center: np.ndarray | None = None, radius: float = math
 
 
 def _overlaps_lane(vehicle: Any, lane: Any) -> bool:
-    """Whether a vehicle's outline (approximately: its centre within half a lane + half its width) is on a lane."""
+    """Whether a vehicle's outline is on a lane: its centre within half a lane + half its width, or a corner on it.
+
+    The corners matter for a vehicle turned across a lane: its centre can be clear of the lane while
+    its front is in it (docs/EXPERTS.md, the intersection's test episode 49).
+    """
     long, lat = lane.local_coordinates(vehicle.position)
-    if not (-vehicle.LENGTH / 2 <= long <= lane.length + vehicle.LENGTH / 2):
-        return False
-    return abs(lat) <= lane.width_at(long) / 2 + vehicle.WIDTH / 2
+    within = -vehicle.LENGTH / 2 <= long <= lane.length + vehicle.LENGTH / 2
+    if within and abs(lat) <= lane.width_at(long) / 2 + vehicle.WIDTH / 2:
+        return True
+    for corner in vehicle.polygon()[:4]:
+        long, lat = lane.local_coordinates(corner)
+        if 0.0 <= long <= lane.length and abs(lat) <= lane.width_at(long) / 2:
+            return True
+    return False
 
 
 # ----------------------------------------------------------------------------------------------------
