@@ -255,7 +255,14 @@ def fast_network(network: Any) -> Any:
 
 
 def perceived_vehicles(vehicles: Sequence[Any], center: np.ndarray, radius: float) -> list[Any]:
-    """The vehicles within ``radius`` metres of ``center`` (per axis): what the expert perceives."""
+    """The vehicles within ``radius`` metres of ``center`` (per axis): what the expert perceives.
+
+    Examples:
+        >>> from types import SimpleNamespace
+        >>> cars = [SimpleNamespace(position=np.array([x, 0.0])) for x in (10.0, 70.0)]
+        >>> len(perceived_vehicles(cars, np.zeros(2), 60.0))
+        1
+    """
     if not math.isfinite(radius):
         return list(vehicles)
     return [v for v in vehicles if np.abs(v.position - center).max() <= radius]
