@@ -10,7 +10,12 @@ from PIL import Image
 from torchrl_csirl.curriculum import scan_subgoal
 from torchrl_csirl.data import load_expert_demonstrations
 from torchrl_csirl.envs import SCENARIOS, make_gym_env
-from torchrl_csirl.visualization import plot_learning_curve, plot_subgoal_curriculum, render_curriculum
+from torchrl_csirl.visualization import (
+    plot_learning_curve,
+    plot_method_curves,
+    plot_subgoal_curriculum,
+    render_curriculum,
+)
 from torchrl_csirl.visualization.scene import EGO_COLOR, ego_positions, render_scene, world_to_pixel
 
 
@@ -52,6 +57,25 @@ def test_learning_curve_leaves_the_backend_alone(tmp_path):
     backend = matplotlib.get_backend()
     plot_learning_curve([{"frames": 0, "accomplish_rate": 0.5}], tmp_path / "curve.png")
     assert matplotlib.get_backend() == backend
+
+
+@pytest.mark.parametrize("with_curve", [True, False], ids=["curve", "references-only"])
+def test_method_curves_frame_axis(tmp_path, monkeypatch, with_curve):
+    """Reference lines alone (records without evaluation logs) get no frame axis to misread."""
+    import torchrl_csirl.visualization.curves as curves_module
+
+    figures = []
+    save_png = curves_module.save_png
+    monkeypatch.setattr(curves_module, "save_png", lambda fig, path: figures.append(fig) or save_png(fig, path))
+    curves = {"sac": [([4000, 8000], [0.2, 0.5])]} if with_curve else {"sac": []}
+    out = plot_method_curves(curves, tmp_path / "curves.png", references={"expert": 0.95, "random": 0.04})
+    assert _png_size(out) == (700, 450)
+    ax = figures[0].axes[0]
+    if with_curve:
+        assert ax.get_xlabel() == "environment frames" and len(ax.get_xticks()) > 0
+    else:
+        assert ax.get_xlabel() == "no evaluation curve recorded" and len(ax.get_xticks()) == 0
+    assert [t.get_text() for t in ax.get_legend().get_texts()][-2:] == ["expert (0.95)", "random (0.04)"]
 
 
 # ---------------------------------------------------------------- subgoal curriculum

@@ -163,6 +163,7 @@ def plot_method_curves(
         ax.plot(frames, mean, "o-", color=color, markersize=3, label=f"{method} ({len(runs)} run{'s' * (len(runs) > 1)})")
         ax.fill_between(frames, mean - std, mean + std, color=color, alpha=0.2, linewidth=0)
         drawn = True
+    curves_drawn = drawn
     for k, (method, rate) in enumerate(sorted((references or {}).items())):
         ax.axhline(float(rate), color=str(0.15 + 0.3 * (k % 3)), linestyle="--", linewidth=1.2,
                    label=f"{method} ({float(rate):.2f})")
@@ -171,6 +172,9 @@ def plot_method_curves(
         empty_message(ax, "no finished run")
     else:
         _rate_axes(ax, ylabel, legend_loc="best", fontsize=8)
+        if not curves_drawn:  # reference lines only: no frame axis to show
+            ax.set_xticks([])
+            ax.set_xlabel("no evaluation curve recorded")
     fig.tight_layout()
     return save_png(fig, path)
 
