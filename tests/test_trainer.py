@@ -103,6 +103,46 @@ def test_checkpoint_round_trip_restores_counters_states_and_rng(tmp_path):
         load_checkpoint(other, tmp_path / "nothing")
 
 
+def test_throughput_covers_the_resumed_parts_of_a_run(tmp_path):
+    """A run resumed from its checkpoint (even a finished one) reports rates over all its parts."""
+    trainer, _ = make_trainer(total_frames=30)
+    trainer.train()
+    first = trainer.throughput
+    hook = CheckpointHook(tmp_path, trainer.online_buffer)
+    hook.save(trainer)
+    trainer.collector.shutdown()
+    assert first["updates_per_s"] > 0 and first["collect_fps"] > 0
+
+    finished, _ = make_trainer(total_frames=30)
+    load_checkpoint(finished, hook.path, finished.online_buffer)
+    finished.train()  # nothing left to do: the rates are the first part's
+    finished.collector.shutdown()
+    assert finished.throughput["updates_per_s"] == pytest.approx(first["updates_per_s"])
+    assert finished.throughput["collect_fps"] == pytest.approx(first["collect_fps"])
+
+    resumed, _ = make_trainer(total_frames=60)
+    load_checkpoint(resumed, hook.path, resumed.online_buffer)
+    resumed.train()
+    resumed.collector.shutdown()
+    assert resumed.updates == 2 * trainer.updates
+    assert resumed.throughput["updates_per_s"] == pytest.approx(resumed.updates / resumed._time_update)
+    assert resumed._time_update > trainer._time_update  # both parts' seconds
+
+
+def test_throughput_after_a_checkpoint_without_timing_counts_this_process_only(tmp_path):
+    trainer, _ = make_trainer(total_frames=30)
+    trainer.train()
+    state = trainer.state_dict()
+    trainer.collector.shutdown()
+    for key in ("collect_s", "update_s"):
+        del state["counters"][key]  # a checkpoint written before they were saved
+    resumed, _ = make_trainer(total_frames=60)
+    resumed.load_state_dict(state)
+    resumed.train()
+    resumed.collector.shutdown()
+    assert resumed.throughput["updates_per_s"] == pytest.approx((resumed.updates - trainer.updates) / resumed._time_update)
+
+
 def test_actor_behaviour_cloning_pulls_the_deterministic_action_to_the_expert_and_scales_with_the_actor_loss():
     from torchrl.envs.utils import ExplorationType, set_exploration_type
     from torchrl.objectives import BCLoss

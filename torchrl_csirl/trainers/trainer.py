@@ -144,6 +144,7 @@ class CSIRLTrainer:
         self._wall = 0.0
         self._time_collect = 0.0
         self._time_update = 0.0
+        self._throughput_base = (0, 0)  # (frames, updates) not covered by the two times above
 
     # ------------------------------------------------------------------ hooks
     def register_op(self, stage: str, op: Callable, name: str | None = None) -> None:
@@ -183,6 +184,8 @@ class CSIRLTrainer:
             "updates_in_round": self.updates_in_round,
             "update_credit": self._update_credit,
             "wall_s": self.wall_time,
+            "collect_s": self._time_collect,
+            "update_s": self._time_update,
         }
 
     def state_dict(self) -> dict[str, Any]:
@@ -203,12 +206,24 @@ class CSIRLTrainer:
         self.updates_in_round = int(counters["updates_in_round"])
         self._update_credit = float(counters["update_credit"])
         self._wall = float(counters["wall_s"])
+        self._restore_timing(counters)
         missing = set(self._stateful) - set(state["states"])
         if missing:
             raise KeyError(f"checkpoint lacks the states {sorted(missing)}.")
         for name, obj in self._stateful.items():
             obj.load_state_dict(state["states"][name])
         set_rng_state(state["rng"])
+
+    def _restore_timing(self, counters: dict[str, Any]) -> None:
+        """Collection and update seconds of the runs before this one, so that :attr:`throughput` covers
+        the whole run; a checkpoint without them (older) makes it cover this process's part only."""
+        if "collect_s" in counters and "update_s" in counters:
+            self._time_collect = float(counters["collect_s"])
+            self._time_update = float(counters["update_s"])
+            self._throughput_base = (0, 0)
+        else:
+            self._time_collect = self._time_update = 0.0
+            self._throughput_base = (self.frames, self.updates)
 
     @property
     def wall_time(self) -> float:
@@ -311,9 +326,11 @@ class CSIRLTrainer:
 
     @property
     def throughput(self) -> dict[str, float]:
-        """Frames per second of collection and updates per second of optimisation (this process)."""
+        """Frames per second of collection and updates per second of optimisation, over the whole run
+        (resumed parts included); ``frames_per_s`` is frames over :attr:`wall_time`."""
+        frames_base, updates_base = self._throughput_base
         return {
-            "collect_fps": self.frames / max(self._time_collect, 1e-9) if self._time_collect else 0.0,
-            "updates_per_s": self.updates / max(self._time_update, 1e-9) if self._time_update else 0.0,
+            "collect_fps": (self.frames - frames_base) / self._time_collect if self._time_collect else 0.0,
+            "updates_per_s": (self.updates - updates_base) / self._time_update if self._time_update else 0.0,
             "frames_per_s": self.frames / max(self.wall_time, 1e-9),
         }
