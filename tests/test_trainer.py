@@ -141,6 +141,10 @@ def test_throughput_after_a_checkpoint_without_timing_counts_this_process_only(t
     resumed.train()
     resumed.collector.shutdown()
     assert resumed.throughput["updates_per_s"] == pytest.approx((resumed.updates - trainer.updates) / resumed._time_update)
+    again, _ = make_trainer(total_frames=60)  # resumed once more: the untimed part stays out
+    again.load_state_dict(resumed.state_dict())
+    again.collector.shutdown()
+    assert again.throughput["updates_per_s"] == pytest.approx(resumed.throughput["updates_per_s"])
 
 
 def test_actor_behaviour_cloning_pulls_the_deterministic_action_to_the_expert_and_scales_with_the_actor_loss():

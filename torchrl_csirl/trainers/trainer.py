@@ -186,6 +186,8 @@ class CSIRLTrainer:
             "wall_s": self.wall_time,
             "collect_s": self._time_collect,
             "update_s": self._time_update,
+            "untimed_frames": self._throughput_base[0],
+            "untimed_updates": self._throughput_base[1],
         }
 
     def state_dict(self) -> dict[str, Any]:
@@ -220,7 +222,7 @@ class CSIRLTrainer:
         if "collect_s" in counters and "update_s" in counters:
             self._time_collect = float(counters["collect_s"])
             self._time_update = float(counters["update_s"])
-            self._throughput_base = (0, 0)
+            self._throughput_base = (int(counters.get("untimed_frames", 0)), int(counters.get("untimed_updates", 0)))
         else:
             self._time_collect = self._time_update = 0.0
             self._throughput_base = (self.frames, self.updates)
