@@ -149,7 +149,7 @@ def plot_method_curves(
     ax = fig.add_subplot(1, 1, 1)
     ax.set_title(title if title is not None else "Learning curves")
     colors = colormaps["tab10"]
-    drawn = False
+    curves_drawn = False
     for k, (method, runs) in enumerate(sorted(curves.items())):
         runs = [(finite_array(f, "frames"), finite_array(r, "rates")) for f, r in runs]
         runs = [(f, r) for f, r in runs if f.size and f.size == r.size]
@@ -162,13 +162,11 @@ def plot_method_curves(
         color = colors(k % 10)
         ax.plot(frames, mean, "o-", color=color, markersize=3, label=f"{method} ({len(runs)} run{'s' * (len(runs) > 1)})")
         ax.fill_between(frames, mean - std, mean + std, color=color, alpha=0.2, linewidth=0)
-        drawn = True
-    curves_drawn = drawn
+        curves_drawn = True
     for k, (method, rate) in enumerate(sorted((references or {}).items())):
         ax.axhline(float(rate), color=str(0.15 + 0.3 * (k % 3)), linestyle="--", linewidth=1.2,
                    label=f"{method} ({float(rate):.2f})")
-        drawn = True
-    if not drawn:
+    if not (curves_drawn or references):
         empty_message(ax, "no finished run")
     else:
         _rate_axes(ax, ylabel, legend_loc="best", fontsize=8)
