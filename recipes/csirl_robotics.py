@@ -92,13 +92,18 @@ def resolve_task(cfg: DictConfig, overrides: list[str] | None) -> None:
     cfg.env.task = cfg.env.scenario
 
 
-def _check(cfg: DictConfig, overrides: list[str] | None = None) -> DictConfig:
+def check_robotics_config(cfg: DictConfig, overrides: list[str] | None = None) -> DictConfig:
+    """The checks every robotics recipe shares: ``env.task`` resolved, no ego-relative inputs."""
     resolve_task(cfg, overrides)
-    check_collector(cfg.collector)
-    resolve_device(cfg.device)
     if cfg.model.ego_relative_features:
         raise ConfigError("model.ego_relative_features=true: the other-vehicle offsets exist in driving scenes only")
     return cfg
+
+
+def _check(cfg: DictConfig, overrides: list[str] | None = None) -> DictConfig:
+    check_collector(cfg.collector)
+    resolve_device(cfg.device)
+    return check_robotics_config(cfg, overrides)
 
 
 def load_config(overrides: list[str] | None = None) -> DictConfig:

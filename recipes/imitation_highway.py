@@ -44,12 +44,15 @@ def summarize(run) -> dict[str, object]:
     return final_summary(run, run.cfg.method, title=f"{run.cfg.method} on {run.spec.name}")
 
 
-def main(argv: list[str] | None = None) -> dict[str, object]:
+def main(argv: list[str] | None = None, *, schema: type = ImitationHighwayConfig, doc: str | None = None,
+         load=load_config, load_run=load_run_config) -> dict[str, object]:
+    """Train (or evaluate) one baseline; ``schema``, ``doc``, ``load`` and ``load_run`` are another
+    recipe's when it reuses this one (imitation_robotics.py)."""
     argv = sys.argv[1:] if argv is None else list(argv)
-    if help_requested(argv, __doc__, ImitationHighwayConfig):
+    if help_requested(argv, doc or __doc__, schema):
         return {}
     start = time.perf_counter()
-    cfg = requested_config(argv, load_config, load_run_config)  # a resumed run keeps its method
+    cfg = requested_config(argv, load, load_run)  # a resumed run keeps its method
     if cfg.method in REFERENCE_METHODS:
         summary = start_run(cfg, cfg.method, evaluate_reference)
     else:

@@ -75,7 +75,7 @@ from common.config import (
 from common.registry import register_recipe
 from common.run import ExpertDataError, expert_accomplish_rate, resolve_device
 from torchrl_csirl.data import ExpertDemonstrations
-from torchrl_csirl.envs import SCENARIOS, ScenarioSpec
+from torchrl_csirl.envs import ScenarioSpec, TaskSpec, resolve_scenario
 from torchrl_csirl.modules import EgoRelativeFeatures, make_actor, make_qvalue
 from torchrl_csirl.objectives._imitation import SACHyperparameters, make_sac_learner
 from torchrl_csirl.trainers import BCUpdate, SACUpdate, evaluate_policy
@@ -153,17 +153,17 @@ ImitationHighwayConfig.__doc__ = "``recipes/imitation_highway.py``: one baseline
 ImitationHighwayConfig.__module__ = __name__
 
 
-def check_method(overrides: list[str]) -> None:
-    """One clear line for a missing method, or for a CSIRL method (another recipe trains it)."""
+def check_method(overrides: list[str], csirl_recipe: str = "recipes/csirl_highway.py") -> None:
+    """One clear line for a missing method, or for a CSIRL method (``csirl_recipe`` trains it)."""
     given = [o.split("=", 1)[1] for o in overrides if o.startswith("method=")]
     if not given:
         raise ConfigError(f"method: required (method=<name>), one of {', '.join(METHODS)}")
     if given[-1] in CSIRL_METHODS:
-        raise ConfigError(f"method={given[-1]}: CSIRL is trained by recipes/csirl_highway.py "
-                          "(recipes/benchmark.py dispatches it there)")
+        raise ConfigError(f"method={given[-1]}: CSIRL is trained by {csirl_recipe}")
 
 
-def _checked(cfg: DictConfig) -> DictConfig:
+def checked_config(cfg: DictConfig) -> DictConfig:
+    """A method is named, the collector and the device are usable (every baseline recipe's checks)."""
     if cfg.method is None:
         raise ConfigError(f"method=null: must be one of {', '.join(METHODS)}")
     check_collector(cfg.collector)
@@ -179,7 +179,7 @@ def load_config(overrides: list[str] | None = None) -> DictConfig:
     """
     overrides = list(overrides or [])
     check_method(overrides)
-    return _checked(config_lib.load_config(ImitationHighwayConfig, overrides))
+    return checked_config(config_lib.load_config(ImitationHighwayConfig, overrides))
 
 
 def load_run_config(run_dir: str, overrides: list[str] | None = None) -> DictConfig:
@@ -187,7 +187,7 @@ def load_run_config(run_dir: str, overrides: list[str] | None = None) -> DictCon
     overrides = list(overrides or [])
     if any(o.startswith("method=") for o in overrides):
         check_method(overrides)
-    return _checked(config_lib.load_run_config(ImitationHighwayConfig, run_dir, overrides))
+    return checked_config(config_lib.load_run_config(ImitationHighwayConfig, run_dir, overrides))
 
 
 def _loader_of(method: str):
@@ -202,7 +202,7 @@ for _method in METHODS:
 
 
 # ---------------------------------------------------------------------------------------- data
-def load_demonstrations(cfg: DictConfig, spec: ScenarioSpec) -> ExpertDemonstrations:
+def load_demonstrations(cfg: DictConfig, spec: TaskSpec) -> ExpertDemonstrations:
     """:func:`common.builders.load_experts`, with an unavailable shipped size as one :class:`ExpertDataError` line."""
     try:
         return load_experts(cfg.expert, spec)
@@ -213,7 +213,7 @@ def load_demonstrations(cfg: DictConfig, spec: ScenarioSpec) -> ExpertDemonstrat
                               f"(method={cfg.method} needs these demonstrations)") from None
 
 
-def input_features(cfg: DictConfig, spec: ScenarioSpec) -> EgoRelativeFeatures | None:
+def input_features(cfg: DictConfig, spec: TaskSpec) -> EgoRelativeFeatures | None:
     """The ego-relative input map of every network (``model.ego_relative_features``), or None."""
     return EgoRelativeFeatures.from_scenario(spec) if cfg.model.ego_relative_features else None
 
@@ -226,20 +226,32 @@ def sac_hyperparameters(section: DictConfig) -> SACHyperparameters:
     return SACHyperparameters(**values)
 
 
-def make_sac(cfg: DictConfig, spec: ScenarioSpec, device: torch.device) -> ImitationMethod:
-    """SAC on the progress reward toward the finish (the paper's "SAC (true distance reward)")."""
+def true_reward_transforms(cfg: DictConfig, spec: TaskSpec, device: torch.device) -> list:
+    """The ``sac`` baseline's reward: on a driving scenario the progress toward the finish (the
+    paper's "true distance reward", written over highway-env's own reward); on a robotics task the
+    environment's own reward, the task's (no transform)."""
+    if not isinstance(spec, ScenarioSpec):
+        if cfg.sac.reward_scale is not None:
+            raise ConfigError(f"sac.reward_scale={cfg.sac.reward_scale}: {spec.name} trains SAC on the "
+                              "environment's own reward, which has no scale to set (null)")
+        return []
+    reward = ProgressReward.from_scenario(spec, scale=cfg.sac.reward_scale).to(device)
+    return [reward, CombineRewards(["progress_reward"])]
+
+
+def make_sac(cfg: DictConfig, spec: TaskSpec, device: torch.device) -> ImitationMethod:
+    """SAC on the task's true reward (:func:`true_reward_transforms`; the paper's "SAC (true distance reward)")."""
     hp = sac_hyperparameters(cfg.sac)
     features = input_features(cfg, spec)
     actor = make_actor(spec.obs_dim, spec.action_dim, input_features=features)
     loss = make_sac_learner(actor, make_qvalue(spec.obs_dim, spec.action_dim, input_features=features), hp).to(device)
     optimizer = torch.optim.Adam([p for p in loss.parameters() if p.requires_grad], lr=hp.lr)
     update = SACUpdate(loss, optimizer, SoftUpdate(loss, tau=hp.tau), hp.max_grad_norm)
-    reward = ProgressReward.from_scenario(spec, scale=cfg.sac.reward_scale).to(device)
-    return ImitationMethod("sac", actor, [reward, CombineRewards(["progress_reward"])], [],
+    return ImitationMethod("sac", actor, true_reward_transforms(cfg, spec, device), [],
                            {"loss": loss, "optim_sac": optimizer}, lambda online, expert: update, hp)
 
 
-def make_bc(cfg: DictConfig, spec: ScenarioSpec, device: torch.device) -> ImitationMethod:
+def make_bc(cfg: DictConfig, spec: TaskSpec, device: torch.device) -> ImitationMethod:
     """Behavioural cloning (TorchRL's ``BCLoss``) on expert batches of ``expert.batch_size``."""
     actor = make_actor(spec.obs_dim, spec.action_dim, input_features=input_features(cfg, spec)).to(device)
     loss = BCLoss(actor, loss_function=cfg.bc.loss_function)
@@ -251,7 +263,7 @@ def make_bc(cfg: DictConfig, spec: ScenarioSpec, device: torch.device) -> Imitat
     return ImitationMethod("bc", actor, [], [], {"actor": actor, "optim_bc": optimizer}, make_update_step)
 
 
-def make_loss_method(cfg: DictConfig, spec: ScenarioSpec, device: torch.device) -> ImitationMethod:
+def make_loss_method(cfg: DictConfig, spec: TaskSpec, device: torch.device) -> ImitationMethod:
     """A loss-based baseline (:func:`~torchrl_csirl.trainers.imitation.make_imitation_method`) with
     the ``<method>`` section as its hyperparameters and CSIRL's actor and critic factory."""
     features = input_features(cfg, spec)
@@ -274,10 +286,12 @@ def make_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume_fra
     """
     torch.manual_seed(cfg.seed)
     device = resolve_device(cfg.device)
-    spec = SCENARIOS[cfg.env.scenario]
+    spec = resolve_scenario(cfg.env.scenario)  # a driving scenario or a robotics task
     demos = load_demonstrations(cfg, spec)
     try:  # e.g. a negative learning rate of a section read from a hyperparameter dataclass
         method = METHOD_BUILDERS[cfg.method](cfg, spec, device)
+    except ConfigError:
+        raise
     except (ValueError, TypeError) as err:
         raise ConfigError(f"{cfg.method}.*: {err}") from None
     batch_size = getattr(method.hyperparameters, "batch_size", cfg.expert.batch_size)
@@ -305,7 +319,7 @@ def reference_policy(method: str, env: Any, spec: ScenarioSpec) -> Any:
 def evaluate_reference(cfg: DictConfig, run_dir: str) -> dict[str, Any]:
     """A reference row: its policy on the ``eval.final_episodes`` test episodes, logged; the summary."""
     torch.manual_seed(cfg.seed)
-    spec = SCENARIOS[cfg.env.scenario]
+    spec = resolve_scenario(cfg.env.scenario)
     demos = load_demonstrations(cfg, spec)
     env = make_eval_env(spec.name)
     logger = make_logger(cfg, run_dir)

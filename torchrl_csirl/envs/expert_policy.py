@@ -3,7 +3,8 @@
 :class:`ExpertDriverPolicy` lets :func:`~torchrl_csirl.trainers.evaluate_policy` (and any
 ``env.rollout``) drive a scenario's TorchRL environment with the privileged
 :class:`~torchrl_csirl.envs.expert.ExpertDriver`, so the expert is scored on exactly the test
-episodes (same seeds, same metric) as the learned policies.
+episodes (same seeds, same metric) as the learned policies. On a robotics task it drives the
+task's expert (:func:`~torchrl_csirl.envs.expert.make_expert`: the DAPG hand, the waypoint-driven ant).
 """
 from __future__ import annotations
 
@@ -26,9 +27,12 @@ class ExpertDriverPolicy(TensorDictModuleBase):
     (a :func:`~torchrl_csirl.envs.make_env` environment, batch size ``[]``). A new episode (a new
     ego vehicle after a reset) re-plans the driver's route.
 
+    A robotics task's expert is memoryless and reads the task environment itself (its
+    ``observation()``, the ant's ``position()``), so it gets the unwrapped environment.
+
     Args:
         env: the TorchRL environment the policy drives.
-        scenario: the scenario name (its expert configuration).
+        scenario: the scenario or robotics task name (its expert configuration).
         driver: a driver to use instead of ``make_expert(scenario)``.
 
     Examples:
@@ -45,17 +49,19 @@ class ExpertDriverPolicy(TensorDictModuleBase):
             raise ValueError(f"ExpertDriverPolicy drives one environment (batch size []), got {tuple(env.batch_size)}.")
         gym_env = getattr(env, "_env", None)
         if gym_env is None or not hasattr(gym_env, "unwrapped"):
-            raise TypeError(f"ExpertDriverPolicy needs a GymEnv of a driving scenario, got {type(env).__name__}.")
+            raise TypeError(f"ExpertDriverPolicy needs the GymEnv of a driving scenario or a robotics task, got {type(env).__name__}.")
         self.in_keys = ["observation"]
         self.out_keys = ["action"]
-        self.__dict__["_gym_env"] = gym_env  # not a module attribute: the simulator is not state
+        driving = hasattr(gym_env.unwrapped, "road")
+        # not a module attribute: the simulator is not state
+        self.__dict__["_gym_env"] = gym_env if driving else gym_env.unwrapped
         self.driver = driver or make_expert(scenario)
         self._action_spec = env.full_action_spec[env.action_key]
         self._vehicle: Any = None
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         gym_env = self.__dict__["_gym_env"]
-        vehicle = gym_env.unwrapped.vehicle
+        vehicle = getattr(gym_env.unwrapped, "vehicle", None)  # a robotics task: None, its expert is memoryless
         if vehicle is not self._vehicle:  # a reset made a new ego vehicle: plan its route
             self.driver.reset(gym_env)
             self._vehicle = vehicle

@@ -1,0 +1,91 @@
+"""One baseline on a robotics task: ``python recipes/imitation_robotics.py method=<name> env.task=relocate [key=value ...]``.
+
+The driving baselines' recipe (``recipes/imitation_highway.py``) on the paper's robotics tasks
+(``env.task=relocate | antmaze-umaze``, also spelled ``env.scenario``): the same methods,
+budget, networks, demonstrations, evaluation, outputs, checkpoints and final JSON line, with the
+robotics sections of ``recipes/csirl_robotics.py`` (the task's shipped 25 expert trajectories,
+``model.ego_relative_features=false``, ``collector.frames_per_batch=1400``). Two rows differ
+from driving: ``sac`` learns from the environment's own reward (the task's true reward:
+Relocate's dense reward, AntMaze's goal indicator) and ``expert`` is the task's expert (the DAPG
+hand, the waypoint-driven ant; docs/EXPERTS.md). The summary's ``return`` is the paper's metric
+here. See docs/ROBOTICS.md.
+
+Example (BC on Relocate; ``python recipes/imitation_robotics.py --help`` lists every key)::
+
+    python recipes/imitation_robotics.py method=bc env.task=relocate seed=0 collector.main_threads=1
+"""
+from __future__ import annotations
+
+import os
+import sys
+from dataclasses import dataclass, field
+from functools import partial
+
+from omegaconf import DictConfig
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+import imitation_highway  # noqa: E402
+from common import config as config_lib  # noqa: E402
+from common.config import option  # noqa: E402
+from common.run import run_script  # noqa: E402
+from csirl_robotics import (  # noqa: E402
+    RoboticsCollectorConfig,
+    RoboticsEnvConfig,
+    RoboticsModelConfig,
+    check_robotics_config,
+)
+from imitation_utils import ImitationExpertConfig, ImitationHighwayConfig, check_method, checked_config  # noqa: E402
+
+__all__ = ["ImitationRoboticsConfig", "load_config", "load_run_config", "main"]
+
+CSIRL_RECIPE = "recipes/csirl_robotics.py"
+
+
+@dataclass
+class RoboticsImitationExpertConfig(ImitationExpertConfig):
+    curriculum: str = option("expert", choices=("expert",),
+                             help="the task's shipped file (its trajectory order; the baselines use no curriculum)")
+
+
+@dataclass
+class ImitationRoboticsConfig(ImitationHighwayConfig):
+    """``recipes/imitation_robotics.py``: the driving baselines' schema with the robotics sections."""
+
+    env: RoboticsEnvConfig = field(default_factory=RoboticsEnvConfig)
+    expert: RoboticsImitationExpertConfig = field(default_factory=RoboticsImitationExpertConfig)
+    model: RoboticsModelConfig = field(default_factory=RoboticsModelConfig)
+    collector: RoboticsCollectorConfig = field(default_factory=RoboticsCollectorConfig)
+
+
+def _check(cfg: DictConfig, overrides: list[str] | None) -> DictConfig:
+    return check_robotics_config(checked_config(cfg), overrides)
+
+
+def load_config(overrides: list[str] | None = None) -> DictConfig:
+    """The defaults and ``key=value`` overrides (``method=<name>`` required).
+
+    Examples:
+        >>> cfg = load_config(["method=bc", "env.task=antmaze-umaze"])
+        >>> cfg.method, cfg.env.scenario, cfg.collector.frames_per_batch, cfg.model.ego_relative_features
+        ('bc', 'antmaze-umaze', 1400, False)
+    """
+    overrides = list(overrides or [])
+    check_method(overrides, CSIRL_RECIPE)
+    return _check(config_lib.load_config(ImitationRoboticsConfig, overrides), overrides)
+
+
+def load_run_config(run_dir: str, overrides: list[str] | None = None) -> DictConfig:
+    """The configuration saved in ``run_dir/config.yaml``, updated by ``overrides`` (resume)."""
+    overrides = list(overrides or [])
+    if any(o.startswith("method=") for o in overrides):
+        check_method(overrides, CSIRL_RECIPE)
+    return _check(config_lib.load_run_config(ImitationRoboticsConfig, run_dir, overrides), overrides)
+
+
+main = partial(imitation_highway.main, schema=ImitationRoboticsConfig, doc=__doc__, load=load_config,
+               load_run=load_run_config)
+
+
+if __name__ == "__main__":
+    run_script(main)

@@ -1,0 +1,83 @@
+"""recipes/imitation_robotics.py: the baselines on the robotics tasks (BC end to end on a tiny
+budget, the expert and SAC rows' task-specific parts) and its configuration errors."""
+from __future__ import annotations
+
+import json
+import os
+import sys
+
+import pytest
+import torch
+
+RECIPES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "recipes")
+sys.path.insert(0, RECIPES)
+
+import imitation_robotics  # noqa: E402
+import imitation_utils  # noqa: E402
+from common.config import ConfigError  # noqa: E402
+
+from torchrl_csirl.envs import make_env, resolve_scenario  # noqa: E402
+from torchrl_csirl.envs.expert_policy import ExpertDriverPolicy  # noqa: E402
+
+# one worker, one env, one 200-frame batch (a Relocate episode), rounds of 20 updates, 1 test episode
+TINY = [
+    "collector.total_frames=400",
+    "collector.frames_per_batch=200",
+    "collector.num_workers=1",
+    "collector.envs_per_worker=1",
+    "collector.init_random_frames=200",
+    "collector.main_threads=1",
+    "replay_buffer.warmup_frames=200",
+    "updates_per_round=20",
+    "optim.utd_ratio=0.1",
+    "eval.episodes=1",
+    "eval.final_episodes=1",
+    "logger.backend=none",
+    "logger.progress_bar=false",
+]
+
+
+def test_bc_on_relocate_end_to_end(tmp_path):
+    summary = imitation_robotics.main(["method=bc", "env.task=relocate", *TINY, f"logger.output_dir={tmp_path}"])
+    assert summary["scenario"] == "relocate" and summary["method"] == "bc"
+    assert summary["frames"] == 400 and summary["updates"] > 0 and isinstance(summary["return"], float)
+    for name in ("config.yaml", "policy.pt", "summary.json"):
+        assert os.path.exists(os.path.join(summary["run_dir"], name)), name
+    with open(os.path.join(summary["run_dir"], "summary.json")) as f:
+        assert json.load(f)["method"] == "bc"
+
+
+def test_the_expert_row_drives_the_task_expert():
+    env = make_env("relocate", seed=0)
+    try:
+        rollout = env.rollout(20, ExpertDriverPolicy(env, "relocate"))
+    finally:
+        env.close()
+    # the DAPG hand reaches for the ball: the palm-to-object distance shrinks over 20 steps
+    palm_to_object = rollout["observation"][:, 30:33].norm(dim=-1)
+    assert rollout["action"].shape == (20, 30) and palm_to_object[-1] < palm_to_object[0]
+
+
+def test_sac_learns_from_the_task_reward_on_robotics_and_the_progress_reward_on_driving():
+    robotics = imitation_robotics.load_config(["method=sac", "env.task=relocate"])
+    assert imitation_utils.true_reward_transforms(robotics, resolve_scenario("relocate"), torch.device("cpu")) == []
+    driving = imitation_utils.load_config(["method=sac", "env.scenario=merge"])
+    names = [type(t).__name__ for t in imitation_utils.true_reward_transforms(
+        driving, resolve_scenario("merge"), torch.device("cpu"))]
+    assert names == ["ProgressReward", "CombineRewards"]
+    scaled = imitation_robotics.load_config(["method=sac", "env.task=relocate", "sac.reward_scale=2"])
+    with pytest.raises(ConfigError, match="sac.reward_scale=2.0: relocate trains SAC on the environment's own reward"):
+        imitation_utils.true_reward_transforms(scaled, resolve_scenario("relocate"), torch.device("cpu"))
+
+
+def test_configuration_errors():
+    cfg = imitation_robotics.load_config(["method=dac", "env.scenario=antmaze-umaze"])
+    assert (cfg.env.task, cfg.collector.frames_per_batch, cfg.expert.curriculum) == ("antmaze-umaze", 1400, "expert")
+    with pytest.raises(ConfigError, match="method: required"):
+        imitation_robotics.load_config(["env.task=relocate"])
+    with pytest.raises(ConfigError, match="env.task=merge"):
+        imitation_robotics.load_config(["method=bc", "env.task=merge"])
+    with pytest.raises(ConfigError, match="model.ego_relative_features=true"):
+        imitation_robotics.load_config(["method=bc", "model.ego_relative_features=true"])
+    with pytest.raises(ConfigError, match="method=csirl: CSIRL is trained by recipes/csirl_robotics.py"):
+        imitation_robotics.load_config(["method=csirl"])
