@@ -66,13 +66,19 @@ class RoboticsCollectorConfig(CollectorConfig):
 
 
 @dataclass
-class CSIRLRoboticsConfig(CSIRLHighwayConfig):
-    """``recipes/csirl_robotics.py``: the driving recipe's defaults with the robotics sections."""
+class RoboticsSections:
+    """The sections a robotics recipe's schema puts over its driving recipe's (a base listed first)."""
 
     env: RoboticsEnvConfig = field(default_factory=RoboticsEnvConfig)
-    expert: RoboticsExpertConfig = field(default_factory=RoboticsExpertConfig)
     model: RoboticsModelConfig = field(default_factory=RoboticsModelConfig)
     collector: RoboticsCollectorConfig = field(default_factory=RoboticsCollectorConfig)
+
+
+@dataclass
+class CSIRLRoboticsConfig(RoboticsSections, CSIRLHighwayConfig):
+    """``recipes/csirl_robotics.py``: the driving recipe's defaults with the robotics sections."""
+
+    expert: RoboticsExpertConfig = field(default_factory=RoboticsExpertConfig)
 
 
 def resolve_task(cfg: DictConfig, overrides: list[str] | None) -> None:

@@ -29,12 +29,7 @@ import imitation_highway  # noqa: E402
 from common import config as config_lib  # noqa: E402
 from common.config import option  # noqa: E402
 from common.run import run_script  # noqa: E402
-from csirl_robotics import (  # noqa: E402
-    RoboticsCollectorConfig,
-    RoboticsEnvConfig,
-    RoboticsModelConfig,
-    check_robotics_config,
-)
+from csirl_robotics import RoboticsSections, check_robotics_config  # noqa: E402
 from imitation_utils import ImitationExpertConfig, ImitationHighwayConfig, check_method, checked_config  # noqa: E402
 
 __all__ = ["ImitationRoboticsConfig", "load_config", "load_run_config", "main"]
@@ -49,13 +44,10 @@ class RoboticsImitationExpertConfig(ImitationExpertConfig):
 
 
 @dataclass
-class ImitationRoboticsConfig(ImitationHighwayConfig):
+class ImitationRoboticsConfig(RoboticsSections, ImitationHighwayConfig):
     """``recipes/imitation_robotics.py``: the driving baselines' schema with the robotics sections."""
 
-    env: RoboticsEnvConfig = field(default_factory=RoboticsEnvConfig)
     expert: RoboticsImitationExpertConfig = field(default_factory=RoboticsImitationExpertConfig)
-    model: RoboticsModelConfig = field(default_factory=RoboticsModelConfig)
-    collector: RoboticsCollectorConfig = field(default_factory=RoboticsCollectorConfig)
 
 
 def _check(cfg: DictConfig, overrides: list[str] | None) -> DictConfig:

@@ -18,23 +18,9 @@ from common.config import ConfigError  # noqa: E402
 
 from torchrl_csirl.envs import make_env, resolve_scenario  # noqa: E402
 from torchrl_csirl.envs.expert_policy import ExpertDriverPolicy  # noqa: E402
+from robotics_budget import TINY_ROBOTICS_RUN  # noqa: E402
 
-# one worker, one env, one 200-frame batch (a Relocate episode), rounds of 20 updates, 1 test episode
-TINY = [
-    "collector.total_frames=400",
-    "collector.frames_per_batch=200",
-    "collector.num_workers=1",
-    "collector.envs_per_worker=1",
-    "collector.init_random_frames=200",
-    "collector.main_threads=1",
-    "replay_buffer.warmup_frames=200",
-    "updates_per_round=20",
-    "optim.utd_ratio=0.1",
-    "eval.episodes=1",
-    "eval.final_episodes=1",
-    "logger.backend=none",
-    "logger.progress_bar=false",
-]
+TINY = [*TINY_ROBOTICS_RUN, "updates_per_round=20"]  # rounds of 20 updates
 
 
 def test_bc_on_relocate_end_to_end(tmp_path):

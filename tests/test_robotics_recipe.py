@@ -18,25 +18,10 @@ from common.run import ExpertDataError  # noqa: E402
 
 from torchrl_csirl.data import load_expert_demonstrations  # noqa: E402
 from torchrl_csirl.envs import resolve_scenario  # noqa: E402
+from robotics_budget import TINY_ROBOTICS_RUN  # noqa: E402
 
-# one worker, one env, 200-frame batches (one Relocate episode), rounds of 10 updates, 1 test episode
-TINY = [
-    "collector.total_frames=400",
-    "collector.frames_per_batch=200",
-    "collector.num_workers=1",
-    "collector.envs_per_worker=1",
-    "collector.init_random_frames=200",
-    "collector.main_threads=1",
-    "replay_buffer.warmup_frames=200",
-    "replay_buffer.batch_size=32",
-    "csirl.updates_per_round=10",
-    "csirl.num_qvalue_nets=2",
-    "optim.utd_ratio=0.1",
-    "eval.episodes=1",
-    "eval.final_episodes=1",
-    "logger.backend=none",
-    "logger.progress_bar=false",
-]
+# rounds of 10 updates of a 2-critic ensemble on 32-transition batches
+TINY = [*TINY_ROBOTICS_RUN, "replay_buffer.batch_size=32", "csirl.updates_per_round=10", "csirl.num_qvalue_nets=2"]
 
 
 def _check_run(summary: dict, task: str) -> None:
