@@ -31,6 +31,9 @@ def test_bc_on_relocate_end_to_end(tmp_path):
         assert os.path.exists(os.path.join(summary["run_dir"], name)), name
     with open(os.path.join(summary["run_dir"], "summary.json")) as f:
         assert json.load(f)["method"] == "bc"
+    # a resume reads the saved robotics configuration back, with the command line's changes
+    resumed = imitation_robotics.load_run_config(summary["run_dir"], ["collector.total_frames=600"])
+    assert (resumed.method, resumed.env.task, resumed.collector.total_frames) == ("bc", "relocate", 600)
 
 
 def test_the_expert_row_drives_the_task_expert():
