@@ -26,11 +26,10 @@ from omegaconf import DictConfig
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 import imitation_highway  # noqa: E402
-from common import config as config_lib  # noqa: E402
 from common.config import option  # noqa: E402
 from common.run import run_script  # noqa: E402
 from csirl_robotics import RoboticsSections, check_robotics_config  # noqa: E402
-from imitation_utils import ImitationExpertConfig, ImitationHighwayConfig, check_method, checked_config  # noqa: E402
+from imitation_utils import ImitationExpertConfig, ImitationHighwayConfig, load_baseline_config  # noqa: E402
 
 __all__ = ["ImitationRoboticsConfig", "load_config", "load_run_config", "main"]
 
@@ -50,10 +49,6 @@ class ImitationRoboticsConfig(RoboticsSections, ImitationHighwayConfig):
     expert: RoboticsImitationExpertConfig = field(default_factory=RoboticsImitationExpertConfig)
 
 
-def _check(cfg: DictConfig, overrides: list[str] | None) -> DictConfig:
-    return check_robotics_config(checked_config(cfg), overrides)
-
-
 def load_config(overrides: list[str] | None = None) -> DictConfig:
     """The defaults and ``key=value`` overrides (``method=<name>`` required).
 
@@ -62,17 +57,14 @@ def load_config(overrides: list[str] | None = None) -> DictConfig:
         >>> cfg.method, cfg.env.scenario, cfg.collector.frames_per_batch, cfg.model.ego_relative_features
         ('bc', 'antmaze-umaze', 1400, False)
     """
-    overrides = list(overrides or [])
-    check_method(overrides, CSIRL_RECIPE)
-    return _check(config_lib.load_config(ImitationRoboticsConfig, overrides), overrides)
+    return check_robotics_config(
+        load_baseline_config(ImitationRoboticsConfig, overrides, csirl_recipe=CSIRL_RECIPE), overrides)
 
 
 def load_run_config(run_dir: str, overrides: list[str] | None = None) -> DictConfig:
     """The configuration saved in ``run_dir/config.yaml``, updated by ``overrides`` (resume)."""
-    overrides = list(overrides or [])
-    if any(o.startswith("method=") for o in overrides):
-        check_method(overrides, CSIRL_RECIPE)
-    return _check(config_lib.load_run_config(ImitationRoboticsConfig, run_dir, overrides), overrides)
+    return check_robotics_config(
+        load_baseline_config(ImitationRoboticsConfig, overrides, run_dir, CSIRL_RECIPE), overrides)
 
 
 main = partial(imitation_highway.main, schema=ImitationRoboticsConfig, doc=__doc__, load=load_config,

@@ -171,23 +171,35 @@ def checked_config(cfg: DictConfig) -> DictConfig:
     return cfg
 
 
+def load_baseline_config(schema: type, overrides: list[str] | None = None, run_dir: str | None = None,
+                         csirl_recipe: str = "recipes/csirl_highway.py") -> DictConfig:
+    """A baseline recipe's configuration: ``schema``'s defaults, or with ``run_dir`` the run's saved
+    configuration (resume, which keeps its method unless the command line names one), updated by
+    ``overrides``; the method named (:func:`check_method`) and :func:`checked_config`.
+
+    Raises:
+        ConfigError: one line naming the bad key or value.
+    """
+    overrides = list(overrides or [])
+    if run_dir is None or any(o.startswith("method=") for o in overrides):
+        check_method(overrides, csirl_recipe)
+    if run_dir is None:
+        return checked_config(config_lib.load_config(schema, overrides))
+    return checked_config(config_lib.load_run_config(schema, run_dir, overrides))
+
+
 def load_config(overrides: list[str] | None = None) -> DictConfig:
     """The defaults and ``key=value`` overrides (``method=<name>`` required).
 
     Raises:
         ConfigError: one line naming the bad key or value.
     """
-    overrides = list(overrides or [])
-    check_method(overrides)
-    return checked_config(config_lib.load_config(ImitationHighwayConfig, overrides))
+    return load_baseline_config(ImitationHighwayConfig, overrides)
 
 
 def load_run_config(run_dir: str, overrides: list[str] | None = None) -> DictConfig:
     """The configuration saved in ``run_dir/config.yaml``, updated by ``overrides`` (resume)."""
-    overrides = list(overrides or [])
-    if any(o.startswith("method=") for o in overrides):
-        check_method(overrides)
-    return checked_config(config_lib.load_run_config(ImitationHighwayConfig, run_dir, overrides))
+    return load_baseline_config(ImitationHighwayConfig, overrides, run_dir)
 
 
 def _loader_of(method: str):
