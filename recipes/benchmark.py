@@ -6,19 +6,23 @@ Run the sweep (local Ray by default, one trial at a time: sized for a 2-core mac
         --output-dir runs/benchmark [key=value ...] [method:key=value ...]
 
 Each cell (method, scenario, seed) is one run of its recipe (``recipes/csirl_highway.py`` for
-``csirl`` and ``csirl-b``, ``recipes/imitation_highway.py method=<name>`` for the others) in its own
+``csirl`` and ``csirl-b``, ``recipes/imitation_highway.py method=<name>`` for the others; on the
+robotics tasks ``--scenarios relocate antmaze-umaze``, ``recipes/csirl_robotics.py`` and
+``recipes/imitation_robotics.py``) in its own
 process, in ``<output-dir>/<scenario>-<method>-s<seed>``, its output in ``<output-dir>/logs``. The
 ``expert`` row runs for the first seed only (the expert driver is deterministic). The
 sweep is resumable: a cell whose ``summary.json`` exists is not run again, a cell with a checkpoint
 continues from it (``checkpoint.resume``), any other leftover is replaced. ``key=value`` overrides
-go to every cell; ``<method>:key=value``, ``csirl_highway:key=value`` or
-``imitation_highway:key=value`` to that method's or that recipe's cells only. ``--address`` joins an
+go to every cell; ``<method>:key=value`` or ``<recipe>:key=value`` (``csirl_highway``,
+``imitation_highway``, ``csirl_robotics``, ``imitation_robotics``) to that method's or that
+recipe's cells only. ``--address`` joins an
 existing Ray cluster (``ray start --head`` on it first); ``--max-concurrent`` and
 ``--cpus-per-trial`` size the trials.
 
 Write the table (method rows x scenario columns, expert-normalised accomplish rate mean +- std over
-seeds, the paper's Table I beside it; Markdown and CSV) and one learning-curve figure per scenario
-(the paper's Figure 6)::
+seeds, the paper's Table I beside it; on the robotics tasks the test return, the paper's metric
+there; Markdown and CSV) and one learning-curve figure per scenario or task (the paper's
+Figures 6 and 7)::
 
     python recipes/benchmark.py report runs/benchmark [more folders or run dirs] [--out runs/benchmark/report]
 
@@ -42,26 +46,38 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from common.config import SCENARIO_NAMES  # noqa: E402
 from summarize_runs import find_summaries, mean_std, welch_test  # noqa: E402
 
+from torchrl_csirl.envs.robotics import ROBOTICS_TASKS  # noqa: E402
+
 RECIPES_DIR = os.path.dirname(os.path.abspath(__file__))
 REPO_ROOT = os.path.dirname(RECIPES_DIR)
 
 #: the table's rows, in the paper's order, and the recipe of each
 METHOD_ORDER = ("expert", "random", "sac", "bc", "gail", "dac", "valuedice", "sqil", "iqlearn", "csirl-b", "csirl")
 CSIRL_RECIPE, IMITATION_RECIPE = "csirl_highway", "imitation_highway"
+#: the robotics tasks' recipes (the same learners on ``env.task=relocate | antmaze-umaze``)
+CSIRL_ROBOTICS_RECIPE, IMITATION_ROBOTICS_RECIPE = "csirl_robotics", "imitation_robotics"
+RECIPES = (CSIRL_RECIPE, IMITATION_RECIPE, CSIRL_ROBOTICS_RECIPE, IMITATION_ROBOTICS_RECIPE)
 #: CSIRL and its ablations (issue 17, section 4): cells of the CSIRL recipe with these switches
 CSIRL_METHODS: dict[str, tuple[str, ...]] = {
     "csirl": (),
     "csirl-b": ("csirl.intrinsic=false",),  # no learned reward r_w
     "csirl-nocur": ("csirl.fixed_subgoal=true",),  # no curriculum: the subgoal is the last state
     "csirl-noexp": ("replay_buffer.expert_fraction=0",),  # no expert transitions in the SAC batch
+    # not an ablation: CSIRL with TD3+BC-style cloning on its actor, the setting that learns Relocate
+    # (docs/RESULTS.md "Relocate and AntMaze: behavioural cloning against CSIRL")
+    "csirl-bc": ("csirl.actor_bc_coef=10",),
 }
-#: the ablation rows (not in the paper's table, so not in a default sweep): after csirl in a report
-ABLATIONS = ("csirl-nocur", "csirl-noexp")
+#: the ablation and variant rows (not in the paper's table, so not in a default sweep): after csirl in a report
+ABLATIONS = ("csirl-nocur", "csirl-noexp", "csirl-bc")
 REFERENCE_METHODS = ("random", "expert")
 #: methods whose run does not depend on the seed (the expert driver is deterministic): first seed only
 SEED_FREE_METHODS = ("expert",)
 #: the table's columns, in the paper's order
 SCENARIO_ORDER = ("highway-fast", "merge", "intersection", "roundabout")
+#: the robotics table's columns (the paper's Figure 7), scored by the test return
+ROBOTICS_ORDER = ("antmaze-umaze", "relocate")
+#: the methods of the paper's robotics comparison (Figure 7: curves, no table; SPEC section 4)
+PAPER_ROBOTICS_METHODS = ("sqil", "dac", "valuedice", "iqlearn", "csirl")
 
 #: the paper's Table I (accomplish rate, 25 expert trajectories, 5 seeds; the expert at 1.00, so
 #: read as expert-normalised): /work/shared/SPEC.md section 2, paper Table "tab:result"
@@ -84,9 +100,27 @@ class BenchmarkError(ValueError):
 
 
 # ---------------------------------------------------------------------------------------- cells
-def recipe_of(method: str) -> str:
-    """The recipe that runs ``method``."""
+def is_robotics(scenario: str) -> bool:
+    """Whether ``scenario`` is one of the robotics tasks (scored by return, run by the robotics recipes)."""
+    return scenario in ROBOTICS_TASKS
+
+
+def recipe_of(method: str, scenario: str = "merge") -> str:
+    """The recipe that runs ``method`` on ``scenario``.
+
+    Examples:
+        >>> recipe_of("csirl-b"), recipe_of("sqil"), recipe_of("csirl", "relocate"), recipe_of("bc", "antmaze-umaze")
+        ('csirl_highway', 'imitation_highway', 'csirl_robotics', 'imitation_robotics')
+    """
+    if is_robotics(scenario):
+        return CSIRL_ROBOTICS_RECIPE if method in CSIRL_METHODS else IMITATION_ROBOTICS_RECIPE
     return CSIRL_RECIPE if method in CSIRL_METHODS else IMITATION_RECIPE
+
+
+def score_key(scenario: str) -> str:
+    """The summary field a scenario's table ranks by: the test return on the robotics tasks (the paper's
+    metric there), the expert-normalised accomplish rate on the driving scenarios."""
+    return "return" if is_robotics(scenario) else "normalized_accomplish_rate"
 
 
 def known_methods() -> tuple[str, ...]:
@@ -112,22 +146,24 @@ class Cell:
         return os.path.basename(self.run_dir)
 
 
-def split_overrides(overrides: list[str], methods: list[str]) -> dict[str, list[str]]:
-    """``method -> overrides`` from plain ``key=value`` (every cell) and ``<method|recipe>:key=value`` ones.
+def split_overrides(overrides: list[str], methods: list[str], scenario: str = "merge") -> dict[str, list[str]]:
+    """``method -> overrides`` on ``scenario`` from plain ``key=value`` (every cell) and ``<method|recipe>:key=value`` ones.
 
     Examples:
         >>> split_overrides(["seed=1", "bc:optim.lr=0.001", "csirl_highway:csirl.delta=3"], ["bc", "csirl"])
         {'bc': ['seed=1', 'optim.lr=0.001'], 'csirl': ['seed=1', 'csirl.delta=3']}
+        >>> split_overrides(["csirl_highway:csirl.delta=3", "csirl_robotics:csirl.actor_bc_coef=10"], ["csirl"], "relocate")
+        {'csirl': ['csirl.actor_bc_coef=10']}
     """
     out: dict[str, list[str]] = {m: [] for m in methods}
     for item in overrides:
         head, sep, rest = item.partition(":")
         if sep and "=" not in head:
-            if head not in (*known_methods(), CSIRL_RECIPE, IMITATION_RECIPE):
+            if head not in (*known_methods(), *RECIPES):
                 raise BenchmarkError(f"{item}: {head!r} is neither a method ({', '.join(known_methods())}) nor "
-                                     f"a recipe ({CSIRL_RECIPE}, {IMITATION_RECIPE})")
+                                     f"a recipe ({', '.join(RECIPES)})")
             for m in methods:
-                if head in (m, recipe_of(m)):
+                if head in (m, recipe_of(m, scenario)):
                     out[m].append(rest)
         else:
             for m in methods:
@@ -144,9 +180,9 @@ def make_cell(method: str, scenario: str, seed: int, output_dir: str, overrides:
     run_dir = os.path.join(output_dir, f"{scenario}-{method}-s{seed}")
     if os.path.isfile(os.path.join(run_dir, "summary.json")):
         return None
-    recipe = os.path.join(RECIPES_DIR, f"{recipe_of(method)}.py")
+    recipe = os.path.join(RECIPES_DIR, f"{recipe_of(method, scenario)}.py")
     args = [f"env.scenario={scenario}", f"seed={seed}", "logger.progress_bar=false", *overrides]
-    if recipe_of(method) == IMITATION_RECIPE:
+    if method not in CSIRL_METHODS:
         args.insert(0, f"method={method}")
     else:
         args += CSIRL_METHODS[method]
@@ -165,12 +201,12 @@ def plan_cells(methods: list[str], scenarios: list[str], seeds: list[int], outpu
     unknown = [m for m in methods if m not in known_methods()]
     if unknown:
         raise BenchmarkError(f"--methods {' '.join(unknown)}: unknown; known: {', '.join(known_methods())}")
-    bad = [s for s in scenarios if s not in SCENARIO_NAMES]
+    bad = [s for s in scenarios if s not in (*SCENARIO_NAMES, *ROBOTICS_TASKS)]
     if bad:
-        raise BenchmarkError(f"--scenarios {' '.join(bad)}: unknown; known: {', '.join(SCENARIO_NAMES)}")
-    per_method = split_overrides(overrides, methods)
+        raise BenchmarkError(f"--scenarios {' '.join(bad)}: unknown; known: {', '.join((*SCENARIO_NAMES, *ROBOTICS_TASKS))}")
     todo, done = [], []
     for scenario in scenarios:
+        per_method = split_overrides(overrides, methods, scenario)
         for method in methods:
             for seed in seeds[:1] if method in SEED_FREE_METHODS else seeds:
                 cell = make_cell(method, scenario, seed, output_dir, per_method[method])
@@ -205,8 +241,8 @@ def run_cell(config: dict[str, Any]) -> None:
             tail = f.read()[-2000:]
         raise RuntimeError(f"{cell['name']}: exit status {proc.returncode}; see {log_path}:\n{tail}")
     summary = json.loads(proc.stdout.strip().splitlines()[-1])
-    metrics = {k: summary[k] for k in ("accomplish_rate", "normalized_accomplish_rate", "success_rate", "crash_rate", "frames",
-                                       "updates", "wall_s") if summary.get(k) is not None}
+    metrics = {k: summary[k] for k in ("accomplish_rate", "normalized_accomplish_rate", "success_rate", "crash_rate", "return",
+                                       "frames", "updates", "wall_s") if summary.get(k) is not None}
     tune.report({**metrics, "run_dir": summary["run_dir"]})
 
 
@@ -243,7 +279,7 @@ def sweep_main(argv: list[str]) -> int:
     parser = argparse.ArgumentParser(prog="benchmark.py", description="methods x scenarios x seeds as Ray Tune trials")
     available = [m for m in METHOD_ORDER if m in known_methods()]
     parser.add_argument("--methods", nargs="+", default=available, metavar="METHOD",
-                        help=f"default: the paper's rows ({' '.join(available)}); CSIRL's ablations: "
+                        help=f"default: the paper's rows ({' '.join(available)}); CSIRL's ablations and variants: "
                              f"{' '.join(ABLATIONS)}")
     parser.add_argument("--scenarios", nargs="+", default=list(SCENARIO_ORDER), metavar="SCENARIO")
     parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
@@ -295,12 +331,14 @@ def table_rows(runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
     for run in runs:
         groups[(run["method"], run["scenario"])].append(run)
     rank = {m: i for i, m in enumerate((*METHOD_ORDER, *ABLATIONS))}
+    column = {s: i for i, s in enumerate((*SCENARIO_ORDER, *ROBOTICS_ORDER))}
     rows = []
-    for (method, scenario), group in sorted(groups.items(), key=lambda kv: (rank.get(kv[0][0], 99), kv[0])):
+    for (method, scenario), group in sorted(groups.items(), key=lambda kv: (rank.get(kv[0][0], 99), kv[0][0],
+                                                                              column.get(kv[0][1], 99), kv[0][1])):
         row: dict[str, Any] = {"method": method, "scenario": scenario, "seeds": " ".join(
             str(s) for s in sorted(int(r["seed"]) for r in group)), "runs": len(group)}
-        for field in ("normalized_accomplish_rate", "accomplish_rate", "success_rate", "crash_rate", "total_wall_s",
-                      "updates_per_s"):
+        for field in ("normalized_accomplish_rate", "accomplish_rate", "return", "success_rate", "crash_rate",
+                      "total_wall_s", "updates_per_s"):
             values = [float(r[field]) for r in group if r.get(field) is not None]
             stats = mean_std(values) if values else {"mean": None, "std": None}
             row[f"{field}_mean"], row[f"{field}_std"] = stats["mean"], stats["std"]
@@ -311,11 +349,12 @@ def table_rows(runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 
 def add_comparison_to_csirl(rows: list[dict[str, Any]], groups: dict[tuple[str, str], list[dict]]) -> None:
-    """Each row's difference from ``csirl`` on its scenario (expert-normalised, Welch's t-test over
-    seeds, :func:`~summarize_runs.welch_test`): ``vs_csirl``, ``vs_csirl_t``, ``vs_csirl_beyond_noise``."""
+    """Each row's difference from ``csirl`` on its scenario (in its :func:`score_key`: expert-normalised on the
+    driving scenarios, the return on the robotics tasks; Welch's t-test over seeds,
+    :func:`~summarize_runs.welch_test`): ``vs_csirl``, ``vs_csirl_t``, ``vs_csirl_beyond_noise``."""
     def values(method: str, scenario: str) -> list[float]:
-        return [float(r["normalized_accomplish_rate"]) for r in groups.get((method, scenario), [])
-                if r.get("normalized_accomplish_rate") is not None]
+        key = score_key(scenario)
+        return [float(r[key]) for r in groups.get((method, scenario), []) if r.get(key) is not None]
 
     for row in rows:
         test = None
@@ -326,23 +365,23 @@ def add_comparison_to_csirl(rows: list[dict[str, Any]], groups: dict[tuple[str, 
         row["vs_csirl_beyond_noise"] = None if test is None else test["beyond_noise"]
 
 
-def _pm(mean: float | None, std: float | None) -> str:
-    return "n/a" if mean is None else f"{mean:.2f} ± {std:.2f}"
+def _pm(mean: float | None, std: float | None, fmt: str = ".2f") -> str:
+    return "n/a" if mean is None else f"{mean:{fmt}} ± {std:{fmt}}"
 
 
-def _score(row: dict[str, Any] | None, paper: float | None) -> str:
-    """``mean ± std (n=runs) [paper]`` of a table row's expert-normalised accomplish rate."""
-    ours = "—" if row is None else (f"{_pm(row['normalized_accomplish_rate_mean'], row['normalized_accomplish_rate_std'])}"
-                                    f" (n={row['runs']})")
+def _score(row: dict[str, Any] | None, paper: float | None, field: str = "normalized_accomplish_rate",
+           fmt: str = ".2f") -> str:
+    """``mean ± std (n=runs) [paper]`` of a table row's ``field`` (the expert-normalised accomplish rate)."""
+    ours = "—" if row is None else f"{_pm(row[f'{field}_mean'], row[f'{field}_std'], fmt)} (n={row['runs']})"
     return ours + (f" [{paper:.2f}]" if paper is not None else "")
 
 
-def _outcomes(row: dict[str, Any] | None) -> str:
-    """``success / crash`` of a table row, ``—`` where a rate is missing."""
+def _outcomes(row: dict[str, Any] | None, second: str = "crash_rate") -> str:
+    """``success / crash`` (or ``success / <second>``) of a table row, ``—`` where a rate is missing."""
     if row is None or row["success_rate_mean"] is None:
         return "—"
-    crash = row["crash_rate_mean"]
-    return f"{row['success_rate_mean']:.2f} / " + ("—" if crash is None else f"{crash:.2f}")
+    other = row[f"{second}_mean"]
+    return f"{row['success_rate_mean']:.2f} / " + ("—" if other is None else f"{other:.2f}")
 
 
 def _cost(row: dict[str, Any] | None) -> str:
@@ -353,11 +392,11 @@ def _cost(row: dict[str, Any] | None) -> str:
     return f"{row['total_wall_s_mean'] / 60:.1f} min" + (f", {ups:.0f} upd/s" if ups else "")
 
 
-def _difference(row: dict[str, Any] | None) -> str:
+def _difference(row: dict[str, Any] | None, fmt: str = "+.3f") -> str:
     """``+d (t x)`` against ``csirl``, in bold beyond seed noise, ``—`` without a comparison."""
     if row is None or row.get("vs_csirl") is None:
         return "—"
-    text = f"{row['vs_csirl']:+.3f} (t {row['vs_csirl_t']:.1f})"
+    text = f"{row['vs_csirl']:{fmt}} (t {row['vs_csirl_t']:.1f})"
     return f"**{text}**" if row["vs_csirl_beyond_noise"] else text
 
 
@@ -368,12 +407,30 @@ def _method_table(caption: str, methods: list[str], scenarios: list[str],
     return lines + [f"| {m} | " + " | ".join(entry(m, s) for s in scenarios) + " |" for m in methods]
 
 
-def markdown_table(rows: list[dict[str, Any]]) -> str:
-    """Method rows x scenario columns: ``ours [paper]``, expert-normalised accomplish rate; then success / crash, the cost
-    and the difference from ``csirl``."""
-    scenarios = [s for s in SCENARIO_ORDER if any(r["scenario"] == s for r in rows)]
-    methods = list(dict.fromkeys(r["method"] for r in rows))
-    cell = {(r["method"], r["scenario"]): r for r in rows}
+def _columns(rows: list[dict[str, Any]], order: tuple[str, ...]) -> tuple[list[str], list[str], dict]:
+    """(scenario columns in ``order``, method rows, ``(method, scenario) -> row``) of the rows on those scenarios."""
+    rows = [r for r in rows if r["scenario"] in order]
+    scenarios = [s for s in order if any(r["scenario"] == s for r in rows)]
+    return scenarios, list(dict.fromkeys(r["method"] for r in rows)), {(r["method"], r["scenario"]): r for r in rows}
+
+
+def _comparison_table(rows: list[dict[str, Any]], scenarios: list[str], cell: dict, what: str,
+                      fmt: str) -> list[str]:
+    """The rows' difference from ``csirl`` (``what``), if any row has one."""
+    compared = list(dict.fromkeys(r["method"] for r in rows if r["vs_csirl"] is not None and r["scenario"] in scenarios))
+    if not compared:
+        return []
+    return [""] + _method_table(
+        f"Difference from csirl ({what}; Welch's t over seeds; **bold**: beyond seed noise, two-sided 5 %).",
+        compared, scenarios, lambda m, s: _difference(cell.get((m, s)), fmt))
+
+
+def driving_tables(rows: list[dict[str, Any]]) -> list[str]:
+    """The driving scenarios' tables: ``ours [paper]`` expert-normalised accomplish rate, success / crash, cost,
+    difference from ``csirl`` (no lines without a driving row)."""
+    scenarios, methods, cell = _columns(rows, SCENARIO_ORDER)
+    if not scenarios:
+        return []
     lines = _method_table("Expert-normalised test accomplish rate, mean ± std over seeds (the paper's Table I in brackets).",
                           methods, scenarios, lambda m, s: _score(cell.get((m, s)), PAPER_TABLE.get(m, {}).get(s)))
     lines += [""] + _method_table(
@@ -383,12 +440,34 @@ def markdown_table(rows: list[dict[str, Any]]) -> str:
     lines += [""] + _method_table(
         "Cost per run: wall time [min] (start-up and final evaluation included) and updates/s, mean over runs.",
         methods, scenarios, lambda m, s: _cost(cell.get((m, s))))
-    compared = list(dict.fromkeys(r["method"] for r in rows if r["vs_csirl"] is not None))
-    if compared:
-        lines += [""] + _method_table(
-            "Difference from csirl (expert-normalised; Welch's t over seeds; **bold**: beyond seed noise, two-sided 5 %).",
-            compared, scenarios, lambda m, s: _difference(cell.get((m, s))))
-    return "\n".join(lines)
+    return lines + _comparison_table(rows, scenarios, cell, "expert-normalised", "+.3f")
+
+
+def robotics_tables(rows: list[dict[str, Any]]) -> list[str]:
+    """The robotics tasks' tables: test return (the paper's metric there), success / progress, cost,
+    difference from ``csirl`` in return (no lines without a robotics row)."""
+    scenarios, methods, cell = _columns(rows, ROBOTICS_ORDER)
+    if not scenarios:
+        return []
+    lines = _method_table(
+        "Test return on the robotics tasks, mean ± std over seeds (the paper's metric there; its Figure 7 gives "
+        f"curves for {', '.join(PAPER_ROBOTICS_METHODS)}, no numbers: on Relocate only CSIRL's return is positive).",
+        methods, scenarios, lambda m, s: _score(cell.get((m, s)), None, "return", ".4g"))
+    lines += [""] + _method_table(
+        "Success rate (AntMaze: goal reached; Relocate: ball at the target) / progress (the accomplish rate's "
+        "analogue, docs/ROBOTICS.md), mean over seeds.",
+        methods, scenarios, lambda m, s: _outcomes(cell.get((m, s)), "accomplish_rate"))
+    lines += [""] + _method_table(
+        "Cost per run: wall time [min] (start-up and final evaluation included) and updates/s, mean over runs.",
+        methods, scenarios, lambda m, s: _cost(cell.get((m, s))))
+    return lines + _comparison_table(rows, scenarios, cell, "test return", "+.4g")
+
+
+def markdown_table(rows: list[dict[str, Any]]) -> str:
+    """Method rows x scenario columns: the driving scenarios' tables (:func:`driving_tables`), then the
+    robotics tasks' (:func:`robotics_tables`)."""
+    driving, robotics = driving_tables(rows), robotics_tables(rows)
+    return "\n".join(driving + ([""] if driving and robotics else []) + robotics)
 
 
 def write_csv(rows: list[dict[str, Any]], path: str) -> str:
@@ -399,37 +478,43 @@ def write_csv(rows: list[dict[str, Any]], path: str) -> str:
     return path
 
 
-def eval_curve(run_dir: str) -> tuple[list[float], list[float]]:
-    """(frames, eval accomplish rate) of a run's ``metrics.jsonl`` (empty for a reference row)."""
+def eval_curve(run_dir: str, key: str = "eval_accomplish_rate") -> tuple[list[float], list[float]]:
+    """(frames, ``key``) of a run's ``metrics.jsonl``, the evaluation accomplish rate by default (empty for a
+    reference row)."""
     path = os.path.join(run_dir, "metrics.jsonl")
-    frames, rates = [], []
+    frames, values = [], []
     if os.path.isfile(path):
         with open(path) as f:
             for line in f:
                 row = json.loads(line) if line.strip() else {}
-                if row.get("eval_accomplish_rate") is not None:
+                if row.get(key) is not None:
                     frames.append(float(row["frames"]))
-                    rates.append(float(row["eval_accomplish_rate"]))
-    return frames, rates
+                    values.append(float(row[key]))
+    return frames, values
 
 
 def learning_curve_figures(runs: list[dict[str, Any]], out_dir: str) -> list[str]:
     """One PNG per scenario: every trained method's evaluation curve (mean ± std over seeds), the
-    reference rows as lines."""
+    reference rows as lines; the accomplish rate on the driving scenarios, the return on the robotics tasks."""
     from torchrl_csirl.visualization import plot_method_curves
 
     paths = []
-    for scenario in [s for s in SCENARIO_ORDER if any(r["scenario"] == s for r in runs)]:
+    for scenario in [s for s in (*SCENARIO_ORDER, *ROBOTICS_ORDER) if any(r["scenario"] == s for r in runs)]:
+        robotics = is_robotics(scenario)
+        summary_key, curve_key = ("return", "eval_env_return") if robotics else ("accomplish_rate", "eval_accomplish_rate")
         curves: dict[str, list] = defaultdict(list)
         references: dict[str, list[float]] = defaultdict(list)
         for run in (r for r in runs if r["scenario"] == scenario):
             if run["method"] in REFERENCE_METHODS:
-                references[run["method"]].append(float(run["accomplish_rate"]))
+                if run.get(summary_key) is not None:
+                    references[run["method"]].append(float(run[summary_key]))
             else:
-                curves[run["method"]].append(eval_curve(run["run_dir"]))
+                curves[run["method"]].append(eval_curve(run["run_dir"], curve_key))
+        label = "evaluation return" if robotics else "evaluation accomplish rate (raw)"
         path = plot_method_curves(curves, os.path.join(out_dir, f"curves_{scenario}.png"),
                                   references={m: sum(v) / len(v) for m, v in references.items()},
-                                  title=f"{scenario}: evaluation accomplish rate (raw)")
+                                  title=f"{scenario}: {label}",
+                                  ylabel="test return" if robotics else "test accomplish rate")
         paths.append(os.fspath(path))
     return paths
 

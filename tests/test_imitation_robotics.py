@@ -2,6 +2,7 @@
 budget, the expert and SAC rows' task-specific parts) and its configuration errors."""
 from __future__ import annotations
 
+import csv
 import json
 import os
 import sys
@@ -12,6 +13,7 @@ import torch
 RECIPES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "recipes")
 sys.path.insert(0, RECIPES)
 
+import benchmark  # noqa: E402
 import imitation_robotics  # noqa: E402
 import imitation_utils  # noqa: E402
 from common.config import ConfigError  # noqa: E402
@@ -70,3 +72,41 @@ def test_configuration_errors():
         imitation_robotics.load_config(["method=bc", "model.ego_relative_features=true"])
     with pytest.raises(ConfigError, match="method=csirl: CSIRL is trained by recipes/csirl_robotics.py"):
         imitation_robotics.load_config(["method=csirl"])
+
+
+def test_benchmark_sweeps_the_robotics_tasks_with_their_recipes_and_reports_the_return(tmp_path):
+    out = str(tmp_path / "bench")
+    todo, _ = benchmark.plan_cells(["csirl", "csirl-bc", "sqil"], ["relocate", "merge"], [0], out,
+                                   ["csirl_robotics:csirl.delta=3", "csirl_highway:csirl.delta=2"])
+    recipes = {c.name: (os.path.basename(c.command[1]), [a for a in c.command if a.startswith("csirl.")]) for c in todo}
+    assert recipes == {
+        "relocate-csirl-s0": ("csirl_robotics.py", ["csirl.delta=3"]),
+        "relocate-csirl-bc-s0": ("csirl_robotics.py", ["csirl.delta=3", "csirl.actor_bc_coef=10"]),
+        "relocate-sqil-s0": ("imitation_robotics.py", []),
+        "merge-csirl-s0": ("csirl_highway.py", ["csirl.delta=2"]),
+        "merge-csirl-bc-s0": ("csirl_highway.py", ["csirl.delta=2", "csirl.actor_bc_coef=10"]),
+        "merge-sqil-s0": ("imitation_highway.py", []),
+    }
+    # one real cell: BC on Relocate through Ray, on the tiny budget
+    args = ["--methods", "bc", "--scenarios", "relocate", "--seeds", "0", "--output-dir", out, "--cpus-per-trial", "1",
+            *TINY, "logger.backend=csv"]
+    assert benchmark.main(args) == 0
+    with open(os.path.join(out, "relocate-bc-s0", "summary.json")) as f:
+        bc_return = json.load(f)["return"]
+    # a finished CSIRL cell beside it (as the sweep leaves one), to compare returns against
+    csirl_dir = tmp_path / "bench" / "relocate-csirl-s0"
+    csirl_dir.mkdir()
+    (csirl_dir / "summary.json").write_text(json.dumps({
+        "scenario": "relocate", "method": "csirl", "seed": 0, "return": bc_return + 1000.0, "success_rate": 0.5,
+        "accomplish_rate": 0.55, "crash_rate": 0.0, "normalized_accomplish_rate": 0.6, "total_wall_s": 600.0}))
+    assert benchmark.main(["report", out]) == 0
+    with open(os.path.join(out, "report", "table.csv")) as f:
+        rows = {r["method"]: r for r in csv.DictReader(f)}
+    assert float(rows["bc"]["return_mean"]) == pytest.approx(bc_return) and rows["bc"]["paper"] == ""
+    assert float(rows["csirl"]["return_mean"]) == pytest.approx(bc_return + 1000.0)
+    with open(os.path.join(out, "report", "table.md")) as f:
+        table = f.read()
+    assert table.startswith("Test return on the robotics tasks") and "| method | relocate |" in table
+    assert "Expert-normalised" not in table and "| csirl | 0.50 / 0.55 |" in table  # success / progress
+    with open(os.path.join(out, "report", "curves_relocate.png"), "rb") as f:
+        assert f.read(8) == b"\x89PNG\r\n\x1a\n"
