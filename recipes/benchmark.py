@@ -443,6 +443,11 @@ def driving_tables(rows: list[dict[str, Any]]) -> list[str]:
     return lines + _comparison_table(rows, scenarios, cell, "expert-normalised", "+.3f")
 
 
+def _return_format(row: dict[str, Any] | None) -> str:
+    """Whole numbers for Relocate-sized returns (thousands), two decimals for AntMaze's goal indicator."""
+    return ".0f" if row is not None and row["return_mean"] is not None and abs(row["return_mean"]) >= 100 else ".2f"
+
+
 def robotics_tables(rows: list[dict[str, Any]]) -> list[str]:
     """The robotics tasks' tables: test return (the paper's metric there), success / progress, cost,
     difference from ``csirl`` in return (no lines without a robotics row)."""
@@ -452,7 +457,7 @@ def robotics_tables(rows: list[dict[str, Any]]) -> list[str]:
     lines = _method_table(
         "Test return on the robotics tasks, mean ± std over seeds (the paper's metric there; its Figure 7 gives "
         f"curves for {', '.join(PAPER_ROBOTICS_METHODS)}, no numbers: on Relocate only CSIRL's return is positive).",
-        methods, scenarios, lambda m, s: _score(cell.get((m, s)), None, "return", ".4g"))
+        methods, scenarios, lambda m, s: _score(cell.get((m, s)), None, "return", _return_format(cell.get((m, s)))))
     lines += [""] + _method_table(
         "Success rate (AntMaze: goal reached; Relocate: ball at the target) / progress (the accomplish rate's "
         "analogue, docs/ROBOTICS.md), mean over seeds.",
@@ -460,7 +465,7 @@ def robotics_tables(rows: list[dict[str, Any]]) -> list[str]:
     lines += [""] + _method_table(
         "Cost per run: wall time [min] (start-up and final evaluation included) and updates/s, mean over runs.",
         methods, scenarios, lambda m, s: _cost(cell.get((m, s))))
-    return lines + _comparison_table(rows, scenarios, cell, "test return", "+.4g")
+    return lines + _comparison_table(rows, scenarios, cell, "test return", "+.1f")
 
 
 def markdown_table(rows: list[dict[str, Any]]) -> str:
@@ -514,7 +519,8 @@ def learning_curve_figures(runs: list[dict[str, Any]], out_dir: str) -> list[str
         path = plot_method_curves(curves, os.path.join(out_dir, f"curves_{scenario}.png"),
                                   references={m: sum(v) / len(v) for m, v in references.items()},
                                   title=f"{scenario}: {label}",
-                                  ylabel="test return" if robotics else "test accomplish rate")
+                                  ylabel="evaluation return" if robotics else "test accomplish rate",
+                                  rate=not robotics)
         paths.append(os.fspath(path))
     return paths
 

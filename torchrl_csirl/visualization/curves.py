@@ -84,9 +84,11 @@ def plot_learning_curve(
     return save_png(fig, path)
 
 
-def _rate_axes(ax, ylabel: str, legend_loc: str, fontsize: int) -> None:
-    """A rate in [0, 1] against environment frames: limits, labels, grid, legend."""
-    ax.set_ylim(-0.02, 1.05)
+def _rate_axes(ax, ylabel: str, legend_loc: str, fontsize: int, rate: bool = True) -> None:
+    """A rate in [0, 1] (or, ``rate=False``, any value: limits from the data) against environment frames:
+    limits, labels, grid, legend."""
+    if rate:
+        ax.set_ylim(-0.02, 1.05)
     ax.set_ylabel(ylabel)
     ax.set_xlabel("environment frames")
     ax.xaxis.set_major_formatter(EngFormatter(sep=""))
@@ -119,8 +121,9 @@ def plot_method_curves(
     references: Mapping[str, float] | None = None,
     title: str | None = None,
     ylabel: str = "test accomplish rate",
+    rate: bool = True,
 ) -> Path:
-    """Learning curves of several methods (the paper's Figure 6): mean +- std over seeds per method.
+    """Learning curves of several methods (the paper's Figures 6 and 7): mean +- std over seeds per method.
 
     Each method's runs are evaluated on the same schedule; a method's curve is drawn at the
     frames all of its runs reached (the shortest run), its band is the standard deviation over
@@ -134,6 +137,7 @@ def plot_method_curves(
         references: method -> a constant rate (e.g. the expert's and random actions').
         title (str, optional): figure title.
         ylabel (str): the y axis label.
+        rate (bool): the values are rates, drawn on [0, 1]; ``False`` (e.g. returns): the axis follows the data.
 
     Returns:
         Path: ``path`` (a 700 x 450 px PNG).
@@ -169,7 +173,7 @@ def plot_method_curves(
     if not (curves_drawn or references):
         empty_message(ax, "no finished run")
     else:
-        _rate_axes(ax, ylabel, legend_loc="best", fontsize=8)
+        _rate_axes(ax, ylabel, legend_loc="best", fontsize=8, rate=rate)
         if not curves_drawn:  # reference lines only: no frame axis to show
             ax.set_xticks([])
             ax.set_xlabel("no evaluation curve recorded")
