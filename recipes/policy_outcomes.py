@@ -7,7 +7,9 @@ Rolls out the saved deterministic policy on the recipe's test episodes (seeds
 episodes, the accomplish rate, the outcomes (success, crash, off-road, time-out), the ego's mean
 and largest speed, the speed and the step at which crashed episodes ended, and the mean
 accomplish rate of the crashed and of the off-road episodes (an accomplish rate earned by driving
-far and then crashing is not expert-like). On merge the episodes are also split by the traffic ahead at reset:
+far and then crashing is not expert-like), and where the off-road episodes left the road: the lane
+they were last on, the ego's position and its lateral offset from that lane's centre line (the
+summary: the mean absolute offset; a lane is half its width on either side of that line). On merge the episodes are also split by the traffic ahead at reset:
 two main-road vehicles ahead of the ego slow to 20 m/s; when they share a lane the other one is
 **free**, when they do not both lanes are **blocked** and finishing means squeezing past them (the
 expert nudges, docs/EXPERTS.md). The last line is JSON.
@@ -59,8 +61,19 @@ def ego_speeds(observations: torch.Tensor, spec: ScenarioSpec) -> torch.Tensor:
     return torch.stack(speeds, -1).norm(dim=-1)
 
 
+def road_position(env: EnvBase) -> dict[str, object]:
+    """Where the ego is on the road: ``lane`` (highway-env's lane index, as text), ``position`` [m] and
+    ``lateral`` [m], its offset from that lane's centre line (off the road beyond half the lane width)."""
+    vehicle = gym_env_of(env).unwrapped.vehicle
+    lane = vehicle.road.network.get_lane(vehicle.lane_index)
+    _, lateral = lane.local_coordinates(vehicle.position)
+    return {"lane": "/".join(str(part) for part in vehicle.lane_index), "position": [round(float(v), 2) for v in vehicle.position],
+            "lateral": float(lateral), "half_width": float(lane.width_at(0)) / 2}
+
+
 def classify_episodes(policy, scenario: str, episodes: int, seed: int) -> list[dict]:
-    """One record per test episode: ``group``, ``outcome``, ``accomplish_rate``, ``steps``, speeds."""
+    """One record per test episode: ``group``, ``outcome``, ``accomplish_rate``, ``steps``, speeds; an off-road
+    one also its :func:`road_position` at the end (``offroad_at``)."""
     spec = SCENARIOS[scenario]
     env = make_env(scenario)
     records = []
@@ -77,6 +90,8 @@ def classify_episodes(policy, scenario: str, episodes: int, seed: int) -> list[d
                                 "accomplish_rate": float(accomplish_rate_from_rollout(rollout)),
                                 "steps": rollout.shape[-1], "mean_speed": float(speeds.mean()),
                                 "max_speed": float(speeds.max()), "final_speed": float(speeds[-1])})
+                if records[-1]["outcome"] == "offroad":
+                    records[-1]["offroad_at"] = road_position(env)
     finally:
         env.close()
     return records
@@ -101,6 +116,8 @@ def summarize_group(group: list[dict]) -> dict[str, object]:
         "crash_step": _mean([float(r["steps"]) for r in crashed]),
         "crash_accomplish_rate": _mean([r["accomplish_rate"] for r in crashed]),
         "offroad_accomplish_rate": _mean([r["accomplish_rate"] for r in offroad]),
+        "offroad_lanes": dict(Counter(r["offroad_at"]["lane"] for r in offroad).most_common()),
+        "offroad_lateral": _mean([abs(r["offroad_at"]["lateral"]) for r in offroad]),
     }
 
 
@@ -118,16 +135,21 @@ def _cell(value: object, fmt: str) -> str:
     return "-" if value is None else format(value, fmt)
 
 
+def _lanes(counts: dict[str, int]) -> str:
+    return " ".join(f"{lane} ({n})" for lane, n in counts.items()) or "-"
+
+
 def print_table(stats: dict[str, dict]) -> None:
     """The groups as a Markdown table on stderr."""
     print("| episodes | n | accomplish (raw) | success | crash | off-road | time-out | mean / max speed [m/s] "
-          "| at a crash: speed, step, accomplish | off-road: accomplish |", file=sys.stderr)
+          "| at a crash: speed, step, accomplish | off-road: accomplish, abs. lateral offset [m], lanes |", file=sys.stderr)
     print("|---|---|---|---|---|---|---|---|---|---|", file=sys.stderr)
     for name, s in stats.items():
         crash = f"{_cell(s['crash_speed'], '.1f')}, {_cell(s['crash_step'], '.0f')}, {_cell(s['crash_accomplish_rate'], '.2f')}"
         print(f"| {name} | {s['episodes']} | {_cell(s['accomplish_rate'], '.3f')} | {s['success']} | {s['crash']} "
               f"| {s['offroad']} | {s['timeout']} | {_cell(s['mean_speed'], '.1f')} / {_cell(s['max_speed'], '.1f')} "
-              f"| {crash} | {_cell(s['offroad_accomplish_rate'], '.2f')} |", file=sys.stderr)
+              f"| {crash} | {_cell(s['offroad_accomplish_rate'], '.2f')}, {_cell(s['offroad_lateral'], '.1f')}, "
+              f"{_lanes(s['offroad_lanes'])} |", file=sys.stderr)
 
 
 def main(argv: list[str] | None = None) -> dict[str, dict]:

@@ -489,6 +489,8 @@ def test_meta_gradient_balance_of_a_trained_run(full_run):
 def test_policy_outcomes_reports_outcomes_and_speeds_and_splits_merge_by_the_traffic_ahead(tmp_path, capsys):
     import policy_outcomes
 
+    from torchrl_csirl.envs import make_env
+
     from torchrl_csirl.envs import SCENARIOS
     from torchrl_csirl.modules import make_actor, save_policy
 
@@ -508,6 +510,15 @@ def test_policy_outcomes_reports_outcomes_and_speeds_and_splits_merge_by_the_tra
     assert 15.0 < stats["all"]["mean_speed"] <= stats["all"]["max_speed"] < 60.0
     roundabout = policy_outcomes.main([saved("roundabout"), "--episodes", "2"])
     assert set(roundabout) == {"all"} and roundabout["all"]["episodes"] == 2
+    assert sum(roundabout["all"]["offroad_lanes"].values()) == roundabout["all"]["offroad"]
+    # the ego's place on the road: its lane and the offset from that lane's centre line
+    env = make_env("roundabout", seed=0)
+    try:
+        env.reset()
+        at = policy_outcomes.road_position(env)
+    finally:
+        env.close()
+    assert at["lane"].count("/") == 2 and abs(at["lateral"]) <= at["half_width"] == 2.0
     other = save_policy(make_actor(35, 2), tmp_path / "other.pt", obs_dim=35, action_dim=2, scenario="relocate", frames=0)
     with pytest.raises(SystemExit):
         policy_outcomes.main([str(other)])
