@@ -103,6 +103,8 @@ def check_robotics_config(cfg: DictConfig, overrides: list[str] | None = None) -
     resolve_task(cfg, overrides)
     if cfg.model.ego_relative_features:
         raise ConfigError("model.ego_relative_features=true: the other-vehicle offsets exist in driving scenes only")
+    if cfg.model.lane_features:
+        raise ConfigError("model.lane_features=true: lanes exist in driving scenes only")
     return cfg
 
 

@@ -45,7 +45,7 @@ from torchrl_csirl.data import DemonstrationMixer
 from torchrl_csirl.envs import FAILURE_KEYS, SCENARIOS, ScenarioSpec, resolve_scenario  # noqa: F401 - SCENARIOS: used by tests
 from torchrl_csirl.data import ExpertDemonstrations
 from torchrl_csirl.modules import (
-    EgoRelativeFeatures,
+    make_input_features,
     ExpertCenteredReward,
     expert_reference_states,
     make_actor,
@@ -167,11 +167,12 @@ def make_loss_modules(cfg: DictConfig, spec: ScenarioSpec, device: torch.device 
     """Actor, ensemble SAC loss, target updater, reward network and meta-loss (None for CSIRL-B), on ``device``.
 
     With ``model.ego_relative_features`` every network reads the observation through
-    :class:`~torchrl_csirl.modules.EgoRelativeFeatures` (a fixed map, no parameters). With
+    :class:`~torchrl_csirl.modules.EgoRelativeFeatures` (a fixed map, no parameters), with
+    ``model.lane_features`` (also) through :class:`~torchrl_csirl.modules.LaneFeatures`. With
     ``csirl.reward_reference=expert`` the reward network is wrapped in
     :class:`~torchrl_csirl.modules.ExpertCenteredReward` over 256 states of ``demos``.
     """
-    features = EgoRelativeFeatures.from_scenario(spec) if cfg.model.ego_relative_features else None
+    features = make_input_features(spec, cfg.model.ego_relative_features, cfg.model.lane_features)
     actor = make_actor(spec.obs_dim, spec.action_dim, input_features=features)
     sac = EnsembleSACLoss(
         actor,

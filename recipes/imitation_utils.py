@@ -76,7 +76,7 @@ from common.registry import register_recipe
 from common.run import ExpertDataError, expert_accomplish_rate, resolve_device
 from torchrl_csirl.data import ExpertDemonstrations
 from torchrl_csirl.envs import ScenarioSpec, TaskSpec, resolve_scenario
-from torchrl_csirl.modules import EgoRelativeFeatures, make_actor, make_qvalue
+from torchrl_csirl.modules import make_actor, make_input_features, make_qvalue
 from torchrl_csirl.objectives._imitation import SACHyperparameters, make_sac_learner
 from torchrl_csirl.trainers import BCUpdate, SACUpdate, evaluate_policy
 from torchrl_csirl.trainers.imitation import (
@@ -225,9 +225,9 @@ def load_demonstrations(cfg: DictConfig, spec: TaskSpec) -> ExpertDemonstrations
                               f"(method={cfg.method} needs these demonstrations)") from None
 
 
-def input_features(cfg: DictConfig, spec: TaskSpec) -> EgoRelativeFeatures | None:
-    """The ego-relative input map of every network (``model.ego_relative_features``), or None."""
-    return EgoRelativeFeatures.from_scenario(spec) if cfg.model.ego_relative_features else None
+def input_features(cfg: DictConfig, spec: TaskSpec) -> torch.nn.Module | None:
+    """The input map of every network (``model.ego_relative_features``, ``model.lane_features``), or None."""
+    return make_input_features(spec, cfg.model.ego_relative_features, cfg.model.lane_features)
 
 
 # ---------------------------------------------------------------------------------------- methods

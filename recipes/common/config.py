@@ -152,6 +152,8 @@ class UpdateRatioConfig:
 @dataclass
 class ModelConfig:
     ego_relative_features: bool = option(True, help="networks also read the other vehicles' offsets from the ego")
+    lane_features: bool = option(False, help="networks also read the ego's offset from the nearest lane centre line "
+                                             "(and its heading relative to that lane; docs/RECIPE.md)")
 
 
 @dataclass

@@ -10,7 +10,8 @@ from torchrl_csirl.modules.actor_critic import (
 )
 from torchrl_csirl.modules.ensemble import FusedCriticEnsemble, fused_critic_ensemble
 from torchrl_csirl.modules.export import load_policy, save_policy
-from torchrl_csirl.modules.features import EgoRelativeFeatures
+from torchrl_csirl.modules.features import EgoRelativeFeatures, FeatureChain, make_input_features
+from torchrl_csirl.modules.lane_features import LaneFeatures
 from torchrl_csirl.modules.reward import ExpertCenteredReward, expert_reference_states, make_reward_network
 
 __all__ = [
@@ -18,12 +19,15 @@ __all__ = [
     "ConcatMLP",
     "EgoRelativeFeatures",
     "ExpertCenteredReward",
+    "FeatureChain",
     "FusedCriticEnsemble",
+    "LaneFeatures",
     "MaskedReLU",
     "fused_critic_ensemble",
     "load_policy",
     "expert_reference_states",
     "make_actor",
+    "make_input_features",
     "make_qvalue",
     "make_reward_network",
     "save_policy",

@@ -8,7 +8,8 @@ import torch
 from torchrl.modules import ProbabilisticActor
 
 from torchrl_csirl.modules.actor_critic import make_actor
-from torchrl_csirl.modules.features import EgoRelativeFeatures
+from torchrl_csirl.modules.features import EgoRelativeFeatures, FeatureChain, feature_map_from_config
+from torchrl_csirl.modules.lane_features import LaneFeatures
 
 __all__ = ["load_policy", "save_policy"]
 
@@ -20,8 +21,9 @@ def save_policy(actor: ProbabilisticActor, path: str | os.PathLike, *, obs_dim: 
                 **metadata: Any) -> str:
     """Writes the actor's weights and what is needed to rebuild it (``metadata``: e.g. the scenario).
 
-    An :class:`~torchrl_csirl.modules.EgoRelativeFeatures` input map inside the actor is saved
-    with it (its constructor arguments) and rebuilt by :func:`load_policy`.
+    An input map inside the actor (:class:`~torchrl_csirl.modules.EgoRelativeFeatures`,
+    :class:`~torchrl_csirl.modules.LaneFeatures` or a chain of both) is saved with it (its
+    constructor arguments) and rebuilt by :func:`load_policy`.
 
     Examples:
         >>> import tempfile, os
@@ -47,8 +49,8 @@ def save_policy(actor: ProbabilisticActor, path: str | os.PathLike, *, obs_dim: 
 
 
 def _input_features_config(actor: ProbabilisticActor) -> dict[str, Any] | None:
-    found = [m for m in actor.modules() if isinstance(m, EgoRelativeFeatures)]
-    return found[0].config() if found else None
+    found = [m for m in actor.modules() if isinstance(m, (FeatureChain, EgoRelativeFeatures, LaneFeatures))]
+    return found[0].config() if found else None  # the outermost map (a chain comes before its members)
 
 
 def load_policy(path: str | os.PathLike) -> ProbabilisticActor:
@@ -75,7 +77,7 @@ def load_policy(path: str | os.PathLike) -> ProbabilisticActor:
         raise ValueError(f"{path!r} is not a torchrl-csirl policy file (format {POLICY_FORMAT}).")
     features = payload.get("input_features")
     actor = make_actor(payload["obs_dim"], payload["action_dim"],
-                       input_features=EgoRelativeFeatures(**features) if features else None)
+                       input_features=feature_map_from_config(features) if features else None)
     actor.load_state_dict(payload["state_dict"])
     actor.metadata = {"obs_dim": int(payload["obs_dim"]), "action_dim": int(payload["action_dim"]),
                       **payload["metadata"]}

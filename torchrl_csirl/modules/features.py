@@ -16,7 +16,7 @@ from typing import Any
 import torch
 from torch import nn
 
-__all__ = ["EgoRelativeFeatures", "RELATIVE_REFERENCE"]
+__all__ = ["EgoRelativeFeatures", "FeatureChain", "RELATIVE_REFERENCE", "feature_map_from_config", "make_input_features"]
 
 #: metres (positions) and metres per second (velocities) that one unit of a relative feature
 #: represents, before clipping to ``[-clip, clip]``.
@@ -142,3 +142,61 @@ class EgoRelativeFeatures(nn.Module):
 
     def extra_repr(self) -> str:
         return f"vehicles={self.vehicles_count}, relative={self.relative_indices}, gains={list(self.gains)}"
+
+
+class FeatureChain(nn.Sequential):
+    """Parameter-free input maps applied one after the other (each appends to its input).
+
+    Examples:
+        >>> from torchrl_csirl.envs import SCENARIOS
+        >>> chain = make_input_features(SCENARIOS["roundabout"], ego_relative=True, lane=True)
+        >>> type(chain).__name__, chain.in_features, chain.out_features
+        ('FeatureChain', 35, 54)
+    """
+
+    @property
+    def in_features(self) -> int:
+        return int(self[0].in_features)
+
+    @property
+    def out_features(self) -> int:
+        return int(self[-1].out_features)
+
+    def config(self) -> dict[str, Any]:
+        return {"kind": "chain", "maps": [m.config() for m in self]}
+
+
+def make_input_features(spec: Any, ego_relative: bool = True, lane: bool = False) -> nn.Module | None:
+    """The networks' input map for a driving scenario: :class:`EgoRelativeFeatures` (``ego_relative``),
+    then :class:`~torchrl_csirl.modules.LaneFeatures` (``lane``); ``None`` for neither.
+
+    Examples:
+        >>> from torchrl_csirl.envs import SCENARIOS
+        >>> make_input_features(SCENARIOS["merge"], ego_relative=False) is None
+        True
+        >>> make_input_features(SCENARIOS["merge"], ego_relative=False, lane=True).out_features  # + lateral offset
+        26
+    """
+    from torchrl_csirl.modules.lane_features import LaneFeatures
+
+    maps: list[nn.Module] = []
+    if ego_relative:
+        maps.append(EgoRelativeFeatures.from_scenario(spec))
+    if lane:
+        maps.append(LaneFeatures.from_scenario(spec, in_features=maps[-1].out_features if maps else None))
+    if not maps:
+        return None
+    return maps[0] if len(maps) == 1 else FeatureChain(*maps)
+
+
+def feature_map_from_config(config: dict[str, Any]) -> nn.Module:
+    """Rebuilds an input map from its ``config()`` (a saved policy's; a config without ``kind`` is an
+    :class:`EgoRelativeFeatures`', as saved before lane features existed)."""
+    from torchrl_csirl.modules.lane_features import LaneFeatures
+
+    kind = config.get("kind", "ego")
+    if kind == "chain":
+        return FeatureChain(*(feature_map_from_config(c) for c in config["maps"]))
+    if kind == "lane":
+        return LaneFeatures.from_config(config)
+    return EgoRelativeFeatures(**{k: v for k, v in config.items() if k != "kind"})
