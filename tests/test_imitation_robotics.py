@@ -70,6 +70,8 @@ def test_configuration_errors():
         imitation_robotics.load_config(["method=bc", "env.task=merge"])
     with pytest.raises(ConfigError, match="model.ego_relative_features=true"):
         imitation_robotics.load_config(["method=bc", "model.ego_relative_features=true"])
+    with pytest.raises(ConfigError, match="model.lane_features=true: lanes exist in driving scenes only"):
+        imitation_robotics.load_config(["method=bc", "model.lane_features=true"])
     with pytest.raises(ConfigError, match="method=csirl: CSIRL is trained by recipes/csirl_robotics.py"):
         imitation_robotics.load_config(["method=csirl"])
 
