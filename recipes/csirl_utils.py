@@ -23,7 +23,14 @@ from torchrl.data import TensorDictReplayBuffer
 from torchrl.objectives import BCLoss, SoftUpdate
 
 from common import config as config_lib
-from common.builders import Run, assemble_trainer, check_collector, load_experts, make_online_buffer
+from common.builders import (
+    Run,
+    assemble_trainer,
+    check_collector,
+    load_experts,
+    make_online_buffer,
+    model_input_features,
+)
 from common.config import (
     DEVICES,
     CheckpointConfig,
@@ -45,7 +52,6 @@ from torchrl_csirl.data import DemonstrationMixer
 from torchrl_csirl.envs import FAILURE_KEYS, SCENARIOS, ScenarioSpec, resolve_scenario  # noqa: F401 - SCENARIOS: used by tests
 from torchrl_csirl.data import ExpertDemonstrations
 from torchrl_csirl.modules import (
-    make_input_features,
     ExpertCenteredReward,
     expert_reference_states,
     make_actor,
@@ -172,7 +178,7 @@ def make_loss_modules(cfg: DictConfig, spec: ScenarioSpec, device: torch.device 
     ``csirl.reward_reference=expert`` the reward network is wrapped in
     :class:`~torchrl_csirl.modules.ExpertCenteredReward` over 256 states of ``demos``.
     """
-    features = make_input_features(spec, cfg.model.ego_relative_features, cfg.model.lane_features)
+    features = model_input_features(cfg.model, spec)
     actor = make_actor(spec.obs_dim, spec.action_dim, input_features=features)
     sac = EnsembleSACLoss(
         actor,

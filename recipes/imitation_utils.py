@@ -57,6 +57,7 @@ from common.builders import (
     make_logger,
     make_online_buffer,
     evaluation_summary,
+    model_input_features,
 )
 from common.config import (
     DEVICES,
@@ -76,7 +77,7 @@ from common.registry import register_recipe
 from common.run import ExpertDataError, expert_accomplish_rate, resolve_device
 from torchrl_csirl.data import ExpertDemonstrations
 from torchrl_csirl.envs import ScenarioSpec, TaskSpec, resolve_scenario
-from torchrl_csirl.modules import make_actor, make_input_features, make_qvalue
+from torchrl_csirl.modules import make_actor, make_qvalue
 from torchrl_csirl.objectives._imitation import SACHyperparameters, make_sac_learner
 from torchrl_csirl.trainers import BCUpdate, SACUpdate, evaluate_policy
 from torchrl_csirl.trainers.imitation import (
@@ -225,11 +226,6 @@ def load_demonstrations(cfg: DictConfig, spec: TaskSpec) -> ExpertDemonstrations
                               f"(method={cfg.method} needs these demonstrations)") from None
 
 
-def input_features(cfg: DictConfig, spec: TaskSpec) -> torch.nn.Module | None:
-    """The input map of every network (``model.ego_relative_features``, ``model.lane_features``), or None."""
-    return make_input_features(spec, cfg.model.ego_relative_features, cfg.model.lane_features)
-
-
 # ---------------------------------------------------------------------------------------- methods
 def sac_hyperparameters(section: DictConfig) -> SACHyperparameters:
     """The SAC learner's settings of the ``sac`` section (its ``reward_scale`` aside)."""
@@ -254,7 +250,7 @@ def true_reward_transforms(cfg: DictConfig, spec: TaskSpec, device: torch.device
 def make_sac(cfg: DictConfig, spec: TaskSpec, device: torch.device) -> ImitationMethod:
     """SAC on the task's true reward (:func:`true_reward_transforms`; the paper's "SAC (true distance reward)")."""
     hp = sac_hyperparameters(cfg.sac)
-    features = input_features(cfg, spec)
+    features = model_input_features(cfg.model, spec)
     actor = make_actor(spec.obs_dim, spec.action_dim, input_features=features)
     loss = make_sac_learner(actor, make_qvalue(spec.obs_dim, spec.action_dim, input_features=features), hp).to(device)
     optimizer = torch.optim.Adam([p for p in loss.parameters() if p.requires_grad], lr=hp.lr)
@@ -265,7 +261,7 @@ def make_sac(cfg: DictConfig, spec: TaskSpec, device: torch.device) -> Imitation
 
 def make_bc(cfg: DictConfig, spec: TaskSpec, device: torch.device) -> ImitationMethod:
     """Behavioural cloning (TorchRL's ``BCLoss``) on expert batches of ``expert.batch_size``."""
-    actor = make_actor(spec.obs_dim, spec.action_dim, input_features=input_features(cfg, spec)).to(device)
+    actor = make_actor(spec.obs_dim, spec.action_dim, input_features=model_input_features(cfg.model, spec)).to(device)
     loss = BCLoss(actor, loss_function=cfg.bc.loss_function)
     optimizer = torch.optim.Adam(actor.parameters(), lr=cfg.bc.lr)
 
@@ -278,7 +274,7 @@ def make_bc(cfg: DictConfig, spec: TaskSpec, device: torch.device) -> ImitationM
 def make_loss_method(cfg: DictConfig, spec: TaskSpec, device: torch.device) -> ImitationMethod:
     """A loss-based baseline (:func:`~torchrl_csirl.trainers.imitation.make_imitation_method`) with
     the ``<method>`` section as its hyperparameters and CSIRL's actor and critic factory."""
-    features = input_features(cfg, spec)
+    features = model_input_features(cfg.model, spec)
     actor = make_actor(spec.obs_dim, spec.action_dim, input_features=features)
     return make_imitation_method(
         cfg.method, actor, partial(make_qvalue, spec.obs_dim, spec.action_dim, input_features=features),

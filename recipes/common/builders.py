@@ -29,8 +29,9 @@ from torchrl.envs import Compose, EnvBase, Transform
 from common.config import ConfigError
 from common.run import ExpertDataError, default_run_name, make_run_dir, resolve_resume
 from torchrl_csirl.data import ExpertDemonstrations, FilledRowsCheckpointer, import_published, load_expert_demonstrations
-from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, make_serial_env, resolve_scenario  # noqa: F401 (doctests)
+from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, TaskSpec, make_serial_env, resolve_scenario  # noqa: F401 (doctests)
 from torchrl_csirl.envs import make_env as make_scenario_env
+from torchrl_csirl.modules import make_input_features
 from torchrl_csirl.trainers import (
     CheckpointHook,
     CSIRLTrainer,
@@ -57,9 +58,17 @@ __all__ = [
     "resume_run",
     "start_run",
     "evaluation_summary",
+    "model_input_features",
 ]
 
 MAX_ENVS_PER_WORKER = 4
+
+
+# ---------------------------------------------------------------------------------------- models
+def model_input_features(model: DictConfig, spec: TaskSpec) -> nn.Module | None:
+    """The input map every network of a recipe reads the observation through (the ``model`` section:
+    ``ego_relative_features``, ``lane_features``; :func:`~torchrl_csirl.modules.make_input_features`), or None."""
+    return make_input_features(spec, model.ego_relative_features, model.lane_features)
 
 
 # ---------------------------------------------------------------------------------------- data

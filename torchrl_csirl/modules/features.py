@@ -16,6 +16,8 @@ from typing import Any
 import torch
 from torch import nn
 
+from torchrl_csirl.modules.lane_features import LaneFeatures
+
 __all__ = ["EgoRelativeFeatures", "FeatureChain", "RELATIVE_REFERENCE", "feature_map_from_config", "make_input_features"]
 
 #: metres (positions) and metres per second (velocities) that one unit of a relative feature
@@ -177,8 +179,6 @@ def make_input_features(spec: Any, ego_relative: bool = True, lane: bool = False
         >>> make_input_features(SCENARIOS["merge"], ego_relative=False, lane=True).out_features  # + lateral offset
         26
     """
-    from torchrl_csirl.modules.lane_features import LaneFeatures
-
     maps: list[nn.Module] = []
     if ego_relative:
         maps.append(EgoRelativeFeatures.from_scenario(spec))
@@ -192,8 +192,6 @@ def make_input_features(spec: Any, ego_relative: bool = True, lane: bool = False
 def feature_map_from_config(config: dict[str, Any]) -> nn.Module:
     """Rebuilds an input map from its ``config()`` (a saved policy's; a config without ``kind`` is an
     :class:`EgoRelativeFeatures`', as saved before lane features existed)."""
-    from torchrl_csirl.modules.lane_features import LaneFeatures
-
     kind = config.get("kind", "ego")
     if kind == "chain":
         return FeatureChain(*(feature_map_from_config(c) for c in config["maps"]))
