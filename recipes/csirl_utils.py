@@ -82,6 +82,10 @@ class CSIRLConfig:
     lr_inner: float = option(0.01, above=0.0, help="inner SGD step of the meta-gradient")
     meta_scale: float = option(100.0, above=0.0, help="multiplies the meta-objective")
     reward_l1_coef: float = option(1.0, minimum=0.0, help="weight of mean |r_w| in the meta-objective")
+    gradient_balance: str = option(
+        "sum", choices=("sum", "normalized"),
+        help="sum: the gradient of the meta-objective (paper); normalized: its imitation and regulariser parts "
+             "each at unit norm, weighted 1 : reward_l1_coef (balanced_meta_gradient)")
     reward_reference: str = option(
         "none", choices=("none", "expert"),
         help="expert: r_w measured against its mean over 256 expert states (no constant shift can be learned; "
@@ -200,7 +204,8 @@ def make_loss_modules(cfg: DictConfig, spec: ScenarioSpec, device: torch.device 
     meta = None
     if cfg.csirl.intrinsic:
         meta = MetaRewardLoss(sac, reward_network, lr_inner=cfg.csirl.lr_inner, scale=cfg.csirl.meta_scale,
-                              reward_l1_coef=cfg.csirl.reward_l1_coef, joint_sac_update=True)
+                              reward_l1_coef=cfg.csirl.reward_l1_coef,
+                              gradient_balance=cfg.csirl.gradient_balance, joint_sac_update=True)
     return LossModules(actor, sac, target_updater, reward_network, meta)
 
 

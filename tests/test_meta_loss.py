@@ -122,6 +122,42 @@ def test_meta_gradient_split_into_imitation_and_regulariser_parts():
     torch.testing.assert_close(out0["meta_grad_norm_imitation"], out0["meta_grad_norm"])
 
 
+def test_normalized_balance_weighs_the_two_parts_by_the_l1_coefficient():
+    """``gradient_balance="normalized"``: scale * (unit imitation part + coef * unit regulariser part)."""
+    flat = lambda grads: torch.cat([g.flatten() for g in grads])  # noqa: E731
+    _, reward, meta, online, expert, regularizer = _setup(reward_l1_coef=0.5)
+    torch.manual_seed(123)
+    out = meta(online, expert, regularizer)
+    out["loss_meta"].backward()
+    total = flat([p.grad for p in reward.parameters()])
+    reward.zero_grad()
+    l1 = meta.scale * 0.5 * reward(regularizer.select("observation"))["intrinsic_reward"].abs().mean()
+    l1.backward()
+    g_r = flat([p.grad for p in reward.parameters()])
+    g_i = total - g_r
+    reward.zero_grad()
+
+    _, reward_n, meta_n, *_ = _setup(reward_l1_coef=0.5, gradient_balance="normalized")
+    torch.manual_seed(123)
+    out_n = meta_n(online, expert, regularizer)
+    out_n["loss_meta"].backward()
+    balanced = flat([p.grad for p in reward_n.parameters()])
+    expected = meta.scale * (g_i / g_i.norm() + 0.5 * g_r / g_r.norm())
+    torch.testing.assert_close(balanced, expected)
+    torch.testing.assert_close(out_n["loss_meta"], out["loss_meta"])  # the value is still L_meta
+    torch.testing.assert_close(out_n["meta_grad_norm"], balanced.norm())
+    torch.testing.assert_close(out_n["meta_grad_norm_imitation"], out["meta_grad_norm_imitation"])
+
+    # without the regulariser: the imitation part alone, at norm ``scale``
+    _, reward_0, meta_0, *_ = _setup(reward_l1_coef=0.0, gradient_balance="normalized")
+    torch.manual_seed(123)
+    meta_0(online, expert, regularizer)["loss_meta"].backward()
+    alone = flat([p.grad for p in reward_0.parameters()])
+    torch.testing.assert_close(alone.norm(), torch.tensor(meta.scale, dtype=alone.dtype))
+    with pytest.raises(ValueError, match="gradient_balance"):
+        _setup(gradient_balance="mean")
+
+
 def test_meta_gradient_matches_unrolled_reference():
     """Independent re-derivation with explicit per-critic loops (no vmap, no SACLoss)."""
     sac, reward, meta, online, expert, regularizer = _setup(reward_l1_coef=0.0, num_critics=2)

@@ -14,7 +14,9 @@ from torchrl.objectives.common import LossModule
 from torchrl_csirl._compat import sac_alpha, sac_reduced_alpha_loss
 from torchrl_csirl.objectives.ensemble_sac import EnsembleSACLoss
 
-__all__ = ["MetaRewardLoss"]
+__all__ = ["MetaRewardLoss", "balanced_meta_gradient"]
+
+GRADIENT_BALANCES = ("sum", "normalized")
 
 
 def _leaves_like(params: TensorDictBase) -> TensorDictParams:
@@ -70,6 +72,40 @@ def _sgd_lookahead_and_grads(
 def _norm(tensors: list[torch.Tensor]) -> torch.Tensor:
     """Global L2 norm of a list of tensors (detached)."""
     return torch.linalg.vector_norm(torch.stack(torch._foreach_norm([t.detach() for t in tensors])))
+
+
+def balanced_meta_gradient(
+    grads_imitation: list[torch.Tensor],
+    grads_l1: list[torch.Tensor] | None,
+    *,
+    l1_weight: float,
+    scale: float,
+    eps: float = 1e-12,
+) -> list[torch.Tensor]:
+    """``scale * (g_I / |g_I| + l1_weight * g_R / |g_R|)``: the meta-gradient with its two parts normalised.
+
+    ``g_I`` is the imitation part of the meta-gradient (Eq. 14-15), ``g_R`` the regulariser's
+    (``mean |r_w|``), each as a list of per-parameter tensors with one global L2 norm. ``g_I``
+    reaches ``w`` through two inner SGD steps and scales with ``lr_inner**2``; ``g_R`` does not,
+    so in the plain sum their ratio is set by ``lr_inner`` and by how sharp the critics are, not by
+    a choice. Normalised, the direction of the step weighs the two in the ratio ``1 : l1_weight``
+    at every update. A part whose norm is zero (or ``grads_l1=None``) contributes nothing.
+
+    Examples:
+        >>> import torch
+        >>> g = balanced_meta_gradient([torch.tensor([3.0, 4.0])], [torch.tensor([0.0, 200.0])],
+        ...                            l1_weight=0.5, scale=10.0)
+        >>> g[0]  # 10 * ([0.6, 0.8] + 0.5 * [0, 1])
+        tensor([ 6., 13.])
+    """
+    parts = [(grads_imitation, 1.0)]
+    if grads_l1 is not None and l1_weight > 0:
+        parts.append((grads_l1, l1_weight))
+    out = [torch.zeros_like(g) for g in grads_imitation]
+    for grads, weight in parts:
+        factor = scale * weight / (_norm(grads) + eps)
+        torch._foreach_add_(out, torch._foreach_mul(grads, factor))
+    return out
 
 
 class _WithGradients(torch.autograd.Function):
@@ -137,6 +173,13 @@ class MetaRewardLoss(LossModule):
     ``("next", sac_loss.tensor_keys.reward)``, the key the critic loss reads. With
     ``use_matching_reward=False`` only ``r_w`` is used. The entry ``("next", reward)`` of the input batch (if any) is ignored.
 
+    **Balance of the two parts.** With ``gradient_balance="sum"`` (the paper) the reward network
+    receives ``dL_meta/dw``, in which the regulariser's part is typically 10-10^5 times the
+    imitation part (it does not pass through the two inner steps; docs/ALGORITHM.md section 5);
+    with ``"normalized"`` it receives :func:`balanced_meta_gradient` of the two parts, which
+    weighs their directions ``1 : reward_l1_coef`` whatever their sizes. ``"loss_meta"`` keeps the
+    value of ``L_meta`` either way; ``"meta_grad_norm"`` is the norm of what is applied.
+
     Hyper-parameter notes: ``lr_in = 0.01`` (plain SGD) and the reward Adam learning rate
     ``1e-3`` follow the published code; the paper states the two swapped (0.001 / 0.01).
     ``scale = 100`` and the ``|r_w|`` regulariser also come from the code.
@@ -154,6 +197,9 @@ class MetaRewardLoss(LossModule):
             a reparameterised sample. Defaults to ``False``.
         use_matching_reward (bool): add ``("next", matching_reward)`` to ``r_w``.
             Defaults to ``True``.
+        gradient_balance (str): ``"sum"`` (the gradient of ``L_meta``) or ``"normalized"``
+            (each part scaled to unit norm, then ``scale * (g_I + reward_l1_coef * g_R)``).
+            Defaults to ``"sum"``.
         joint_sac_update (bool): also return the ordinary SAC losses of ``sac_loss`` on
             the same batch and local reward (``"loss_qvalue"``, ``"loss_actor"``,
             ``"loss_alpha"``, ``"alpha"``, ``"entropy"``), sharing the critic-target and
@@ -232,6 +278,7 @@ class MetaRewardLoss(LossModule):
         reward_l1_coef: float = 1.0,
         deterministic_expert_action: bool = False,
         use_matching_reward: bool = True,
+        gradient_balance: str = "sum",
         joint_sac_update: bool = False,
     ) -> None:
         if not isinstance(sac_loss, EnsembleSACLoss):
@@ -245,6 +292,8 @@ class MetaRewardLoss(LossModule):
                 "Need lr_inner > 0, scale > 0 and reward_l1_coef >= 0, got "
                 f"{lr_inner}, {scale}, {reward_l1_coef}."
             )
+        if gradient_balance not in GRADIENT_BALANCES:
+            raise ValueError(f"gradient_balance must be one of {GRADIENT_BALANCES}, got {gradient_balance!r}.")
         super().__init__()
         # not registered as a submodule: meta_loss.parameters() are the reward's only.
         self.__dict__["sac_loss"] = sac_loss
@@ -254,6 +303,7 @@ class MetaRewardLoss(LossModule):
         self.reward_l1_coef = float(reward_l1_coef)
         self.deterministic_expert_action = bool(deterministic_expert_action)
         self.use_matching_reward = bool(use_matching_reward)
+        self.gradient_balance = gradient_balance
         self.joint_sac_update = bool(joint_sac_update)
         out_keys = list(getattr(reward_network, "out_keys", []))
         if out_keys and out_keys[0] != self.tensor_keys.intrinsic_reward:
@@ -380,7 +430,9 @@ class MetaRewardLoss(LossModule):
             grads_l1 = _grads_or_zeros(self.scale * self.reward_l1_coef * loss_l1, w_params, retain_graph=True)
         grads = _grads_or_zeros(loss, w_params)
         grads_imitation = grads if grads_l1 is None else torch._foreach_sub(grads, grads_l1)
-        # same value as ``loss``, gradient w.r.t. w exactly ``grads``, nothing else.
+        if self.gradient_balance == "normalized":
+            grads = balanced_meta_gradient(grads_imitation, grads_l1, l1_weight=self.reward_l1_coef, scale=self.scale)
+        # same value as ``loss``, gradient w.r.t. w exactly ``grads`` (balanced or not), nothing else.
         out = {
             "loss_meta": _linear_surrogate(loss, w_params, grads),
             "loss_imitation": loss_imitation.detach(),
