@@ -11,6 +11,8 @@ rolls the actor out in the scenario, applies the recipe's matching reward, and a
 ``--steps`` meta-losses the norm of each part (``MetaRewardLoss``'s ``meta_grad_norm_imitation``
 and ``meta_grad_norm_l1``). Adam normalises the summed gradient, so when the ratio
 ``l1 / imitation`` is large the reward network follows the regulariser alone and ``r_w -> 0``.
+It also reports whether ``r_w`` tells the expert's states from the policy's
+(:func:`reward_separation`: mean ``r_w`` on each, and the rank AUC over all pairs).
 
 The last line printed is a JSON object.
 """
@@ -38,6 +40,29 @@ def load_trained(modules, checkpoint: str) -> None:
     state = torch.load(os.path.join(checkpoint, "state.pt"), weights_only=False)
     modules.sac.load_state_dict(state["states"]["loss"])
     modules.reward_network.load_state_dict(state["states"]["reward_network"])
+
+
+def reward_separation(reward_network, expert_obs: torch.Tensor, policy_obs: torch.Tensor) -> dict[str, float]:
+    """Mean ``r_w`` on expert and on policy states, and how well ``r_w`` ranks the expert's above the policy's.
+
+    ``r_w_auc`` is the probability that a random expert state gets a higher ``r_w`` than a random
+    policy state (ties count a half): 0.5 for a reward that does not tell them apart, 1.0 for one
+    that rates every expert state above every policy state.
+
+    Examples:
+        >>> from tensordict.nn import TensorDictModule
+        >>> net = TensorDictModule(lambda o: o[..., :1], in_keys=["observation"], out_keys=["intrinsic_reward"])
+        >>> reward_separation(net, torch.ones(3, 2), torch.zeros(4, 2))["r_w_auc"]
+        1.0
+    """
+    from tensordict import TensorDict
+
+    with torch.no_grad():
+        r_e, r_p = (reward_network(TensorDict({"observation": obs}, [len(obs)]))["intrinsic_reward"].reshape(-1)
+                    for obs in (expert_obs, policy_obs))
+    diff = r_e[:, None] - r_p[None, :]
+    auc = float((diff > 0).float().mean() + 0.5 * (diff == 0).float().mean())
+    return {"r_w_expert_mean": float(r_e.mean()), "r_w_policy_mean": float(r_p.mean()), "r_w_auc": auc}
 
 
 def main(argv: list[str] | None = None) -> dict[str, float]:
@@ -77,6 +102,8 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
         **{k: float(f"{v:.4g}") for k, v in sums.items()},
         "l1_to_imitation_ratio": float(f"{sums['meta_grad_norm_l1'] / max(sums['meta_grad_norm_imitation'], 1e-30):.4g}"),
         "matching_reward_mean": float(f"{float(online['next', 'matching_reward'].mean()):.4g}"),
+        **{k: float(f"{v:.4g}") for k, v in reward_separation(
+            modules.reward_network, demos.transitions()["observation"], online["observation"]).items()},
     }
     print(json.dumps(summary))
     return summary
