@@ -59,6 +59,7 @@ from torchrl_csirl.modules import (
     make_reward_network,
 )
 from torchrl_csirl.objectives import ActorBehaviourCloning, EnsembleSACLoss, MetaRewardLoss
+from torchrl_csirl.objectives.meta_reward import GRADIENT_BALANCES
 from torchrl_csirl.trainers import MetaRewardUpdate, SACUpdate, SubgoalSelectionHook
 from torchrl_csirl.transforms import CombineRewards, IntrinsicReward, SubgoalMatchingReward
 
@@ -83,7 +84,7 @@ class CSIRLConfig:
     meta_scale: float = option(100.0, above=0.0, help="multiplies the meta-objective")
     reward_l1_coef: float = option(1.0, minimum=0.0, help="weight of mean |r_w| in the meta-objective")
     gradient_balance: str = option(
-        "sum", choices=("sum", "normalized"),
+        "sum", choices=GRADIENT_BALANCES,
         help="sum: the gradient of the meta-objective (paper); normalized: its imitation and regulariser parts "
              "each at unit norm, weighted 1 : reward_l1_coef (balanced_meta_gradient)")
     reward_reference: str = option(

@@ -24,6 +24,7 @@ import os
 import sys
 
 import torch
+from tensordict import TensorDict
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
@@ -55,10 +56,9 @@ def reward_separation(reward_network, expert_obs: torch.Tensor, policy_obs: torc
         >>> reward_separation(net, torch.ones(3, 2), torch.zeros(4, 2))["r_w_auc"]
         1.0
     """
-    from tensordict import TensorDict
-
+    obs_key, reward_key = reward_network.in_keys[0], reward_network.out_keys[0]
     with torch.no_grad():
-        r_e, r_p = (reward_network(TensorDict({"observation": obs}, [len(obs)]))["intrinsic_reward"].reshape(-1)
+        r_e, r_p = (reward_network(TensorDict({obs_key: obs}, [len(obs)]))[reward_key].reshape(-1)
                     for obs in (expert_obs, policy_obs))
     diff = r_e[:, None] - r_p[None, :]
     auc = float((diff > 0).float().mean() + 0.5 * (diff == 0).float().mean())
