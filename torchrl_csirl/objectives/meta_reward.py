@@ -174,7 +174,7 @@ class MetaRewardLoss(LossModule):
     ``use_matching_reward=False`` only ``r_w`` is used. The entry ``("next", reward)`` of the input batch (if any) is ignored.
 
     **Balance of the two parts.** With ``gradient_balance="sum"`` (the paper) the reward network
-    receives ``dL_meta/dw``, in which the regulariser's part is typically 10-10^5 times the
+    receives ``dL_meta/dw``, in which the regulariser's part is 3 to 10^5 times the
     imitation part (it does not pass through the two inner steps; docs/ALGORITHM.md section 5);
     with ``"normalized"`` it receives :func:`balanced_meta_gradient` of the two parts, which
     weighs their directions ``1 : reward_l1_coef`` whatever their sizes. ``"loss_meta"`` keeps the
