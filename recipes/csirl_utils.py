@@ -52,6 +52,7 @@ from torchrl_csirl.data import DemonstrationMixer
 from torchrl_csirl.envs import FAILURE_KEYS, SCENARIOS, ScenarioSpec, resolve_scenario  # noqa: F401 - SCENARIOS: used by tests
 from torchrl_csirl.data import ExpertDemonstrations
 from torchrl_csirl.modules import (
+    REWARD_ACTIVATIONS,
     ExpertCenteredReward,
     expert_reference_states,
     make_actor,
@@ -87,6 +88,9 @@ class CSIRLConfig:
         "sum", choices=GRADIENT_BALANCES,
         help="sum: the gradient of the meta-objective (paper); normalized: its imitation and regulariser parts "
              "each at unit norm, weighted 1 : reward_l1_coef (balanced_meta_gradient)")
+    reward_activation: str = option(
+        "relu", choices=tuple(REWARD_ACTIVATIONS),
+        help="hidden-layer activation of r_w: relu (paper) or a smooth one whose units cannot die")
     reward_reference: str = option(
         "none", choices=("none", "expert"),
         help="expert: r_w measured against its mean over 256 expert states (no constant shift can be learned; "
@@ -195,7 +199,8 @@ def make_loss_modules(cfg: DictConfig, spec: ScenarioSpec, device: torch.device 
         dispersion=cfg.csirl.dispersion,
     ).to(device)
     target_updater = SoftUpdate(sac, tau=cfg.optim.tau)
-    reward_network = make_reward_network(spec.obs_dim, input_features=features)
+    reward_network = make_reward_network(spec.obs_dim, input_features=features,
+                                         activation=cfg.csirl.reward_activation)
     if cfg.csirl.reward_reference == "expert":
         if demos is None:
             raise ValueError("csirl.reward_reference=expert needs the demonstrations (demos=).")

@@ -44,9 +44,10 @@ def load_trained(modules, checkpoint: str) -> None:
 
 
 def reward_separation(reward_network, expert_obs: torch.Tensor, policy_obs: torch.Tensor) -> dict[str, float]:
-    """Mean ``r_w`` on expert and on policy states, and how well ``r_w`` ranks the expert's above the policy's.
+    """Mean ``r_w`` on expert and on policy states, its spread, and how well it ranks the expert's above the policy's.
 
-    ``r_w_auc`` is the probability that a random expert state gets a higher ``r_w`` than a random
+    ``r_w_std`` is the standard deviation of ``r_w`` over both sets of states (0 for a constant,
+    e.g. dead, reward network). ``r_w_auc`` is the probability that a random expert state gets a higher ``r_w`` than a random
     policy state (ties count a half): 0.5 for a reward that does not tell them apart, 1.0 for one
     that rates every expert state above every policy state.
 
@@ -62,7 +63,8 @@ def reward_separation(reward_network, expert_obs: torch.Tensor, policy_obs: torc
                     for obs in (expert_obs, policy_obs))
     diff = r_e[:, None] - r_p[None, :]
     auc = float((diff > 0).float().mean() + 0.5 * (diff == 0).float().mean())
-    return {"r_w_expert_mean": float(r_e.mean()), "r_w_policy_mean": float(r_p.mean()), "r_w_auc": auc}
+    return {"r_w_expert_mean": float(r_e.mean()), "r_w_policy_mean": float(r_p.mean()),
+            "r_w_std": float(torch.cat([r_e, r_p]).std()), "r_w_auc": auc}
 
 
 def main(argv: list[str] | None = None) -> dict[str, float]:

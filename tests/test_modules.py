@@ -94,6 +94,37 @@ def test_reward_network_is_reexported():
     assert modules.make_reward_network is reward.make_reward_network
 
 
+@pytest.mark.parametrize("activation", ["elu", "silu", "tanh"])
+def test_smooth_reward_activation_keeps_gradient_where_relu_units_are_dead(activation):
+    """With every hidden pre-activation negative a ReLU r_w is constant and gets no gradient below its
+    output layer; a smooth activation still varies with the state and passes gradient to every layer."""
+    from torchrl_csirl.modules import REWARD_ACTIVATIONS, make_reward_network
+
+    obs = TensorDict({"observation": torch.rand(32, 4)}, [32])
+    grads, spreads = {}, {}
+    for name in ("relu", activation):
+        torch.manual_seed(0)
+        net = make_reward_network(4, hidden=(8, 8), activation=name)
+        assert any(isinstance(m, REWARD_ACTIVATIONS[name]) for m in net.modules())
+        first, second = _linears(net)[:2]
+        with torch.no_grad():  # kill every unit of both hidden layers (inputs are in [0, 1))
+            first.weight.abs_().neg_()
+            first.bias.fill_(-1.0)
+            second.bias.fill_(-3.0)
+        reward = net(obs)["intrinsic_reward"]
+        reward.sum().backward()
+        grads[name], spreads[name] = first.weight.grad.abs().sum(), reward.std()
+    assert grads["relu"] == 0 and spreads["relu"] < 1e-6
+    assert grads[activation] > 0 and spreads[activation] > 1e-6
+
+
+def test_reward_network_rejects_unknown_activation():
+    from torchrl_csirl.modules import make_reward_network
+
+    with pytest.raises(ValueError, match="activation must be one of"):
+        make_reward_network(4, activation="gelu")
+
+
 def test_masked_relu_matches_relu_values_and_gradients():
     x = torch.randn(50, dtype=torch.float64, requires_grad=True)
     x.data[0] = 0.0

@@ -472,7 +472,8 @@ def test_meta_gradient_balance_reports_both_parts(capsys):
     assert json.loads(capsys.readouterr().out.strip().splitlines()[-1]) == out
     assert out["meta_grad_norm_imitation"] > 0 and out["meta_grad_norm_l1"] > 0
     assert out["l1_to_imitation_ratio"] > 100  # published constants: the L1 term swamps imitation
-    assert 0.0 <= out["r_w_auc"] <= 1.0 and {"r_w_expert_mean", "r_w_policy_mean"} <= set(out)
+    assert 0.0 <= out["r_w_auc"] <= 1.0 and {"r_w_expert_mean", "r_w_policy_mean", "r_w_std"} <= set(out)
+    assert out["r_w_std"] > 0  # an untrained network rates states differently
     off = meta_gradient_balance.main(["--frames", "60", "--steps", "2", "replay_buffer.batch_size=32",
                                       "csirl.reward_l1_coef=0"])
     assert off["meta_grad_norm_l1"] == 0 and off["meta_grad_norm_imitation"] > 0

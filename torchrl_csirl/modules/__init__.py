@@ -12,7 +12,12 @@ from torchrl_csirl.modules.ensemble import FusedCriticEnsemble, fused_critic_ens
 from torchrl_csirl.modules.export import load_policy, save_policy
 from torchrl_csirl.modules.features import EgoRelativeFeatures, FeatureChain, make_input_features
 from torchrl_csirl.modules.lane_features import LaneFeatures
-from torchrl_csirl.modules.reward import ExpertCenteredReward, expert_reference_states, make_reward_network
+from torchrl_csirl.modules.reward import (
+    REWARD_ACTIVATIONS,
+    ExpertCenteredReward,
+    expert_reference_states,
+    make_reward_network,
+)
 
 __all__ = [
     "BoundedLogStdNormalParams",
@@ -23,6 +28,7 @@ __all__ = [
     "FusedCriticEnsemble",
     "LaneFeatures",
     "MaskedReLU",
+    "REWARD_ACTIVATIONS",
     "fused_critic_ensemble",
     "load_policy",
     "expert_reference_states",

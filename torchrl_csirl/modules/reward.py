@@ -13,7 +13,24 @@ from torchrl.modules import MLP
 
 from torchrl_csirl.modules.actor_critic import _input_size
 
-__all__ = ["ExpertCenteredReward", "RewardMLP", "expert_reference_states", "make_reward_network"]
+__all__ = [
+    "REWARD_ACTIVATIONS",
+    "ExpertCenteredReward",
+    "RewardMLP",
+    "expert_reference_states",
+    "make_reward_network",
+]
+
+#: Hidden-layer activations of :class:`RewardMLP` by name. ``"relu"`` is the paper's; the smooth ones
+#: have a non-zero derivative everywhere, so no unit stops receiving gradient for good (ReLU units
+#: of ``r_w`` do die in training: docs/RESULTS.md, "The meta-gradient's parts normalised").
+REWARD_ACTIVATIONS: dict[str, type[nn.Module]] = {"relu": nn.ReLU, "elu": nn.ELU, "silu": nn.SiLU, "tanh": nn.Tanh}
+
+
+def _activation_class(activation: str) -> type[nn.Module]:
+    if activation not in REWARD_ACTIVATIONS:
+        raise ValueError(f"activation must be one of {sorted(REWARD_ACTIVATIONS)}, got {activation!r}.")
+    return REWARD_ACTIVATIONS[activation]
 
 
 class RewardMLP(nn.Module):
@@ -24,6 +41,8 @@ class RewardMLP(nn.Module):
         hidden (sequence of int): hidden widths. Defaults to ``(256, 256)``.
         input_features (nn.Module, optional): a parameter-free map of the first input (the
             observation); ``in_features`` then counts its output size.
+        activation (str): hidden-layer activation, a key of :data:`REWARD_ACTIVATIONS`.
+            Defaults to ``"relu"`` (the paper).
 
     Examples:
         >>> import torch
@@ -34,14 +53,14 @@ class RewardMLP(nn.Module):
     """
 
     def __init__(self, in_features: int, hidden: Sequence[int] = (256, 256),
-                 input_features: nn.Module | None = None) -> None:
+                 input_features: nn.Module | None = None, activation: str = "relu") -> None:
         super().__init__()
         self.input_features = input_features
         self.mlp = MLP(
             in_features=in_features,
             out_features=1,
             num_cells=list(hidden),
-            activation_class=nn.ReLU,
+            activation_class=_activation_class(activation),
         )
 
     def forward(self, *inputs: torch.Tensor) -> torch.Tensor:
@@ -58,8 +77,9 @@ def make_reward_network(
     in_keys: Sequence[NestedKey] | None = None,
     out_key: NestedKey = "intrinsic_reward",
     input_features: nn.Module | None = None,
+    activation: str = "relu",
 ) -> TensorDictModule:
-    """Builds the intrinsic reward network ``r_w`` (MLP, ReLU, tanh output in ``(-1, 1)``).
+    """Builds the intrinsic reward network ``r_w`` (MLP, ReLU by default, tanh output in ``(-1, 1)``).
 
     State-only ``r_w(s)`` by default (the published code); state-action ``r_w(s, a)`` (the
     paper) when ``action_dim`` is given.
@@ -73,6 +93,8 @@ def make_reward_network(
         out_key (NestedKey): output key. Defaults to ``"intrinsic_reward"``.
         input_features (nn.Module, optional): a parameter-free map of the observation (see
             :func:`~torchrl_csirl.modules.make_actor`). Defaults to ``None``.
+        activation (str): hidden-layer activation, a key of :data:`REWARD_ACTIVATIONS`
+            (``"relu"``, ``"elu"``, ``"silu"``, ``"tanh"``). Defaults to ``"relu"`` (the paper).
 
     Returns:
         TensorDictModule: writes ``out_key`` with shape ``[*B, 1]``.
@@ -87,6 +109,8 @@ def make_reward_network(
         >>> sa = make_reward_network(4, action_dim=2)
         >>> sa.in_keys
         ['observation', 'action']
+        >>> make_reward_network(4, activation="elu").module.mlp[1]
+        ELU(alpha=1.0)
     """
     for name, value in (("obs_dim", obs_dim), ("action_dim", action_dim)):
         if value is None and name == "action_dim":
@@ -106,7 +130,8 @@ def make_reward_network(
             f"got {in_keys}."
         )
     in_features = _input_size(obs_dim, input_features) + (action_dim or 0)
-    return TensorDictModule(RewardMLP(in_features, hidden, input_features), in_keys=in_keys, out_keys=[out_key])
+    module = RewardMLP(in_features, hidden, input_features, activation=activation)
+    return TensorDictModule(module, in_keys=in_keys, out_keys=[out_key])
 
 
 class ExpertCenteredReward(TensorDictModuleBase):
