@@ -317,6 +317,25 @@ def test_rollout_end_at_arrival_truncates_highway():
     assert env.unwrapped.vehicle.position[0] >= SCENARIOS["highway-fast"].finish_position[0]
 
 
+def test_rollout_action_noise_is_seeded_clipped_and_recorded():
+    """D4RL-style noisy demonstrations: the executed action is the expert's plus N(0, std^2), clipped,
+    recorded as executed, the same for the same seed."""
+    env = make_gym_env("merge")
+    clean = rollout_expert(env, seed=3, max_steps=6)
+    noisy = rollout_expert(env, seed=3, max_steps=6, action_noise=0.3)
+    again = rollout_expert(env, seed=3, max_steps=6, action_noise=0.3)
+    np.testing.assert_array_equal(noisy["action"], again["action"])
+    np.testing.assert_array_equal(noisy["observation"], again["observation"])
+    low, high = env.action_space.low, env.action_space.high
+    assert ((noisy["action"] >= low) & (noisy["action"] <= high)).all()
+    # same reset state, so the first actions differ by the noise alone
+    first_noise = noisy["action"][0] - clean["action"][0]
+    assert 0 < np.abs(first_noise).max() < 5 * 0.3
+    assert noisy["action_noise"] == 0.3 and clean["action_noise"] == 0.0
+    with pytest.raises(ValueError, match="action_noise"):
+        rollout_expert(env, seed=3, max_steps=2, action_noise=-0.1)
+
+
 def test_shipped_loader_errors():
     with pytest.raises(ValueError, match="Unknown scenario"):
         load_expert_demonstrations("parking")

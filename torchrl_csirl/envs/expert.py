@@ -34,7 +34,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -905,6 +905,7 @@ def rollout_expert(
     empty_road: bool = False,
     max_steps: int | None = None,
     end_at_arrival: bool = False,
+    action_noise: float = 0.0,
 ) -> dict[str, Any]:
     """Drive one episode with the expert and record it.
 
@@ -922,6 +923,10 @@ def rollout_expert(
             terminates there). Used when recording demonstrations: highway-fast and roundabout do
             not terminate on arrival, and the states recorded after it (driving on past the
             finish, x clipped at the edge of the observation range) carry no information.
+        action_noise: standard deviation of Gaussian noise added to each expert action before it
+            is executed, clipped to the action space; the noisy (executed) action is recorded, as
+            in D4RL's AntMaze datasets (0.2 there). Drawn from a generator seeded by ``seed``, so an
+            episode is reproducible. Defaults to ``0.0`` (the clean expert).
 
     Returns:
         a dict with the episode in the layout of
@@ -943,6 +948,9 @@ def rollout_expert(
 
     scenario = scenario or _scenario_of(env)
     expert = expert or make_expert(scenario)
+    if not action_noise >= 0:
+        raise ValueError(f"action_noise must be >= 0, got {action_noise}.")
+    perturb = _action_perturbation(env.action_space, action_noise, seed)
     if empty_road and scenario not in EXPERT_CONFIGS:
         raise ValueError(f"empty_road applies to the driving scenarios only, not {scenario!r}.")
     obs, info = env.reset(seed=seed)
@@ -954,7 +962,7 @@ def rollout_expert(
     crashed = offroad = success = False
     step = success_steps = 0
     while True:
-        action = expert.act(env)
+        action = perturb(expert.act(env))
         obs, reward, term, trunc, info = env.step(action)
         step += 1
         observations.append(np.asarray(obs, dtype=np.float32).ravel())
@@ -987,6 +995,7 @@ def rollout_expert(
         "scenario": scenario,
         "empty_road": bool(empty_road),
         "end_at_arrival": bool(end_at_arrival),
+        "action_noise": float(action_noise),
         "success": bool(success and not crashed and not offroad),
         "success_steps": success_steps,
         "return": float(np.sum(rewards)),
@@ -994,6 +1003,19 @@ def rollout_expert(
         "offroad": offroad,
         "accomplish_rate": float(accomplish_rate(distances)),
     }
+
+
+def _action_perturbation(action_space: Any, std: float, seed: int | None) -> Callable[[np.ndarray], np.ndarray]:
+    """``a -> clip(a + N(0, std^2), low, high)`` with its own generator seeded by ``seed`` (identity for ``std == 0``)."""
+    if std == 0:
+        return lambda action: action
+    generator = np.random.default_rng(None if seed is None else [seed, 0x5EED])
+
+    def perturb(action: np.ndarray) -> np.ndarray:
+        noisy = np.asarray(action) + generator.normal(0.0, std, np.shape(action))
+        return np.clip(noisy, action_space.low, action_space.high).astype(np.asarray(action).dtype)
+
+    return perturb
 
 
 def _scenario_of(env: Any) -> str:
