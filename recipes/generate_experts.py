@@ -33,6 +33,9 @@ Examples:
     # ... as D4RL recorded AntMaze: N(0, 0.2) noise on the executed (and recorded) actions
     python recipes/generate_experts.py --scenario antmaze-umaze --episodes 25 --seed 0 --only-successful \
         --action-noise 0.2 --out /tmp/antmaze_noisy_25.npz
+    # ... or those perturbed states labelled with the expert's own action (DART)
+    python recipes/generate_experts.py --scenario antmaze-umaze --episodes 25 --seed 0 --only-successful \
+        --action-noise 0.2 --record-expert-action --out /tmp/antmaze_dart_25.npz
     # ... or with another goal-reaching ant
     python recipes/generate_experts.py --scenario antmaze-umaze --ant-policy runs/ant-goal-sac-s0-... \
         --episodes 100 --seed 10000
@@ -101,10 +104,11 @@ def roll_episodes(
     end_at_arrival: bool = False,
     expert_kwargs: dict[str, Any] | None = None,
     action_noise: float = 0.0,
+    record_expert_action: bool = False,
 ) -> tuple[list[dict], list[dict]]:
     """Roll expert episodes with seeds ``seed, seed + 1, ...`` (``expert_kwargs``: ``make_expert``'s options;
-    ``action_noise``: Gaussian noise on the executed and recorded actions, see
-    :func:`~torchrl_csirl.envs.expert.rollout_expert`).
+    ``action_noise``, ``record_expert_action``: Gaussian noise on the executed actions, and which action
+    is recorded, see :func:`~torchrl_csirl.envs.expert.rollout_expert`).
 
     With ``end_at_arrival`` (used when recording), each episode ends at the ego's arrival (see
     :func:`~torchrl_csirl.envs.expert.rollout_expert`); otherwise it runs until the env ends it.
@@ -125,7 +129,7 @@ def roll_episodes(
     for i in bar:
         episode = rollout_expert(
             env, seed=seed + i, expert=expert, scenario=scenario, empty_road=empty_road,
-            end_at_arrival=end_at_arrival, action_noise=action_noise,
+            end_at_arrival=end_at_arrival, action_noise=action_noise, record_expert_action=record_expert_action,
         )
         rolled.append(episode)
         if episode["success"] or not only_successful:
@@ -254,11 +258,16 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     parser.add_argument("--action-noise", type=float, default=0.0,
                         help="std of Gaussian noise on the expert's actions, executed and recorded (D4RL's AntMaze "
                              "data: 0.2); default 0, the clean expert")
+    parser.add_argument("--record-expert-action", action="store_true",
+                        help="with --action-noise: record the expert's noise-free action at the perturbed states "
+                             "(DART) instead of the executed one")
     args = parser.parse_args(argv)
     if args.episodes < 1:
         parser.error("--episodes must be >= 1")
     if not args.action_noise >= 0:
         parser.error("--action-noise must be >= 0")
+    if args.record_expert_action and not args.action_noise:
+        parser.error("--record-expert-action needs --action-noise > 0")
     if args.action_noise and args.shipped:
         parser.error("--shipped writes the clean expert's datasets; use --out with --action-noise")
     if args.ant_policy is not None and args.scenario != "antmaze-umaze":
@@ -281,7 +290,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         kept, rolled = roll_episodes(
             args.scenario, args.episodes, seed, args.empty_road, args.only_successful, args.max_attempts,
             end_at_arrival=bool(args.out) and not args.full_episodes, expert_kwargs=options,
-            action_noise=args.action_noise,
+            action_noise=args.action_noise, record_expert_action=args.record_expert_action,
         )
         result = {"scenario": args.scenario, "seed": seed, "action_noise": args.action_noise,
                   **summarize(rolled, kept)}
@@ -296,6 +305,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
                 "only_successful": bool(args.only_successful),
                 "end_at_arrival": bool(kept[0]["end_at_arrival"]),
                 "action_noise": float(args.action_noise),
+                "recorded_action": kept[0]["recorded_action"],
                 "num_trajectories": len(kept),
             }
             result["out"] = build_demonstrations(kept, meta).save(args.out)

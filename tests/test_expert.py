@@ -319,7 +319,7 @@ def test_rollout_end_at_arrival_truncates_highway():
 
 def test_rollout_action_noise_is_seeded_clipped_and_recorded():
     """D4RL-style noisy demonstrations: the executed action is the expert's plus N(0, std^2), clipped,
-    recorded as executed, the same for the same seed."""
+    recorded as executed (or, DART, the expert's own action), the same for the same seed."""
     env = make_gym_env("merge")
     clean = rollout_expert(env, seed=3, max_steps=6)
     noisy = rollout_expert(env, seed=3, max_steps=6, action_noise=0.3)
@@ -332,6 +332,11 @@ def test_rollout_action_noise_is_seeded_clipped_and_recorded():
     first_noise = noisy["action"][0] - clean["action"][0]
     assert 0 < np.abs(first_noise).max() < 5 * 0.3
     assert noisy["action_noise"] == 0.3 and clean["action_noise"] == 0.0
+    # DART: the same perturbed states, labelled with the expert's noise-free action
+    dart = rollout_expert(env, seed=3, max_steps=6, action_noise=0.3, record_expert_action=True)
+    np.testing.assert_array_equal(dart["observation"], noisy["observation"])
+    np.testing.assert_array_equal(dart["action"][0], clean["action"][0])
+    assert not np.array_equal(dart["action"], noisy["action"]) and dart["recorded_action"] == "expert"
     with pytest.raises(ValueError, match="action_noise"):
         rollout_expert(env, seed=3, max_steps=2, action_noise=-0.1)
 

@@ -906,6 +906,7 @@ def rollout_expert(
     max_steps: int | None = None,
     end_at_arrival: bool = False,
     action_noise: float = 0.0,
+    record_expert_action: bool = False,
 ) -> dict[str, Any]:
     """Drive one episode with the expert and record it.
 
@@ -927,6 +928,9 @@ def rollout_expert(
             is executed, clipped to the action space; the noisy (executed) action is recorded, as
             in D4RL's AntMaze datasets (0.2 there). Drawn from a generator seeded by ``seed``, so an
             episode is reproducible. Defaults to ``0.0`` (the clean expert).
+        record_expert_action: with ``action_noise``, record the expert's own (noise-free) action
+            instead of the executed one: the states of a perturbed expert labelled with what the
+            expert would do there (DART, Laskey et al. 2017). Defaults to ``False``.
 
     Returns:
         a dict with the episode in the layout of
@@ -962,11 +966,12 @@ def rollout_expert(
     crashed = offroad = success = False
     step = success_steps = 0
     while True:
-        action = perturb(expert.act(env))
+        expert_action = expert.act(env)
+        action = perturb(expert_action)
         obs, reward, term, trunc, info = env.step(action)
         step += 1
         observations.append(np.asarray(obs, dtype=np.float32).ravel())
-        actions.append(action)
+        actions.append(expert_action if record_expert_action else action)
         rewards.append(float(reward))
         distances.append(float(info["distance_to_finish"]))
         crashed = crashed or bool(info.get("crashed", False))
@@ -996,6 +1001,7 @@ def rollout_expert(
         "empty_road": bool(empty_road),
         "end_at_arrival": bool(end_at_arrival),
         "action_noise": float(action_noise),
+        "recorded_action": "expert" if record_expert_action else "executed",
         "success": bool(success and not crashed and not offroad),
         "success_steps": success_steps,
         "return": float(np.sum(rewards)),
