@@ -47,9 +47,9 @@ def reward_separation(reward_network, expert_obs: torch.Tensor, policy_obs: torc
     """Mean ``r_w`` on expert and on policy states, its spread, and how well it ranks the expert's above the policy's.
 
     ``r_w_std`` is the standard deviation of ``r_w`` over both sets of states (0 for a constant,
-    e.g. dead, reward network). ``r_w_auc`` is the probability that a random expert state gets a higher ``r_w`` than a random
-    policy state (ties count a half): 0.5 for a reward that does not tell them apart, 1.0 for one
-    that rates every expert state above every policy state.
+    e.g. dead, reward network). ``r_w_auc`` is the probability that a random expert state gets a
+    higher ``r_w`` than a random policy state (ties count a half): 0.5 for a reward that does not
+    tell them apart, 1.0 for one that rates every expert state above every policy state.
 
     Examples:
         >>> from tensordict.nn import TensorDictModule

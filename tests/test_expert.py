@@ -369,3 +369,15 @@ def test_generate_experts_same_seed_same_bytes(tmp_path, capsys):
 
     demos = ExpertDemonstrations.load(paths[0])
     assert demos.num_trajectories == 1 and demos.metadata["empty_road"] is True
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--action-noise", "-0.1"], "--action-noise must be >= 0"),
+    (["--record-expert-action"], "--record-expert-action needs --action-noise"),
+    (["--action-noise", "0.2", "--shipped"], "--shipped writes the clean expert"),
+])
+def test_generate_experts_rejects_bad_noise_options(args, message, capsys):
+    recipe = _load_recipe()
+    with pytest.raises(SystemExit):
+        recipe.main(["--scenario", "merge", "--episodes", "1", *args])
+    assert message in capsys.readouterr().err
