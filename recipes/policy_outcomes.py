@@ -16,7 +16,6 @@ expert nudges, docs/EXPERTS.md). The last line is JSON.
 """
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import sys
@@ -25,9 +24,10 @@ from collections import Counter, defaultdict
 import torch
 from torchrl.envs import EnvBase, ExplorationType, set_exploration_type
 
+from common.policy_cli import format_cell, load_test_policy, mean_or_none
+
 from torchrl_csirl._compat import gym_env_of
 from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, accomplish_rate_from_rollout, make_env, success_from_rollout
-from torchrl_csirl.modules import load_policy
 
 OUTCOMES = ("success", "crash", "offroad", "timeout")
 
@@ -97,10 +97,6 @@ def classify_episodes(policy, scenario: str, episodes: int, seed: int) -> list[d
     return records
 
 
-def _mean(values: list[float]) -> float | None:
-    return sum(values) / len(values) if values else None
-
-
 def summarize_group(group: list[dict]) -> dict[str, object]:
     """Episodes, mean accomplish rate, outcome counts, speeds, and what the crashed episodes had reached."""
     counts = Counter(r["outcome"] for r in group)
@@ -108,16 +104,16 @@ def summarize_group(group: list[dict]) -> dict[str, object]:
     offroad = [r for r in group if r["outcome"] == "offroad"]
     return {
         "episodes": len(group),
-        "accomplish_rate": _mean([r["accomplish_rate"] for r in group]),
+        "accomplish_rate": mean_or_none([r["accomplish_rate"] for r in group]),
         **{o: counts.get(o, 0) for o in OUTCOMES},
-        "mean_speed": _mean([r["mean_speed"] for r in group]),
+        "mean_speed": mean_or_none([r["mean_speed"] for r in group]),
         "max_speed": max((r["max_speed"] for r in group), default=None),
-        "crash_speed": _mean([r["final_speed"] for r in crashed]),
-        "crash_step": _mean([float(r["steps"]) for r in crashed]),
-        "crash_accomplish_rate": _mean([r["accomplish_rate"] for r in crashed]),
-        "offroad_accomplish_rate": _mean([r["accomplish_rate"] for r in offroad]),
+        "crash_speed": mean_or_none([r["final_speed"] for r in crashed]),
+        "crash_step": mean_or_none([float(r["steps"]) for r in crashed]),
+        "crash_accomplish_rate": mean_or_none([r["accomplish_rate"] for r in crashed]),
+        "offroad_accomplish_rate": mean_or_none([r["accomplish_rate"] for r in offroad]),
         "offroad_lanes": dict(Counter(r["offroad_at"]["lane"] for r in offroad).most_common()),
-        "offroad_lateral": _mean([abs(r["offroad_at"]["lateral"]) for r in offroad]),
+        "offroad_lateral": mean_or_none([abs(r["offroad_at"]["lateral"]) for r in offroad]),
     }
 
 
@@ -131,10 +127,6 @@ def summarize(records: list[dict]) -> dict[str, dict]:
     return {name: summarize_group(group) for name, group in groups.items()}
 
 
-def _cell(value: object, fmt: str) -> str:
-    return "-" if value is None else format(value, fmt)
-
-
 def _lanes(counts: dict[str, int]) -> str:
     return " ".join(f"{lane} ({n})" for lane, n in counts.items()) or "-"
 
@@ -145,31 +137,19 @@ def print_table(stats: dict[str, dict]) -> None:
           "| at a crash: speed, step, accomplish | off-road: accomplish, abs. lateral offset [m], lanes |", file=sys.stderr)
     print("|---|---|---|---|---|---|---|---|---|---|", file=sys.stderr)
     for name, s in stats.items():
-        crash = f"{_cell(s['crash_speed'], '.1f')}, {_cell(s['crash_step'], '.0f')}, {_cell(s['crash_accomplish_rate'], '.2f')}"
-        print(f"| {name} | {s['episodes']} | {_cell(s['accomplish_rate'], '.3f')} | {s['success']} | {s['crash']} "
-              f"| {s['offroad']} | {s['timeout']} | {_cell(s['mean_speed'], '.1f')} / {_cell(s['max_speed'], '.1f')} "
-              f"| {crash} | {_cell(s['offroad_accomplish_rate'], '.2f')}, {_cell(s['offroad_lateral'], '.1f')}, "
+        crash = f"{format_cell(s['crash_speed'], '.1f')}, {format_cell(s['crash_step'], '.0f')}, {format_cell(s['crash_accomplish_rate'], '.2f')}"
+        print(f"| {name} | {s['episodes']} | {format_cell(s['accomplish_rate'], '.3f')} | {s['success']} | {s['crash']} "
+              f"| {s['offroad']} | {s['timeout']} | {format_cell(s['mean_speed'], '.1f')} / {format_cell(s['max_speed'], '.1f')} "
+              f"| {crash} | {format_cell(s['offroad_accomplish_rate'], '.2f')}, {format_cell(s['offroad_lateral'], '.1f')}, "
               f"{_lanes(s['offroad_lanes'])} |", file=sys.stderr)
 
 
 def main(argv: list[str] | None = None) -> dict[str, dict]:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("policy", help="a run directory or its policy.pt")
-    parser.add_argument("--episodes", type=int, default=50)
-    parser.add_argument("--seed", type=int, default=1_000_000, help="seed of the first episode (the recipe's eval.seed)")
-    args = parser.parse_args(argv)
-    if args.episodes <= 0:
-        parser.error(f"--episodes must be positive, got {args.episodes}")
-    policy = load_policy(args.policy)
-    scenario = policy.metadata.get("scenario")
-    if scenario not in SCENARIOS:
-        parser.error(f"{args.policy}: a policy for {scenario!r}, not one of the driving scenarios {sorted(SCENARIOS)}")
-    torch.set_num_threads(1)
+    args, policy, scenario = load_test_policy(__doc__.splitlines()[0], argv, SCENARIOS, "driving scenarios")
     stats = summarize(classify_episodes(policy, scenario, args.episodes, args.seed))
     print_table(stats)
     print(json.dumps({"policy": os.path.abspath(args.policy), "scenario": scenario, **stats}))
     return stats
-
 
 if __name__ == "__main__":
     main()

@@ -1,0 +1,63 @@
+"""The command line of the scripts that roll a saved policy out on the recipe's test episodes
+(``recipes/policy_outcomes.py``, ``recipes/robotics_outcomes.py``): the arguments, the policy and
+its task, checked; and the small formatting helpers of their tables.
+"""
+from __future__ import annotations
+
+import argparse
+from collections.abc import Collection
+from typing import Any
+
+import torch
+
+from torchrl_csirl.modules import load_policy
+
+__all__ = ["format_cell", "load_test_policy", "mean_or_none"]
+
+
+def load_test_policy(description: str, argv: list[str] | None, tasks: Collection[str],
+                     kind: str) -> tuple[argparse.Namespace, Any, str]:
+    """Parses ``<policy> [--episodes N] [--seed S]``, loads the policy and checks its task is one of ``tasks``.
+
+    Args:
+        description: the script's one-line description (``--help``).
+        argv: the arguments (``None``: ``sys.argv[1:]``).
+        tasks: the tasks the script handles.
+        kind: what they are, for the error (e.g. ``"driving scenarios"``).
+
+    Returns:
+        The parsed arguments, the policy (deterministic at test) and its task. Sets torch to one
+        thread (the rollouts are small batches).
+
+    Examples:
+        >>> import os, tempfile
+        >>> from torchrl_csirl.modules import make_actor, save_policy
+        >>> path = save_policy(make_actor(25, 2), os.path.join(tempfile.mkdtemp(), "p.pt"),
+        ...                    obs_dim=25, action_dim=2, scenario="merge")
+        >>> args, policy, task = load_test_policy("demo", [path, "--episodes", "3"], ["merge"], "driving scenarios")
+        >>> args.episodes, task
+        (3, 'merge')
+    """
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("policy", help="a run directory or its policy.pt")
+    parser.add_argument("--episodes", type=int, default=50)
+    parser.add_argument("--seed", type=int, default=1_000_000, help="seed of the first episode (the recipe's eval.seed)")
+    args = parser.parse_args(argv)
+    if args.episodes <= 0:
+        parser.error(f"--episodes must be positive, got {args.episodes}")
+    policy = load_policy(args.policy)
+    task = policy.metadata.get("scenario")
+    if task not in tasks:
+        parser.error(f"{args.policy}: a policy for {task!r}, not one of the {kind} {sorted(tasks)}")
+    torch.set_num_threads(1)
+    return args, policy, task
+
+
+def mean_or_none(values: list[float]) -> float | None:
+    """The mean, or ``None`` for no values."""
+    return sum(values) / len(values) if values else None
+
+
+def format_cell(value: object, fmt: str) -> str:
+    """A table cell: ``value`` formatted, ``"-"`` for ``None``."""
+    return "-" if value is None else format(value, fmt)
