@@ -305,12 +305,26 @@ def sweep_main(argv: list[str]) -> int:
 
 # ---------------------------------------------------------------------------------------- report
 def cell_method(summary: dict[str, Any], run_dir: str) -> str:
-    """The method of a run: the one its sweep cell's name ``<scenario>-<method>-s<seed>`` gives
-    (the ablations' runs say ``csirl`` in their summary), else the summary's own."""
-    for method in known_methods():
-        if os.path.basename(run_dir) == f"{summary.get('scenario')}-{method}-s{summary.get('seed')}":
-            return method
-    return summary["method"]
+    """The row of a run: the label its directory's name ``<scenario>-<label>-s<seed>`` gives when
+    that label is a known method (the ablations' runs say ``csirl`` in their summary) or extends the
+    summary's method (``antmaze-umaze-csirl-bc-path-s0``, a ``csirl`` run, gets a row of its own
+    instead of joining CSIRL's), else the summary's own method.
+
+    Examples:
+        >>> cell_method({"scenario": "merge", "seed": 0, "method": "csirl"}, "runs/merge-csirl-nocur-s0")
+        'csirl-nocur'
+        >>> cell_method({"scenario": "merge", "seed": 0, "method": "csirl"}, "runs/merge-csirl-mine-s0")
+        'csirl-mine'
+        >>> cell_method({"scenario": "merge", "seed": 0, "method": "csirl-b"}, "runs/merge-b-s0")
+        'csirl-b'
+    """
+    method = summary["method"]
+    prefix, suffix = f"{summary.get('scenario')}-", f"-s{summary.get('seed')}"
+    name = os.path.basename(os.path.normpath(run_dir))
+    if not (name.startswith(prefix) and name.endswith(suffix) and len(name) > len(prefix) + len(suffix)):
+        return method
+    label = name[len(prefix):-len(suffix)]
+    return label if label in known_methods() or label.startswith(f"{method}-") else method
 
 
 def read_runs(paths: list[str]) -> list[dict[str, Any]]:
