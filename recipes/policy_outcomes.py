@@ -22,12 +22,12 @@ import sys
 from collections import Counter, defaultdict
 
 import torch
-from torchrl.envs import EnvBase, ExplorationType, set_exploration_type
+from torchrl.envs import EnvBase
 
-from common.policy_cli import format_cell, load_test_policy, mean_or_none
+from common.policy_cli import format_cell, load_test_policy, mean_or_none, roll_test_episodes
 
 from torchrl_csirl._compat import gym_env_of
-from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, accomplish_rate_from_rollout, make_env, success_from_rollout
+from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, accomplish_rate_from_rollout, success_from_rollout
 
 OUTCOMES = ("success", "crash", "offroad", "timeout")
 
@@ -75,25 +75,17 @@ def classify_episodes(policy, scenario: str, episodes: int, seed: int) -> list[d
     """One record per test episode: ``group``, ``outcome``, ``accomplish_rate``, ``steps``, speeds; an off-road
     one also its :func:`road_position` at the end (``offroad_at``)."""
     spec = SCENARIOS[scenario]
-    env = make_env(scenario)
+    grouping = traffic_ahead if scenario == "merge" else None
     records = []
-    try:
-        with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
-            for i in range(episodes):
-                env.set_seed(seed + i)  # the reset below is the one of evaluate_policy's rollout
-                start = env.reset()
-                group = traffic_ahead(env) if scenario == "merge" else "all"
-                rollout = env.rollout(spec.max_steps, policy, auto_reset=False, tensordict=start,
-                                      break_when_any_done=True)
-                speeds = ego_speeds(rollout["next", "observation"], spec)
-                records.append({"episode": i, "group": group, "outcome": outcome(rollout),
-                                "accomplish_rate": float(accomplish_rate_from_rollout(rollout)),
-                                "steps": rollout.shape[-1], "mean_speed": float(speeds.mean()),
-                                "max_speed": float(speeds.max()), "final_speed": float(speeds[-1])})
-                if records[-1]["outcome"] == "offroad":
-                    records[-1]["offroad_at"] = road_position(env)
-    finally:
-        env.close()
+    for i, (env, rollout, group) in enumerate(roll_test_episodes(policy, scenario, episodes, seed, spec.max_steps,
+                                                                 at_reset=grouping)):
+        speeds = ego_speeds(rollout["next", "observation"], spec)
+        records.append({"episode": i, "group": group or "all", "outcome": outcome(rollout),
+                        "accomplish_rate": float(accomplish_rate_from_rollout(rollout)),
+                        "steps": rollout.shape[-1], "mean_speed": float(speeds.mean()),
+                        "max_speed": float(speeds.max()), "final_speed": float(speeds[-1])})
+        if records[-1]["outcome"] == "offroad":
+            records[-1]["offroad_at"] = road_position(env)
     return records
 
 
@@ -150,6 +142,7 @@ def main(argv: list[str] | None = None) -> dict[str, dict]:
     print_table(stats)
     print(json.dumps({"policy": os.path.abspath(args.policy), "scenario": scenario, **stats}))
     return stats
+
 
 if __name__ == "__main__":
     main()

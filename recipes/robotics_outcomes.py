@@ -25,13 +25,11 @@ import sys
 from collections import Counter, defaultdict
 
 import numpy as np
-import torch
-from torchrl.envs import ExplorationType, set_exploration_type
 
-from common.policy_cli import format_cell, load_test_policy, mean_or_none
+from common.policy_cli import format_cell, load_test_policy, mean_or_none, roll_test_episodes
 
 from torchrl_csirl._compat import gym_env_of
-from torchrl_csirl.envs import accomplish_rate_from_rollout, make_env
+from torchrl_csirl.envs import accomplish_rate_from_rollout
 from torchrl_csirl.envs.robotics import ROBOTICS_TASKS
 
 OUTCOMES = {"antmaze-umaze": ("goal", "flipped", "short"), "relocate": ("at_target", "lost", "never")}
@@ -45,13 +43,14 @@ def route_cell(task_env, position: np.ndarray) -> str:
 
 def antmaze_record(rollout, task_env) -> dict:
     """One AntMaze episode: outcome, the first flipped step, the end position and its route cell."""
-    flipped = rollout["next", "crashed"].reshape(-1)
-    position = task_env.position()
+    flipped_steps = rollout["next", "crashed"].reshape(-1).nonzero()
+    flip_step = int(flipped_steps[0, 0]) + 1 if flipped_steps.numel() else None
     if bool(rollout["next", "success"].any()):
         outcome = "goal"
     else:
-        outcome = "flipped" if bool(flipped.any()) else "short"
-    return {"outcome": outcome, "flip_step": int(flipped.nonzero()[0, 0]) + 1 if bool(flipped.any()) else None,
+        outcome = "short" if flip_step is None else "flipped"
+    position = task_env.position()
+    return {"outcome": outcome, "flip_step": flip_step,
             "end": [round(float(v), 2) for v in position], "end_cell": route_cell(task_env, position)}
 
 
@@ -68,23 +67,11 @@ def relocate_record(rollout, task_env) -> dict:
 
 def classify_episodes(policy, task: str, episodes: int, seed: int) -> list[dict]:
     """One record per test episode: ``outcome``, ``accomplish_rate`` (progress), ``steps`` and the task's own fields."""
-    spec = ROBOTICS_TASKS[task]
     describe = antmaze_record if task == "antmaze-umaze" else relocate_record
-    env = make_env(task)
-    records = []
-    try:
-        task_env = gym_env_of(env).unwrapped
-        with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
-            for i in range(episodes):
-                env.set_seed(seed + i)  # the reset below is the one of evaluate_policy's rollout
-                start = env.reset()
-                rollout = env.rollout(spec.max_steps, policy, auto_reset=False, tensordict=start,
-                                      break_when_any_done=True)
-                records.append({"episode": i, "accomplish_rate": float(accomplish_rate_from_rollout(rollout)),
-                                "steps": rollout.shape[-1], **describe(rollout, task_env)})
-    finally:
-        env.close()
-    return records
+    rollouts = roll_test_episodes(policy, task, episodes, seed, ROBOTICS_TASKS[task].max_steps)
+    return [{"episode": i, "accomplish_rate": float(accomplish_rate_from_rollout(rollout)),
+             "steps": rollout.shape[-1], **describe(rollout, gym_env_of(env).unwrapped)}
+            for i, (env, rollout, _) in enumerate(rollouts)]
 
 
 def summarize(task: str, records: list[dict]) -> dict[str, object]:
@@ -129,6 +116,7 @@ def main(argv: list[str] | None = None) -> dict[str, object]:
     print_table(task, stats)
     print(json.dumps({"policy": os.path.abspath(args.policy), "task": task, **stats}))
     return stats
+
 
 if __name__ == "__main__":
     main()

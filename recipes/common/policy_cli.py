@@ -5,14 +5,17 @@ its task, checked; and the small formatting helpers of their tables.
 from __future__ import annotations
 
 import argparse
-from collections.abc import Collection
+from collections.abc import Callable, Collection, Iterator
 from typing import Any
 
 import torch
+from tensordict import TensorDictBase
+from torchrl.envs import EnvBase, ExplorationType, set_exploration_type
 
+from torchrl_csirl.envs import make_env
 from torchrl_csirl.modules import load_policy
 
-__all__ = ["format_cell", "load_test_policy", "mean_or_none"]
+__all__ = ["format_cell", "load_test_policy", "mean_or_none", "roll_test_episodes"]
 
 
 def load_test_policy(description: str, argv: list[str] | None, tasks: Collection[str],
@@ -51,6 +54,35 @@ def load_test_policy(description: str, argv: list[str] | None, tasks: Collection
         parser.error(f"{args.policy}: a policy for {task!r}, not one of the {kind} {sorted(tasks)}")
     torch.set_num_threads(1)
     return args, policy, task
+
+
+def roll_test_episodes(policy, task: str, episodes: int, seed: int, max_steps: int,
+                       at_reset: Callable[[EnvBase], Any] | None = None
+                       ) -> Iterator[tuple[EnvBase, TensorDictBase, Any]]:
+    """Rolls the deterministic ``policy`` over the recipe's test episodes of ``task``, one at a time.
+
+    Episode ``i`` is seeded with ``seed + i`` as the recipe's final evaluation does; each rollout
+    stops at the episode's end. Yields ``(env, rollout, at_reset(env))``: the environment as the
+    episode left it, the rollout, and what ``at_reset`` read from the scene just after the reset
+    (``None`` without it). The environment is closed at the end.
+
+    Examples:
+        >>> from torchrl_csirl.modules import make_actor
+        >>> [r.shape[-1] for _, r, _ in roll_test_episodes(make_actor(25, 2), "merge", 2, 0, max_steps=3)]
+        [3, 3]
+    """
+    env = make_env(task)
+    try:
+        with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
+            for i in range(episodes):
+                env.set_seed(seed + i)  # the reset below is the one of evaluate_policy's rollout
+                start = env.reset()
+                before = at_reset(env) if at_reset is not None else None
+                rollout = env.rollout(max_steps, policy, auto_reset=False, tensordict=start,
+                                      break_when_any_done=True)
+                yield env, rollout, before
+    finally:
+        env.close()
 
 
 def mean_or_none(values: list[float]) -> float | None:
