@@ -512,30 +512,46 @@ def eval_curve(run_dir: str, key: str = "eval_accomplish_rate") -> tuple[list[fl
     return frames, values
 
 
+def curve_kinds(scenario: str) -> list[tuple[str, str, str, str, bool]]:
+    """The evaluation curves drawn for ``scenario``: ``(file prefix, summary key, curve key, y label, rate)``.
+
+    The driving scenarios get the accomplish rate (the paper's Figure 6); the robotics tasks the return
+    (its Figure 7) and, since AntMaze's return is the goal indicator (flat at 0 for most methods), the
+    progress too.
+
+    Examples:
+        >>> [kind[0] for kind in curve_kinds("merge")], [kind[0] for kind in curve_kinds("antmaze-umaze")]
+        (['curves'], ['curves', 'progress'])
+    """
+    rate = ("accomplish_rate", "eval_accomplish_rate")
+    if not is_robotics(scenario):
+        return [("curves", *rate, "evaluation accomplish rate (raw)", True)]
+    return [("curves", "return", "eval_env_return", "evaluation return", False),
+            ("progress", *rate, "evaluation progress", True)]
+
+
 def learning_curve_figures(runs: list[dict[str, Any]], out_dir: str) -> list[str]:
-    """One PNG per scenario: every trained method's evaluation curve (mean ± std over seeds), the
-    reference rows as lines; the accomplish rate on the driving scenarios, the return on the robotics tasks."""
+    """PNGs per scenario (``curve_kinds``): every trained method's evaluation curve (mean ± std over seeds),
+    the reference rows as lines."""
     from torchrl_csirl.visualization import plot_method_curves
 
     paths = []
     for scenario in [s for s in (*SCENARIO_ORDER, *ROBOTICS_ORDER) if any(r["scenario"] == s for r in runs)]:
-        robotics = is_robotics(scenario)
-        summary_key, curve_key = ("return", "eval_env_return") if robotics else ("accomplish_rate", "eval_accomplish_rate")
-        curves: dict[str, list] = defaultdict(list)
-        references: dict[str, list[float]] = defaultdict(list)
-        for run in (r for r in runs if r["scenario"] == scenario):
-            if run["method"] in REFERENCE_METHODS:
-                if run.get(summary_key) is not None:
-                    references[run["method"]].append(float(run[summary_key]))
-            else:
-                curves[run["method"]].append(eval_curve(run["run_dir"], curve_key))
-        label = "evaluation return" if robotics else "evaluation accomplish rate (raw)"
-        path = plot_method_curves(curves, os.path.join(out_dir, f"curves_{scenario}.png"),
-                                  references={m: sum(v) / len(v) for m, v in references.items()},
-                                  title=f"{scenario}: {label}",
-                                  ylabel="evaluation return" if robotics else "test accomplish rate",
-                                  rate=not robotics)
-        paths.append(os.fspath(path))
+        for prefix, summary_key, curve_key, label, rate in curve_kinds(scenario):
+            curves: dict[str, list] = defaultdict(list)
+            references: dict[str, list[float]] = defaultdict(list)
+            for run in (r for r in runs if r["scenario"] == scenario):
+                if run["method"] in REFERENCE_METHODS:
+                    if run.get(summary_key) is not None:
+                        references[run["method"]].append(float(run[summary_key]))
+                else:
+                    curves[run["method"]].append(eval_curve(run["run_dir"], curve_key))
+            path = plot_method_curves(curves, os.path.join(out_dir, f"{prefix}_{scenario}.png"),
+                                      references={m: sum(v) / len(v) for m, v in references.items()},
+                                      title=f"{scenario}: {label}",
+                                      ylabel="test accomplish rate" if not is_robotics(scenario) else label,
+                                      rate=rate)
+            paths.append(os.fspath(path))
     return paths
 
 

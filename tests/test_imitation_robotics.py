@@ -110,5 +110,6 @@ def test_benchmark_sweeps_the_robotics_tasks_with_their_recipes_and_reports_the_
         table = f.read()
     assert table.startswith("Test return on the robotics tasks") and "| method | relocate |" in table
     assert "Expert-normalised" not in table and "| csirl | 0.50 / 0.55 |" in table  # success / progress
-    with open(os.path.join(out, "report", "curves_relocate.png"), "rb") as f:
-        assert f.read(8) == b"\x89PNG\r\n\x1a\n"
+    for figure in ("curves_relocate.png", "progress_relocate.png"):  # the return, and the progress
+        with open(os.path.join(out, "report", figure), "rb") as f:
+            assert f.read(8) == b"\x89PNG\r\n\x1a\n"
