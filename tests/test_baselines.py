@@ -414,13 +414,8 @@ def test_method_trains_in_the_csirl_trainer_on_a_mock_env(name):
 
 
 def test_baselines_page_example_runs():
-    """docs/BASELINES.md's example runs as written (one DAC update on the shipped merge demonstrations)."""
-    import os
-    import re
+    """docs/baselines.md's example runs as written (one DAC update on the shipped merge demonstrations)."""
+    from markdown_examples import _run_python_blocks
 
-    path = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "docs", "BASELINES.md")
-    with open(path, encoding="utf-8") as f:
-        (block,) = re.findall(r"```python\n(.*?)```", f.read(), flags=re.S)
-    namespace: dict = {}
-    exec(compile(block, "docs/BASELINES.md", "exec"), namespace)  # noqa: S102 - our own docs
+    namespace = _run_python_blocks("docs/baselines.md")
     assert {"loss_discriminator", "loss_gradient_penalty", "loss_qvalue", "loss_actor"} <= set(namespace["losses"])

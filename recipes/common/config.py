@@ -49,7 +49,9 @@ __all__ = [
     "ModelConfig",
     "OptimConfig",
     "ReplayBufferConfig",
+    "ConfigKey",
     "describe",
+    "describe_rows",
     "flatten_config",
     "format_override",
     "load_config",
@@ -477,6 +479,35 @@ def help_requested(argv: list[str], doc: str, schema: type) -> bool:
     return True
 
 
+class ConfigKey(typing.NamedTuple):
+    """One leaf of a schema, as :func:`describe_rows` reports it."""
+
+    key: str  #: dotted key, e.g. ``collector.total_frames``
+    default: str  #: the default as written on a command line (``null``, ``false``, ...)
+    allowed: str  #: what values are accepted
+    help: str  #: what the key does
+
+
+def describe_rows(schema: type, prefix: str = "") -> list[ConfigKey]:
+    """Every leaf of ``schema`` with its default, what it accepts and its help, in schema order
+    (the source of each recipe's ``--help`` and of the docs' configuration reference).
+
+    Examples:
+        >>> describe_rows(EnvConfig)[0].key, describe_rows(EnvConfig)[0].default
+        ('scenario', 'merge')
+    """
+    rows = []
+    hints = _hints(schema)
+    for f in dataclasses.fields(schema):
+        tp, key = hints[f.name], f"{prefix}{f.name}"
+        if dataclasses.is_dataclass(tp):
+            rows.extend(describe_rows(tp, prefix=f"{key}."))
+            continue
+        help_text = f.metadata.get("help") or attribute_docs(schema).get(f.name, "")
+        rows.append(ConfigKey(key, _value_text(f.default), describe_allowed(tp, f.metadata), help_text))
+    return rows
+
+
 def describe(schema: type, prefix: str = "") -> list[str]:
     """``key = default  # what is allowed; help`` for every leaf (a recipe's ``--help``).
 
@@ -484,14 +515,5 @@ def describe(schema: type, prefix: str = "") -> list[str]:
         >>> describe(EnvConfig)
         ['scenario = merge  # one of highway-fast, intersection, merge, roundabout; the driving scenario']
     """
-    lines = []
-    hints = _hints(schema)
-    for f in dataclasses.fields(schema):
-        tp, key = hints[f.name], f"{prefix}{f.name}"
-        if dataclasses.is_dataclass(tp):
-            lines.extend(describe(tp, prefix=f"{key}."))
-            continue
-        help_text = f.metadata.get("help") or attribute_docs(schema).get(f.name, "")
-        allowed = describe_allowed(tp, f.metadata)
-        lines.append(f"{key} = {_value_text(f.default)}  # {allowed}" + (f"; {help_text}" if help_text else ""))
-    return lines
+    return [f"{r.key} = {r.default}  # {r.allowed}" + (f"; {r.help}" if r.help else "")
+            for r in describe_rows(schema, prefix)]

@@ -208,7 +208,8 @@ class MetaRewardLoss(LossModule):
             carries that gradient as a linear surrogate). One backward of
             ``loss_qvalue + loss_actor + loss_meta`` then yields the real SAC gradients
             and the meta-gradient. Inner steps are then taken from the pre-update
-            actor/critic (the published code takes them after the real steps).
+            actor/critic, as in the published code (which loads its inner copies before
+            the real steps); the real actor loss also sees the pre-update critics.
             Defaults to ``False``.
 
     Examples:
