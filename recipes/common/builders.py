@@ -199,7 +199,8 @@ def make_worker_env_fn(scenario: str, collector: DictConfig) -> Callable[[], Env
         torch.Size([2])
     """
     # Ctrl-C reaches the workers too: they keep collecting until the main process stops them
-    return ignoring_interrupts(partial(make_serial_env, scenario, envs_per_worker(collector, resolve_scenario(scenario))))
+    k = envs_per_worker(collector, resolve_scenario(scenario))
+    return ignoring_interrupts(partial(make_serial_env, scenario, k))
 
 
 def make_eval_env(scenario: str) -> EnvBase:

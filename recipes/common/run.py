@@ -117,7 +117,8 @@ def resume_command(run_dir: str) -> str:
     """
     script = getattr(sys.modules.get("__main__"), "__file__", None) or "recipes/<recipe>.py"
     relative = os.path.relpath(script)
-    return f"python {shlex.quote(script if relative.startswith('..') else relative)} checkpoint.resume={shlex.quote(run_dir)}"
+    script = script if relative.startswith("..") else relative
+    return f"python {shlex.quote(script)} checkpoint.resume={shlex.quote(run_dir)}"
 
 
 def stop_with_checkpoint(checkpoint: str, run_dir: str, signum: int | None) -> None:
