@@ -76,13 +76,17 @@ def _run_dir(tmp_path, task="relocate", policy=True):
     return run_dir
 
 
-def test_watch_films_a_robotics_run_headless(tmp_path, capsys):
-    run_dir = _run_dir(tmp_path)
+@pytest.mark.parametrize("task, pictures", [
+    ("relocate", 3),  # 10 ms steps: the reset, step 4 and step 8 (25 pictures a second)
+    ("antmaze-umaze", 9),  # 50 ms steps: the reset and every step
+])
+def test_watch_films_a_robotics_run_headless(tmp_path, capsys, task, pictures):
+    run_dir = _run_dir(tmp_path, task)
     paths = watch.main([str(run_dir), "--format", "gif", "--max-steps", "8"])
     assert paths == [str(run_dir / "videos" / "test-episode-0.gif")]
     with Image.open(paths[0]) as image:
-        assert image.n_frames == 3  # Relocate steps 10 ms: the reset, step 4 and step 8 (25 pictures a second)
-    assert "relocate, seed 7: 8 steps" in capsys.readouterr().out
+        assert image.n_frames == pictures
+    assert f"{task}, seed 7: 8 steps" in capsys.readouterr().out
 
 
 def test_watch_refuses_what_is_not_a_finished_run(tmp_path):

@@ -163,8 +163,9 @@ def _lighten_mujoco(env: Any) -> None:
     """Turns off shadows and reflections of a MuJoCo task's offscreen viewer (about 3x faster on a
     software renderer); a driving scene is left alone."""
     gym_env = getattr(env, "_env", None)
-    inner = getattr(getattr(gym_env, "unwrapped", None), "_inner", None)
-    renderer = getattr(getattr(inner, "unwrapped", None), "mujoco_renderer", None)
+    inner = getattr(getattr(getattr(gym_env, "unwrapped", None), "_inner", None), "unwrapped", None)
+    holder = getattr(inner, "ant_env", inner)  # AntMaze renders through its ant's MuJoCo env
+    renderer = getattr(holder, "mujoco_renderer", None)
     if renderer is None:
         return
     import mujoco
