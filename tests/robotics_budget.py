@@ -13,6 +13,7 @@ TINY_ROBOTICS_RUN = [
     "optim.utd_ratio=0.1",
     "eval.episodes=1",
     "eval.final_episodes=1",
+    "eval.video=false",  # MuJoCo on a software renderer: ~0.1-0.4 s a frame (tests/test_video.py films some)
     "logger.backend=none",
     "logger.progress_bar=false",
 ]

@@ -213,7 +213,7 @@ def test_train_ant_expert_end_to_end(tmp_path):
         "collector.total_frames=800", "collector.frames_per_batch=400", "collector.num_workers=1",
         "collector.init_random_frames=200", "collector.main_threads=1", "replay_buffer.warmup_frames=200",
         "sac.batch_size=32", "updates_per_round=100", "eval.episodes=1", "eval.final_episodes=1",
-        "expert_eval.episodes=1", "device=cpu", "logger.backend=none", "logger.progress_bar=false",
+        "eval.video=false", "expert_eval.episodes=1", "device=cpu", "logger.backend=none", "logger.progress_bar=false",
         f"logger.output_dir={tmp_path}", "logger.exp_name=ant",
     ])
     assert summary["scenario"] == "ant-goal" and summary["frames"] == 800 and summary["updates"] == 400

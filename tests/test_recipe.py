@@ -86,6 +86,33 @@ def test_recipe_artefacts(full_run):
         assert json.load(f)["accomplish_rate"] == full_run["accomplish_rate"]
 
 
+def test_final_evaluation_is_filmed_and_logged_to_wandb(full_run):
+    import glob
+
+    run_dir = full_run["run_dir"]
+    assert full_run["videos"] == [os.path.join(run_dir, "videos", os.path.basename(full_run["videos"][0]))]
+    assert os.path.basename(full_run["videos"][0]) in ("test-episode-0.mp4", "test-episode-0.gif")
+    assert os.path.getsize(full_run["videos"][0]) > 0
+    assert glob.glob(os.path.join(run_dir, "wandb", "*", "files", "media", "videos", "test_episode_*"))
+
+
+def test_watch_films_the_final_evaluation_episodes(full_run, tmp_path):
+    from PIL import Image
+
+    proc = subprocess.run([sys.executable, os.path.join(RECIPES, "watch.py"), full_run["run_dir"], "--episodes", "2",
+                           "--format", "gif", "--out", str(tmp_path)], capture_output=True, text=True, timeout=300,
+                          env={**os.environ, "MPLBACKEND": "Agg"})
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    lines = proc.stdout.strip().splitlines()
+    assert [line.split()[0] for line in lines] == [str(tmp_path / f"test-episode-{i}.gif") for i in range(2)]
+    # the same episodes as the final evaluation: their mean accomplish rate is the reported one
+    rates = [float(line.split("accomplish rate ")[1].split(",")[0]) for line in lines]
+    assert abs(sum(rates) / 2 - full_run["accomplish_rate"]) < 1e-3
+    steps = int(lines[0].split(": ")[1].split(" steps")[0])
+    with Image.open(tmp_path / "test-episode-0.gif") as gif:
+        assert gif.n_frames == steps + 1  # the reset and every step (driving: at most 25 steps a second)
+
+
 def test_saved_policy_rolls_out_in_two_lines(full_run):
     from torchrl_csirl.envs import make_env
     from torchrl_csirl.modules import load_policy

@@ -183,3 +183,40 @@ def test_actor_behaviour_cloning_pulls_the_deterministic_action_to_the_expert_an
     assert loss_actor.grad is None
     with pytest.raises(ValueError, match="coef must be positive"):
         ActorBehaviourCloning(term.bc_loss, expert.as_replay_buffer(batch_size=4), coef=0.0)
+
+
+
+def test_a_stop_request_ends_at_the_batch_boundary_and_its_checkpoint_resumes_exactly(tmp_path):
+    from torchrl_csirl.trainers import TrainingInterrupted
+
+    def build(stop_at=None):
+        trainer, _ = make_trainer(total_frames=60, updates_per_round=100)  # one round, never ended
+        rows = []
+        trainer.register_op("log", lambda t, row: rows.append(
+            {k: v for k, v in row.items() if k not in ("collect_fps", "updates_per_s")}), "rows")
+        if stop_at is not None:  # as a signal handler would, in the middle of a batch
+            trainer.register_op("batch_process", lambda b: (trainer.frames == stop_at and trainer.request_stop("SIGTERM"), b)[1])
+        return trainer, rows
+
+    full, full_rows = build()
+    full.train()
+    full.collector.shutdown()
+
+    stopped, _ = build(stop_at=20)
+    with pytest.raises(TrainingInterrupted, match="SIGTERM") as raised:
+        stopped.train()
+    stopped.collector.shutdown()
+    assert raised.value.reason == "SIGTERM"
+    # the batch in progress was finished: collected, its updates done and logged
+    assert (stopped.frames, stopped.updates, stopped.rounds, stopped.updates_in_round) == (30, 9, 0, 9)
+    checkpoint = CheckpointHook(tmp_path, stopped.online_buffer).save(stopped)
+
+    resumed, resumed_rows = build()
+    load_checkpoint(resumed, checkpoint, resumed.online_buffer)
+    resumed.train()
+    resumed.collector.shutdown()
+    assert (resumed.frames, resumed.updates, resumed.rounds) == (full.frames, full.updates, full.rounds) == (60, 18, 0)
+    assert resumed_rows == [row for row in full_rows if row["frames"] > 30]
+    # the mock env's observations are not seeded: the buffer holds the stopped run's 30 rows, then 30 new ones
+    assert len(resumed.online_buffer) == 60
+    assert torch.equal(resumed.online_buffer[:30]["observation"], stopped.online_buffer[:]["observation"])

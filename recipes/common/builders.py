@@ -27,7 +27,7 @@ from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
 from torchrl.envs import Compose, EnvBase, Transform
 
 from common.config import ConfigError
-from common.run import ExpertDataError, default_run_name, make_run_dir, resolve_resume
+from common.run import ExpertDataError, default_run_name, make_run_dir, resolve_resume, stop_with_checkpoint
 from torchrl_csirl.data import ExpertDemonstrations, FilledRowsCheckpointer, import_published, load_expert_demonstrations
 from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, TaskSpec, make_serial_env, resolve_scenario  # noqa: F401 (doctests)
 from torchrl_csirl.envs import make_env as make_scenario_env
@@ -38,6 +38,7 @@ from torchrl_csirl.trainers import (
     EvaluationHook,
     MetricsLogger,
     evaluate_policy,
+    ignoring_interrupts,
     shutdown_collector,
 )
 
@@ -197,7 +198,9 @@ def make_worker_env_fn(scenario: str, collector: DictConfig) -> Callable[[], Env
         >>> make_worker_env_fn("merge", c)().batch_size
         torch.Size([2])
     """
-    return partial(make_serial_env, scenario, envs_per_worker(collector, resolve_scenario(scenario)))
+    # Ctrl-C reaches the workers too: they keep collecting until the main process stops them
+    k = envs_per_worker(collector, resolve_scenario(scenario))
+    return ignoring_interrupts(partial(make_serial_env, scenario, k))
 
 
 def make_eval_env(scenario: str) -> EnvBase:
@@ -502,13 +505,20 @@ def open_run(argv: list[str], method: Callable[[DictConfig], str], make_trainer:
 def train(run: Run) -> None:
     """``run.trainer.train()``; on any exit the collector is shut down and the logs are kept.
 
+    SIGTERM or Ctrl-C stops at the end of the current batch, writes a checkpoint there and exits
+    (130 / 143) with the command that resumes the run (:func:`common.run.stop_with_checkpoint`).
+
     Raises:
         TrainingDivergedError: with where the last good checkpoint is and how to resume.
     """
-    from torchrl_csirl.trainers import TrainingDivergedError
+    from torchrl_csirl.trainers import StopOnSignals, TrainingDivergedError, TrainingInterrupted
 
     try:
-        run.trainer.train()
+        with StopOnSignals(run.trainer) as stop:
+            run.trainer.train()
+    except TrainingInterrupted:  # SIGTERM / Ctrl-C, at a batch boundary: checkpoint, say how to resume
+        run.logger.close()
+        stop_with_checkpoint(run.checkpoint.save(run.trainer), run.run_dir, stop.signum)
     except TrainingDivergedError as err:
         run.logger.close()
         last = run.checkpoint.path if os.path.exists(run.checkpoint.path) else "none yet"
@@ -587,6 +597,10 @@ def final_summary(run: Run, method: str, title: str) -> dict[str, Any]:
     }
     run.logger.log({"frames": trainer.frames, "updates": trainer.updates,
                     **{f"test_{k}": v for k, v in final.items()}})
+    if cfg.eval.video:
+        from common.video import film_final_episode
+
+        summary["videos"] = film_final_episode(run)
     curve = plot_learning_curve(history, os.path.join(run.run_dir, "learning_curve.png"), title=title)
     summary["plots"] = [os.fspath(curve)]
     return summary

@@ -173,6 +173,8 @@ class EvalConfig:
     every_rounds: int = option(1, above=0, help="evaluation cadence in rounds")
     final_episodes: int = option(50, above=0, help="episodes of the reported test accomplish rate")
     seed: int = option(1_000_000, minimum=0, help="eval episode i uses seed + i")
+    video: bool = option(True, help="film the final evaluation's first episode into videos/ (mp4, or gif without "
+                                    "imageio-ffmpeg) and log it to W&B; recipes/watch.py films more")
 
 
 @dataclass

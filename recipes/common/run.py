@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import shlex
 import shutil
 import signal
 import sys
@@ -27,7 +28,9 @@ __all__ = [
     "make_run_dir",
     "resolve_device",
     "resolve_resume",
+    "resume_command",
     "run_script",
+    "stop_with_checkpoint",
     "write_summary",
 ]
 
@@ -103,6 +106,28 @@ def resolve_resume(path: str) -> tuple[str, str]:
     if not os.path.isfile(os.path.join(run_dir, "config.yaml")):
         raise ConfigError(f"checkpoint.resume={path}: {run_dir} has no config.yaml")
     return run_dir, checkpoint
+
+
+def resume_command(run_dir: str) -> str:
+    """The command that continues the run of ``run_dir`` with the running recipe script.
+
+    Examples:
+        >>> resume_command("/tmp/runs/merge-csirl-s0").endswith(" checkpoint.resume=/tmp/runs/merge-csirl-s0")
+        True
+    """
+    script = getattr(sys.modules.get("__main__"), "__file__", None) or "recipes/<recipe>.py"
+    relative = os.path.relpath(script)
+    script = script if relative.startswith("..") else relative
+    return f"python {shlex.quote(script)} checkpoint.resume={shlex.quote(run_dir)}"
+
+
+def stop_with_checkpoint(checkpoint: str, run_dir: str, signum: int | None) -> None:
+    """Says where an interrupted run's checkpoint is and how to resume it, then exits with ``128 + signum``
+    (130 for Ctrl-C, 143 for SIGTERM)."""
+    signum = signum or signal.SIGINT
+    print(f"{signal.Signals(signum).name}: training stopped; checkpoint saved at {checkpoint}\n"
+          f"resume with: {resume_command(run_dir)}", file=sys.stderr, flush=True)
+    sys.exit(128 + signum)
 
 
 def resolve_device(name: str) -> torch.device:

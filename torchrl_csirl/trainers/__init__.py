@@ -7,8 +7,9 @@ from torchrl_csirl.trainers.checkpoint import CheckpointHook, load_checkpoint
 from torchrl_csirl.trainers.imitation import IMITATION_METHODS, ImitationMethod, hyperparameters_class, make_imitation_method
 from torchrl_csirl.trainers.imitation_updates import AdversarialImitationUpdate, DiscriminatorStep, ValueDICEUpdate
 from torchrl_csirl.trainers.hooks import EvaluationHook, SubgoalSelectionHook
+from torchrl_csirl.trainers.interrupt import StopOnSignals, ignoring_interrupts
 from torchrl_csirl.trainers.metrics_logger import MetricsLogger
-from torchrl_csirl.trainers.trainer import CSIRLTrainer, TrainingDivergedError, check_finite_losses
+from torchrl_csirl.trainers.trainer import CSIRLTrainer, TrainingDivergedError, TrainingInterrupted, check_finite_losses
 from torchrl_csirl.trainers.updates import BCUpdate, MetaRewardUpdate, SACUpdate
 
 __all__ = [
@@ -23,12 +24,15 @@ __all__ = [
     "MetaRewardUpdate",
     "MetricsLogger",
     "SACUpdate",
+    "StopOnSignals",
     "SubgoalSelectionHook",
     "TrainingDivergedError",
+    "TrainingInterrupted",
     "ValueDICEUpdate",
     "check_finite_losses",
     "evaluate_policy",
     "hyperparameters_class",
+    "ignoring_interrupts",
     "load_checkpoint",
     "make_imitation_method",
     "shutdown_collector",

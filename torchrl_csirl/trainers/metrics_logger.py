@@ -106,6 +106,18 @@ class MetricsLogger:
                 if isinstance(value, (int, float)) and key != self.step_key:
                     self.logger.log_scalar(key, value, step=step)
 
+    def log_video(self, path: str | os.PathLike, key: str = "test_episode", step: int | None = None) -> None:
+        """Sends a video file (``.mp4`` or ``.gif``) to W&B, with ``step`` as the step entry; the other
+        backends keep the file where it is (TorchRL's CSV logger would need torchcodec for mp4)."""
+        if self.backend != "wandb" or self.logger is None:
+            return
+        import wandb
+
+        payload: dict[str, Any] = {key: wandb.Video(os.fspath(path), format=os.path.splitext(path)[1].lstrip("."))}
+        if step is not None:
+            payload[self.step_key] = step
+        self.logger.experiment.log(payload)
+
     def write_csv(self) -> None:
         """Rewrites ``metrics.csv`` from the rows (union of keys, in first-seen order)."""
         columns: dict[str, None] = {}

@@ -21,13 +21,27 @@ import numpy as np
 import torch
 from tensordict import TensorDictBase
 
-__all__ = ["CSIRLTrainer", "TrainingDivergedError", "check_finite_losses", "rng_state", "set_rng_state"]
+__all__ = ["CSIRLTrainer", "TrainingDivergedError", "TrainingInterrupted", "check_finite_losses", "rng_state",
+           "set_rng_state"]
 
 STAGES = ("batch_process", "post_update", "round_end", "post_round", "log", "train_end")
 
 
 class TrainingDivergedError(RuntimeError):
     """Raised when a loss becomes NaN or infinite; the last good checkpoint is kept."""
+
+
+class TrainingInterrupted(Exception):
+    """Raised by :meth:`CSIRLTrainer.train` after :meth:`CSIRLTrainer.request_stop`, at a batch boundary:
+    the trainer's state is the one of an uninterrupted run at that point, ready to be checkpointed.
+
+    Attributes:
+        reason: what :meth:`~CSIRLTrainer.request_stop` was given (e.g. ``"SIGTERM"``).
+    """
+
+    def __init__(self, reason: str) -> None:
+        super().__init__(f"training stopped: {reason}")
+        self.reason = reason
 
 
 def check_finite_losses(losses: dict[str, torch.Tensor], where: str) -> None:
@@ -145,6 +159,7 @@ class CSIRLTrainer:
         self._time_collect = 0.0
         self._time_update = 0.0
         self._throughput_base = (0, 0)  # (frames, updates) not covered by the two times above
+        self.stop_reason: str | None = None  # set by request_stop (e.g. from a signal handler)
 
     # ------------------------------------------------------------------ hooks
     def register_op(self, stage: str, op: Callable, name: str | None = None) -> None:
@@ -173,6 +188,11 @@ class CSIRLTrainer:
     def ops(self, stage: str) -> list[str]:
         """Names of the ops registered at ``stage``, in call order."""
         return [name for name, _ in self._ops[stage]]
+
+    def request_stop(self, reason: str = "stop requested") -> None:
+        """Asks :meth:`train` to stop at the end of the current batch (its updates, round end and log
+        done) with :class:`TrainingInterrupted`; safe to call from a signal handler."""
+        self.stop_reason = reason
 
     # ------------------------------------------------------------------ state
     def counters(self) -> dict[str, Any]:
@@ -319,6 +339,8 @@ class CSIRLTrainer:
                 bar.update(frames)
                 if self.postfix:
                     bar.set_postfix(self.postfix, refresh=False)
+                if self.stop_reason is not None:
+                    raise TrainingInterrupted(self.stop_reason)
         finally:
             bar.close()
             self._wall += time.perf_counter() - self._t0

@@ -1,0 +1,66 @@
+"""SIGTERM in a run's first round: a checkpoint at the batch reached, the resume command printed,
+exit status 143, and the resumed run finishes with every frame counted once."""
+from __future__ import annotations
+
+import json
+import os
+import shlex
+import signal
+import subprocess
+import sys
+import time
+
+import torch
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+RECIPE = os.path.join("recipes", "csirl_highway.py")
+# 100-frame batches collected in the main process, one round that never ends before 400 frames: no
+# round checkpoint before the signal
+TINY = [
+    "collector.frames_per_batch=100", "collector.init_random_frames=100", "collector.num_workers=1",
+    "collector.main_threads=1", "replay_buffer.warmup_frames=100", "replay_buffer.batch_size=32",
+    "csirl.updates_per_round=1000", "csirl.num_qvalue_nets=2", "optim.utd_ratio=0.1", "eval.episodes=1",
+    "eval.final_episodes=1", "eval.video=false", "logger.backend=none", "logger.progress_bar=false",
+    "collector.total_frames=400",
+]
+ENV = {**os.environ, "WANDB_MODE": "offline", "MPLBACKEND": "Agg", "RL_WARNINGS": "0"}
+
+
+def _rows(run_dir: str) -> list[dict]:
+    path = os.path.join(run_dir, "metrics.jsonl")
+    if not os.path.exists(path):
+        return []
+    with open(path) as f:
+        return [json.loads(line) for line in f if line.strip()]
+
+
+def test_sigterm_in_the_first_round_checkpoints_and_prints_the_resume_command(tmp_path):
+    run_dir = os.path.join(tmp_path, "stopped")
+    proc = subprocess.Popen([sys.executable, RECIPE, *TINY, f"logger.output_dir={tmp_path}", "logger.exp_name=stopped"],
+                            cwd=ROOT, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 120
+        while not _rows(run_dir) and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert proc.poll() is None, f"the run ended before it could be stopped:\n{proc.stderr.read()[-2000:]}"
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    assert proc.returncode == 128 + signal.SIGTERM, err[-2000:]
+    state = torch.load(os.path.join(run_dir, "checkpoints", "last", "state.pt"), weights_only=False)
+    counters = state["counters"]
+    frames = counters["frames"]
+    assert 100 <= frames < 400 and counters["rounds"] == 0 and frames == _rows(run_dir)[-1]["frames"]
+    resume = [line for line in err.splitlines() if line.startswith("resume with: ")]
+    assert resume, err[-2000:]
+    command = shlex.split(resume[-1].removeprefix("resume with: "))
+    assert command == ["python", RECIPE, f"checkpoint.resume={run_dir}"]
+
+    done = subprocess.run([sys.executable, *command[1:]], cwd=ROOT, env=ENV, capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert f"resumed {run_dir} at {frames} frames" in done.stderr
+    summary = json.loads(done.stdout.strip().splitlines()[-1])
+    assert summary["frames"] == 400 and summary["run_dir"] == run_dir
+    assert [r["frames"] for r in _rows(run_dir) if "round" in r] == [100, 200, 300, 400]  # each batch once

@@ -1,0 +1,111 @@
+"""Videos: the writers (gif, mp4), filming a robotics task headless, and recipes/watch.py's input checks
+(a driving run is filmed in tests/test_recipe.py, on its trained run)."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from omegaconf import OmegaConf
+from PIL import Image
+
+RECIPES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "recipes")
+sys.path.insert(0, RECIPES)
+
+import watch  # noqa: E402
+from common.config import ConfigError  # noqa: E402
+
+from torchrl_csirl.modules import make_actor, save_policy  # noqa: E402
+from torchrl_csirl.visualization import VideoError, write_video  # noqa: E402
+from torchrl_csirl.visualization.video import frame_stride, make_render_env, video_format_available  # noqa: E402
+
+
+def _frames(n=4, h=7, w=9):
+    frames = np.zeros((n, h, w, 3), dtype=np.uint8)
+    for i in range(n):
+        frames[i, :, : i + 1] = 255
+    return frames
+
+
+def test_gif_and_mp4_are_written_from_frames(tmp_path):
+    gif = write_video(_frames(), tmp_path / "a.gif", fps=10)
+    with Image.open(gif) as image:
+        assert (image.n_frames, image.size) == (4, (9, 7))
+        assert image.info["duration"] == 100
+    if not video_format_available("mp4"):
+        pytest.skip("imageio-ffmpeg is not installed (the video extra)")
+    mp4 = write_video(list(_frames()), tmp_path / "sub" / "a.mp4", fps=10)  # odd sizes: padded
+    with open(mp4, "rb") as f:
+        assert f.read(12)[4:8] == b"ftyp"
+
+
+def test_bad_frames_and_formats_are_refused(tmp_path):
+    with pytest.raises(ValueError, match="unknown video format '.avi'"):
+        write_video(_frames(), tmp_path / "a.avi")
+    with pytest.raises(ValueError, match=r"\[T, H, W, 3\]"):
+        write_video(np.zeros((2, 4, 4)), tmp_path / "a.gif")
+    assert frame_stride(0.01) == 4 and frame_stride(1.0) == 1
+
+
+def test_a_machine_that_cannot_render_says_what_to_install(monkeypatch):
+    import torchrl_csirl.envs as envs
+
+    def no_gl(*args, **kwargs):
+        raise AttributeError("'NoneType' object has no attribute 'eglQueryString'")
+
+    monkeypatch.setattr(envs, "make_env", no_gl)
+    with pytest.raises(VideoError, match="cannot render relocate headless here .*apt-get install libegl1"):
+        make_render_env("relocate")
+
+
+def _run_dir(tmp_path, task="relocate", policy=True):
+    import csirl_robotics
+
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    cfg = csirl_robotics.load_config([f"env.task={task}", "eval.seed=7"])
+    OmegaConf.save(cfg, run_dir / "config.yaml")
+    if policy:
+        from torchrl_csirl.envs import resolve_scenario
+
+        spec = resolve_scenario(task)
+        save_policy(make_actor(spec.obs_dim, spec.action_dim), run_dir / "policy.pt", obs_dim=spec.obs_dim,
+                    action_dim=spec.action_dim, scenario=task)
+    return run_dir
+
+
+@pytest.mark.parametrize("task, pictures", [
+    ("relocate", 3),  # 10 ms steps: the reset, step 4 and step 8 (25 pictures a second)
+    ("antmaze-umaze", 9),  # 50 ms steps: the reset and every step
+])
+def test_watch_films_a_robotics_run_headless(tmp_path, capsys, task, pictures):
+    run_dir = _run_dir(tmp_path, task)
+    paths = watch.main([str(run_dir), "--format", "gif", "--max-steps", "8"])
+    assert paths == [str(run_dir / "videos" / "test-episode-0.gif")]
+    with Image.open(paths[0]) as image:
+        assert image.n_frames == pictures
+    assert f"{task}, seed 7: 8 steps" in capsys.readouterr().out
+
+
+def test_watch_refuses_what_is_not_a_finished_run(tmp_path):
+    with pytest.raises(ConfigError, match="no such directory"):
+        watch.main([str(tmp_path / "nothing")])
+    with pytest.raises(ConfigError, match=r"not a run directory \(no config.yaml\)"):
+        watch.main([str(tmp_path)])
+    run_dir = _run_dir(tmp_path, policy=False)
+    with pytest.raises(ConfigError, match="no policy.pt; it is written when training finishes"):
+        watch.main([str(run_dir)])
+    with pytest.raises(ConfigError, match="--format=avi: must be one of mp4, gif"):
+        watch.main([str(run_dir), "--format", "avi"])
+    with pytest.raises(ConfigError, match="--episodes=0: must be positive"):
+        watch.main([str(run_dir), "--episodes", "0"])
+
+
+def test_watch_bad_input_is_one_error_line_and_exit_status_2(tmp_path):
+    env = {**os.environ, "MPLBACKEND": "Agg"}
+    proc = subprocess.run([sys.executable, os.path.join(RECIPES, "watch.py"), str(tmp_path)], capture_output=True,
+                          text=True, env=env, timeout=300)
+    assert proc.returncode == 2
+    assert proc.stderr.strip().splitlines()[-1] == f"error: {tmp_path}: not a run directory (no config.yaml)"
