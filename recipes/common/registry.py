@@ -22,7 +22,7 @@ from omegaconf import DictConfig
 __all__ = ["RECIPE_MODULES", "known_methods", "load_config_for", "register_recipe"]
 
 #: the recipe modules (importable from recipes/) that register methods
-RECIPE_MODULES = ("csirl_utils", "imitation_utils")
+RECIPE_MODULES = ("common.csirl", "common.imitation")
 
 _LOADERS: dict[str, Callable[[list[str]], DictConfig]] = {}
 

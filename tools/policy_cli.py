@@ -1,5 +1,5 @@
 """The command line of the scripts that roll a saved policy out on the recipe's test episodes
-(``recipes/policy_outcomes.py``, ``recipes/robotics_outcomes.py``): the arguments, the policy and
+(``tools/policy_outcomes.py``, ``tools/robotics_outcomes.py``): the arguments, the policy and
 its task, checked; and the small formatting helpers of their tables.
 """
 from __future__ import annotations

@@ -46,6 +46,7 @@ from common.config import (
     option,
 )
 from common.registry import register_recipe
+from common.robotics import RoboticsExpertConfig, RoboticsSections
 from common.run import ExpertDataError, resolve_device
 from torchrl_csirl.curriculum import SubgoalCurriculum
 from torchrl_csirl.data import DemonstrationMixer
@@ -64,7 +65,7 @@ from torchrl_csirl.objectives.meta_reward import GRADIENT_BALANCES
 from torchrl_csirl.trainers import MetaRewardUpdate, SACUpdate, SubgoalSelectionHook
 from torchrl_csirl.transforms import CombineRewards, IntrinsicReward, SubgoalMatchingReward
 
-__all__ = ["ConfigError", "CSIRLConfig", "CSIRLHighwayConfig", "ExpertDataError", "load_config", "make_trainer"]
+__all__ = ["ConfigError", "CSIRLConfig", "CSIRLHighwayConfig", "CSIRLRoboticsConfig", "ExpertDataError", "load_config", "make_trainer"]
 
 CONFIG_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "config", "csirl_highway")
 
@@ -129,6 +130,13 @@ class CSIRLHighwayConfig:
     eval: EvalConfig = field(default_factory=EvalConfig)
     logger: LoggerConfig = field(default_factory=LoggerConfig)
     checkpoint: CheckpointConfig = field(default_factory=CheckpointConfig)
+
+
+@dataclass
+class CSIRLRoboticsConfig(RoboticsSections, CSIRLHighwayConfig):
+    """``recipes/csirl_robotics.py``: the driving recipe's defaults with the robotics sections."""
+
+    expert: RoboticsExpertConfig = field(default_factory=RoboticsExpertConfig)
 
 
 def load_config(overrides: list[str] | None = None) -> DictConfig:
