@@ -37,3 +37,10 @@ def test_schema_describes_every_key_and_is_the_recipes_own(recipe):
         config.attribute_docs(klass)
     script = importlib.import_module(recipe)
     assert getattr(script, schema.__name__) is schema
+
+
+def test_the_glue_finds_the_recipes_preset_config_group():
+    from common import csirl
+
+    assert config.preset_names(csirl.CONFIG_DIR) == ("default", "paper")
+    assert csirl.load_config(["preset=paper"]).preset == "paper"

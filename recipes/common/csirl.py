@@ -60,7 +60,8 @@ from torchrl_csirl.transforms import CombineRewards, IntrinsicReward, SubgoalMat
 
 __all__ = ["ConfigError", "CSIRLConfig", "CSIRLHighwayConfig", "CSIRLRoboticsConfig", "ExpertDataError", "load_config", "make_trainer"]
 
-CONFIG_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "config", "csirl_highway")
+RECIPES_DIR = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+CONFIG_DIR = os.path.join(RECIPES_DIR, "config", "csirl_highway")  # the preset config group
 
 
 # ---------------------------------------------------------------------------------------- config
