@@ -32,7 +32,7 @@ import torch
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "recipes"))
 
-import csirl_utils  # noqa: E402
+from common import csirl  # noqa: E402
 from common.run import resolve_device  # noqa: E402
 
 
@@ -53,11 +53,11 @@ def main() -> None:
     parser.add_argument("overrides", nargs="*", help="recipe configuration, key=value")
     args = parser.parse_args()
     out_dir = tempfile.mkdtemp(prefix="bench_recipe_update-")
-    cfg = csirl_utils.load_config([
+    cfg = csirl.load_config([
         "collector.num_workers=1", "logger.backend=none", "logger.progress_bar=false",
         f"logger.output_dir={out_dir}", *args.overrides,
     ])
-    run = csirl_utils.make_trainer(cfg, out_dir)
+    run = csirl.make_trainer(cfg, out_dir)
     try:
         _fill(run, args.frames)
         trainer, update = run.trainer, run.trainer.update_step

@@ -44,7 +44,7 @@ from typing import Any
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 from common.config import SCENARIO_NAMES  # noqa: E402
-from summarize_runs import find_summaries, mean_std, welch_test  # noqa: E402
+from common.summaries import find_summaries, mean_std, welch_test  # noqa: E402
 
 from torchrl_csirl.envs.robotics import ROBOTICS_TASKS  # noqa: E402
 
@@ -125,7 +125,7 @@ def score_key(scenario: str) -> str:
 
 def known_methods() -> tuple[str, ...]:
     """Every method a cell can run: CSIRL's and those ``imitation_highway.py`` accepts."""
-    from imitation_utils import METHODS
+    from common.imitation import METHODS
 
     return (*CSIRL_METHODS, *METHODS)
 
@@ -365,7 +365,7 @@ def table_rows(runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
 def add_comparison_to_csirl(rows: list[dict[str, Any]], groups: dict[tuple[str, str], list[dict]]) -> None:
     """Each row's difference from ``csirl`` on its scenario (in its :func:`score_key`: expert-normalised on the
     driving scenarios, the return on the robotics tasks; Welch's t-test over seeds,
-    :func:`~summarize_runs.welch_test`): ``vs_csirl``, ``vs_csirl_t``, ``vs_csirl_beyond_noise``."""
+    :func:`~common.summaries.welch_test`): ``vs_csirl``, ``vs_csirl_t``, ``vs_csirl_beyond_noise``."""
     def values(method: str, scenario: str) -> list[float]:
         key = score_key(scenario)
         return [float(r[key]) for r in groups.get((method, scenario), []) if r.get(key) is not None]

@@ -2,7 +2,7 @@
 
 Trains the ensemble-SAC learner with the matching reward toward curricular subgoals and the
 meta-learned intrinsic reward, from the shipped expert demonstrations, and reports the paper's
-test accomplish rate. Configuration: the typed schema in ``recipes/csirl_utils.py``
+test accomplish rate. Configuration: the typed schema in ``recipes/common/csirl.py``
 (``python recipes/csirl_highway.py --help`` lists every key, its default and what it accepts;
 e.g. ``env.scenario=roundabout seed=1 csirl.intrinsic=false``); ``preset=paper`` is the published
 procedure. See docs/RECIPE.md.
@@ -23,7 +23,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from common.builders import Run, final_summary, open_run, train_and_finish  # noqa: E402
 from common.config import help_requested  # noqa: E402
 from common.run import run_script, write_summary  # noqa: E402
-from csirl_utils import CSIRLHighwayConfig, load_config, load_run_config, make_trainer, method_name  # noqa: E402
+from common.csirl import CSIRLHighwayConfig, load_config, load_run_config, make_trainer, method_name  # noqa: E402
 
 
 def build(argv: list[str], load=load_config, load_run=load_run_config) -> Run:

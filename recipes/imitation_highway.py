@@ -4,7 +4,7 @@ Trains (or, for the reference rows, evaluates) one of the methods CSIRL is compa
 the CSIRL recipe's budget, networks, input features, demonstrations and evaluation, with the same
 outputs. Methods: ``sac`` (SAC on the true distance reward), ``bc`` (behavioural cloning),
 ``random`` and ``expert`` (reference rows, no training); CSIRL itself is
-``recipes/csirl_highway.py``. Configuration: the typed schema in ``recipes/imitation_utils.py``
+``recipes/csirl_highway.py``. Configuration: the typed schema in ``recipes/common/imitation.py``
 (``python recipes/imitation_highway.py --help`` lists every key). See docs/BENCHMARK.md.
 
 The run directory (``logger.output_dir``/<name>) receives ``config.yaml``, ``metrics.jsonl``,
@@ -29,7 +29,7 @@ from common.builders import (  # noqa: E402
 )
 from common.config import help_requested  # noqa: E402
 from common.run import run_script, write_summary  # noqa: E402
-from imitation_utils import (  # noqa: E402
+from common.imitation import (  # noqa: E402
     REFERENCE_METHODS,
     ImitationHighwayConfig,
     evaluate_reference,

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import os
 import sys
-from dataclasses import dataclass, field
 from functools import partial
 
 from omegaconf import DictConfig
@@ -26,27 +25,13 @@ from omegaconf import DictConfig
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 import imitation_highway  # noqa: E402
-from common.config import option  # noqa: E402
+from common.imitation import ImitationRoboticsConfig, load_baseline_config  # noqa: E402
+from common.robotics import check_robotics_config  # noqa: E402
 from common.run import run_script  # noqa: E402
-from csirl_robotics import RoboticsSections, check_robotics_config  # noqa: E402
-from imitation_utils import ImitationExpertConfig, ImitationHighwayConfig, load_baseline_config  # noqa: E402
 
 __all__ = ["ImitationRoboticsConfig", "load_config", "load_run_config", "main"]
 
 CSIRL_RECIPE = "recipes/csirl_robotics.py"
-
-
-@dataclass
-class RoboticsImitationExpertConfig(ImitationExpertConfig):
-    curriculum: str = option("expert", choices=("expert",),
-                             help="the task's shipped file (its trajectory order; the baselines use no curriculum)")
-
-
-@dataclass
-class ImitationRoboticsConfig(RoboticsSections, ImitationHighwayConfig):
-    """``recipes/imitation_robotics.py``: the driving baselines' schema with the robotics sections."""
-
-    expert: RoboticsImitationExpertConfig = field(default_factory=RoboticsImitationExpertConfig)
 
 
 def load_config(overrides: list[str] | None = None) -> DictConfig:

@@ -27,7 +27,6 @@ from __future__ import annotations
 import os
 import sys
 import time
-from dataclasses import dataclass, field
 
 from omegaconf import DictConfig, OmegaConf
 
@@ -38,16 +37,7 @@ import torch  # noqa: E402
 from common import config as config_lib  # noqa: E402
 from common.builders import Run, assemble_trainer, check_collector, final_summary, make_online_buffer  # noqa: E402
 from common.builders import open_run, train_and_finish  # noqa: E402
-from common.config import (  # noqa: E402
-    DEVICES,
-    CheckpointConfig,
-    CollectorConfig,
-    EvalConfig,
-    LearnerReplayBufferConfig,
-    LoggerConfig,
-    UpdateRatioConfig,
-    option,
-)
+from common.ant_expert import AntExpertConfig  # noqa: E402
 from common.run import resolve_device, run_script, write_summary  # noqa: E402
 
 from torchrl.objectives import SoftUpdate  # noqa: E402
@@ -59,64 +49,8 @@ from torchrl_csirl.trainers import SACUpdate  # noqa: E402
 
 __all__ = ["AntExpertConfig", "evaluate_waypoint_expert", "load_config", "main", "make_trainer"]
 
-TASK = "ant-goal"
-
 
 # ---------------------------------------------------------------------------------------- config
-@dataclass
-class AntEnvConfig:
-    scenario: str = option(TASK, choices=(TASK,), help="the training task (chained-hop goal reaching)")
-
-
-@dataclass
-class AntCollectorConfig(CollectorConfig):
-    total_frames: int = option(1_000_000, above=0, help="environment frames")
-    frames_per_batch: int = option(1200, above=0,
-                                   help="frames per collected batch (>= 300, one episode, per environment)")
-    init_random_frames: int = option(10_000, minimum=0, help="uniform random actions first")
-
-
-@dataclass
-class AntReplayBufferConfig(LearnerReplayBufferConfig):
-    warmup_frames: int = option(10_000, minimum=0, help="transitions in the buffer before the first update")
-
-
-@dataclass
-class AntEvalConfig(EvalConfig):
-    episodes: int = option(20, above=0, help="deterministic ant-goal episodes (4-goal chains) per evaluation")
-    final_episodes: int = option(100, above=0, help="ant-goal episodes of the final test")
-
-
-@dataclass
-class AntCheckpointConfig(CheckpointConfig):
-    every_rounds: int = option(5, minimum=0, help="checkpoint cadence in rounds (0: only at the end)")
-
-
-@dataclass
-class ExpertEvalConfig:
-    episodes: int = option(20, minimum=0, help="AntMaze episodes driven by the waypoint expert at the end (0: none)")
-    seed: int = option(10_000, minimum=0, help="AntMaze episode i uses seed + i")
-
-
-@dataclass
-class AntExpertConfig:
-    """``recipes/train_ant_expert.py``: SAC on the ant's goal-reaching task."""
-
-    preset: str = option("default", help="default (no other preset)")
-    seed: int = option(0, minimum=0, help="random seed")
-    device: str = option("auto", choices=DEVICES, help="the learner's device (auto: a GPU when there is one)")
-    updates_per_round: int = option(10_000, above=0, help="updates between two evaluations (a round)")
-    env: AntEnvConfig = field(default_factory=AntEnvConfig)
-    collector: AntCollectorConfig = field(default_factory=AntCollectorConfig)
-    replay_buffer: AntReplayBufferConfig = field(default_factory=AntReplayBufferConfig)
-    optim: UpdateRatioConfig = field(default_factory=UpdateRatioConfig)
-    sac: SACHyperparameters = field(default_factory=SACHyperparameters)
-    eval: AntEvalConfig = field(default_factory=AntEvalConfig)
-    expert_eval: ExpertEvalConfig = field(default_factory=ExpertEvalConfig)
-    logger: LoggerConfig = field(default_factory=LoggerConfig)
-    checkpoint: AntCheckpointConfig = field(default_factory=AntCheckpointConfig)
-
-
 def _checked(cfg: DictConfig) -> DictConfig:
     check_collector(cfg.collector)
     resolve_device(cfg.device)

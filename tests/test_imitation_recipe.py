@@ -10,12 +10,14 @@ import sys
 import pytest
 import torch
 
-RECIPES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "recipes")
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+RECIPES, TOOLS = os.path.join(ROOT, "recipes"), os.path.join(ROOT, "tools")
 sys.path.insert(0, RECIPES)
+sys.path.insert(0, TOOLS)  # the analysis scripts
 
 import benchmark  # noqa: E402
 import imitation_highway  # noqa: E402
-import imitation_utils  # noqa: E402
+from common import imitation  # noqa: E402
 import termination_probe  # noqa: E402
 from common.run import run_script  # noqa: E402
 
@@ -37,7 +39,7 @@ VOLATILE = {"collect_fps", "updates_per_s"}
 
 def small_batches(method: str) -> list[str]:
     """``<method>.<...>batch_size=32`` for every batch size of the method's section."""
-    cfg = imitation_utils.load_config([f"method={method}"])
+    cfg = imitation.load_config([f"method={method}"])
     section = cfg.get(method) or {}
     return [f"{method}.{key}=32" for key in section if key.endswith("batch_size")]
 
@@ -51,7 +53,7 @@ def run_main(*args: str) -> dict:
     return imitation_highway.main(list(args))
 
 
-@pytest.mark.parametrize("method", imitation_utils.TRAINED_METHODS)
+@pytest.mark.parametrize("method", imitation.TRAINED_METHODS)
 def test_trained_baseline_end_to_end(method, tmp_path):
     out = run_main(f"method={method}", *TINY, *small_batches(method), "collector.total_frames=200",
                    f"logger.output_dir={tmp_path}", "logger.exp_name=run", "logger.backend=csv")
@@ -78,7 +80,7 @@ def test_trained_baseline_end_to_end(method, tmp_path):
         with open(os.path.join(run_dir, "termination_probe.json")) as f:
             assert json.load(f)["agent"] == stats["agent"]
     else:
-        with pytest.raises(imitation_utils.ConfigError, match="no critic to probe"):
+        with pytest.raises(imitation.ConfigError, match="no critic to probe"):
             termination_probe.main([run_dir])
 
 
@@ -102,9 +104,9 @@ def test_progress_reward_is_the_distance_gained_toward_the_finish():
 
 
 def test_sac_trains_on_the_progress_reward(tmp_path):
-    cfg = imitation_utils.load_config(["method=sac", *TINY, *small_batches("sac"), "collector.total_frames=200",
+    cfg = imitation.load_config(["method=sac", *TINY, *small_batches("sac"), "collector.total_frames=200",
                                        "logger.backend=none"])
-    run = imitation_utils.make_trainer(cfg, str(tmp_path))
+    run = imitation.make_trainer(cfg, str(tmp_path))
     try:
         run.trainer.train()
         batch = run.online_buffer.sample()
@@ -231,6 +233,6 @@ def test_help_lists_every_key_with_its_help(capsys):
 
     assert imitation_highway.main(["--help"]) == {}
     keys = [line for line in capsys.readouterr().out.splitlines() if " = " in line]
-    assert len(keys) == len(flatten_config(imitation_utils.load_config(["method=bc"])))
+    assert len(keys) == len(flatten_config(imitation.load_config(["method=bc"])))
     # sections from a hyperparameter dataclass show the help of its docstring
     assert any(line.strip().startswith("sac.tau = 0.005  # a number; Polyak") for line in keys)

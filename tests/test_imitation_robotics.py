@@ -15,7 +15,7 @@ sys.path.insert(0, RECIPES)
 
 import benchmark  # noqa: E402
 import imitation_robotics  # noqa: E402
-import imitation_utils  # noqa: E402
+from common import imitation  # noqa: E402
 from common.config import ConfigError  # noqa: E402
 
 from torchrl_csirl.envs import make_env, resolve_scenario  # noqa: E402
@@ -51,14 +51,14 @@ def test_the_expert_row_drives_the_task_expert():
 
 def test_sac_learns_from_the_task_reward_on_robotics_and_the_progress_reward_on_driving():
     robotics = imitation_robotics.load_config(["method=sac", "env.task=relocate"])
-    assert imitation_utils.true_reward_transforms(robotics, resolve_scenario("relocate"), torch.device("cpu")) == []
-    driving = imitation_utils.load_config(["method=sac", "env.scenario=merge"])
-    names = [type(t).__name__ for t in imitation_utils.true_reward_transforms(
+    assert imitation.true_reward_transforms(robotics, resolve_scenario("relocate"), torch.device("cpu")) == []
+    driving = imitation.load_config(["method=sac", "env.scenario=merge"])
+    names = [type(t).__name__ for t in imitation.true_reward_transforms(
         driving, resolve_scenario("merge"), torch.device("cpu"))]
     assert names == ["ProgressReward", "CombineRewards"]
     scaled = imitation_robotics.load_config(["method=sac", "env.task=relocate", "sac.reward_scale=2"])
     with pytest.raises(ConfigError, match="sac.reward_scale=2.0: relocate trains SAC on the environment's own reward"):
-        imitation_utils.true_reward_transforms(scaled, resolve_scenario("relocate"), torch.device("cpu"))
+        imitation.true_reward_transforms(scaled, resolve_scenario("relocate"), torch.device("cpu"))
 
 
 def test_configuration_errors():

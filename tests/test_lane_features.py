@@ -8,7 +8,7 @@ import torch
 from tensordict import TensorDict
 
 from torchrl_csirl.data import load_expert_demonstrations
-from torchrl_csirl.envs import SCENARIOS, make_gym_env
+from torchrl_csirl.envs import SCENARIOS, make_gym_env, sample_lane_centres
 from torchrl_csirl.modules import (
     FeatureChain,
     LaneFeatures,
@@ -85,14 +85,22 @@ def test_chained_after_the_ego_relative_map_in_every_network_and_the_meta_gradie
     assert sum(p.grad.abs().sum() for p in reward.parameters()) > 0
 
 
-def test_a_saved_policy_rebuilds_its_chained_map_from_the_scenario(tmp_path):
+def test_a_saved_policy_holds_its_chained_map_and_its_lane_points(tmp_path):
     spec = SCENARIOS["roundabout"]
     actor = make_actor(spec.obs_dim, 2, input_features=make_input_features(spec, ego_relative=True, lane=True))
     path = save_policy(actor, tmp_path / "policy.pt", obs_dim=spec.obs_dim, action_dim=2, scenario="roundabout")
     payload = torch.load(path, weights_only=True)
-    assert payload["input_features"]["kind"] == "chain" and payload["input_features"]["maps"][1]["centres"] is None
-    loaded = load_policy(path)
+    lane = payload["input_features"]["maps"][1]
+    assert payload["input_features"]["kind"] == "chain" and lane["scenario"] == "roundabout"
+    assert np.allclose(lane["centres"], spec.lane_centres())  # loading needs no environment
     td = TensorDict({"observation": torch.rand(6, spec.obs_dim) * 0.2}, [6])
+    assert torch.equal(actor(td.clone())["loc"], load_policy(path)(td.clone())["loc"])
+    # a policy saved with the scenario's name only (before the points were stored) takes them from the road
+    lane["centres"] = None
+    torch.save(payload, tmp_path / "by_name.pt")
+    with pytest.raises(ValueError, match="pass lane_centres=torchrl_csirl.envs.sample_lane_centres"):
+        load_policy(tmp_path / "by_name.pt")
+    loaded = load_policy(tmp_path / "by_name.pt", lane_centres=sample_lane_centres)
     assert torch.equal(actor(td.clone())["loc"], loaded(td.clone())["loc"])
 
 

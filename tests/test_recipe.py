@@ -12,11 +12,13 @@ import numpy as np
 import pytest
 import torch
 
-RECIPES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "recipes")
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+RECIPES, TOOLS = os.path.join(ROOT, "recipes"), os.path.join(ROOT, "tools")
 RECIPE = os.path.join(RECIPES, "csirl_highway.py")
 sys.path.insert(0, RECIPES)
+sys.path.insert(0, TOOLS)  # the analysis scripts
 
-import csirl_utils  # noqa: E402
+from common import csirl  # noqa: E402
 from common import builders, config, run  # noqa: E402
 
 from torchrl_csirl.trainers import TrainingDivergedError, load_checkpoint, shutdown_collector  # noqa: E402
@@ -139,13 +141,13 @@ def test_resume_gives_the_uninterrupted_metrics(full_run, tmp_path):
 
 
 def _tiny_cfg(tmp_path, *extra):
-    return csirl_utils.load_config(TINY + ["collector.num_workers=1", "logger.backend=none",
+    return csirl.load_config(TINY + ["collector.num_workers=1", "logger.backend=none",
                                            f"logger.output_dir={tmp_path}", *extra])
 
 
 def test_csirl_b_switch_trains_without_the_reward_network(tmp_path):
     cfg = _tiny_cfg(tmp_path, "csirl.intrinsic=false", "collector.total_frames=300")
-    run = csirl_utils.make_trainer(cfg, str(tmp_path))
+    run = csirl.make_trainer(cfg, str(tmp_path))
     try:
         assert run.modules.meta is None
         reward_before = [p.clone() for p in run.modules.reward_network.parameters()]
@@ -162,7 +164,7 @@ def test_csirl_b_switch_trains_without_the_reward_network(tmp_path):
 
 def test_fixed_subgoal_switch_keeps_the_subgoal_at_the_last_curriculum_state(tmp_path):
     cfg = _tiny_cfg(tmp_path, "csirl.fixed_subgoal=true", "collector.total_frames=300")
-    run = csirl_utils.make_trainer(cfg, str(tmp_path))
+    run = csirl.make_trainer(cfg, str(tmp_path))
     try:
         last = run.curriculum.length - 1
         assert run.curriculum.subgoal == last
@@ -180,8 +182,8 @@ def test_matching_scale_defaults_to_the_scenario_and_can_be_overridden(tmp_path)
     spec = SCENARIOS["merge"]
     curriculum = torch.zeros(5, spec.obs_dim)
     curriculum[:, spec.position_feature_indices[0]] = torch.linspace(0.0, 0.4, 5)
-    default = csirl_utils.make_matching(_tiny_cfg(tmp_path), spec, curriculum, 2)
-    scaled = csirl_utils.make_matching(_tiny_cfg(tmp_path, "csirl.matching_scale=10"), spec, curriculum, 2)
+    default = csirl.make_matching(_tiny_cfg(tmp_path), spec, curriculum, 2)
+    scaled = csirl.make_matching(_tiny_cfg(tmp_path, "csirl.matching_scale=10"), spec, curriculum, 2)
     assert default.scale == spec.matching_scale and scaled.scale == 10.0
     with pytest.raises(config.ConfigError, match="matching_scale"):
         _tiny_cfg(tmp_path, "csirl.matching_scale=0")
@@ -189,7 +191,7 @@ def test_matching_scale_defaults_to_the_scenario_and_can_be_overridden(tmp_path)
 
 def test_automatic_temperature_is_trained_and_logged(tmp_path):
     cfg = _tiny_cfg(tmp_path, "csirl.fixed_alpha=false", "collector.total_frames=300")
-    run = csirl_utils.make_trainer(cfg, str(tmp_path))
+    run = csirl.make_trainer(cfg, str(tmp_path))
     try:
         log_alpha = run.modules.sac.log_alpha
         assert log_alpha.requires_grad
@@ -206,7 +208,7 @@ def test_automatic_temperature_is_trained_and_logged(tmp_path):
 def test_demonstrations_in_the_batch_and_actor_cloning_are_wired_and_logged(tmp_path):
     cfg = _tiny_cfg(tmp_path, "replay_buffer.expert_fraction=0.25", "csirl.actor_bc_coef=0.4",
                     "collector.total_frames=300")
-    run = csirl_utils.make_trainer(cfg, str(tmp_path))
+    run = csirl.make_trainer(cfg, str(tmp_path))
     try:
         update = run.trainer.update_step.sac_update
         assert update.actor_bc.coef == 0.4 and update.actor_bc.bc_loss.actor_network is run.modules.actor
@@ -225,7 +227,7 @@ def test_demonstrations_in_the_batch_and_actor_cloning_are_wired_and_logged(tmp_
 
 def test_nan_stops_training_and_keeps_the_last_checkpoint(tmp_path):
     cfg = _tiny_cfg(tmp_path, "collector.total_frames=400")
-    run = csirl_utils.make_trainer(cfg, str(tmp_path))
+    run = csirl.make_trainer(cfg, str(tmp_path))
 
     def poison(batch):
         if run.trainer.frames >= 200:  # after the first rounds were checkpointed
@@ -244,7 +246,7 @@ def test_nan_stops_training_and_keeps_the_last_checkpoint(tmp_path):
     params = saved["states"]["loss"]
     assert all(torch.isfinite(v).all() for v in params.values() if v.is_floating_point())
     # the kept checkpoint loads into a fresh run
-    fresh = csirl_utils.make_trainer(cfg, str(tmp_path / "fresh"))
+    fresh = csirl.make_trainer(cfg, str(tmp_path / "fresh"))
     try:
         load_checkpoint(fresh.trainer, run.checkpoint.path, fresh.online_buffer)
         assert fresh.trainer.frames == saved["counters"]["frames"]
@@ -274,8 +276,8 @@ def test_malformed_expert_file_is_a_clear_error(tmp_path, content):
               "terminated": torch.zeros(4, dtype=torch.bool)}
         ExpertDemonstrations.from_episodes([ep] * 25).save(path)
     cfg = _tiny_cfg(tmp_path, f"expert.path={path}")
-    with pytest.raises(csirl_utils.ExpertDataError, match=str(path.name)):
-        builders.load_experts(cfg.expert, csirl_utils.SCENARIOS["merge"])
+    with pytest.raises(csirl.ExpertDataError, match=str(path.name)):
+        builders.load_experts(cfg.expert, csirl.SCENARIOS["merge"])
 
 
 @pytest.mark.parametrize("curriculum, expected", [("empty", 0), ("traffic", 1)])
@@ -289,7 +291,7 @@ def test_published_file_drives_the_run(tmp_path, curriculum, expected):
     stored = import_published(path)
     cfg = _tiny_cfg(tmp_path, f"expert.path={path}", f"expert.curriculum={curriculum}",
                     "expert.num_trajectories=5")
-    run = csirl_utils.make_trainer(cfg, str(tmp_path / "run"))
+    run = csirl.make_trainer(cfg, str(tmp_path / "run"))
     try:
         assert run.demos.num_trajectories == 5 and run.demos.metadata["curriculum_trajectory"] == expected
         assert run.demos.lengths.tolist() == [60] * 5
@@ -305,8 +307,8 @@ def test_published_file_without_traffic_is_a_clear_error(tmp_path):
 
     path = write_published_files(tmp_path, "merge", sizes=(1,))[1]
     cfg = _tiny_cfg(tmp_path, f"expert.path={path}", "expert.curriculum=traffic", "expert.num_trajectories=1")
-    with pytest.raises(csirl_utils.ExpertDataError, match="expert.curriculum=traffic: no trajectory of .*merge_1.npy"):
-        builders.load_experts(cfg.expert, csirl_utils.SCENARIOS["merge"])
+    with pytest.raises(csirl.ExpertDataError, match="expert.curriculum=traffic: no trajectory of .*merge_1.npy"):
+        builders.load_experts(cfg.expert, csirl.SCENARIOS["merge"])
 
 
 def test_expert_end_at_cuts_a_published_file_where_our_scene_ends(tmp_path):
@@ -318,7 +320,7 @@ def test_expert_end_at_cuts_a_published_file_where_our_scene_ends(tmp_path):
 
     assert config.PUBLISHED_END_AT == END_AT  # the schema's choices are the importer's
     path = write_published_files(tmp_path / "published", "merge", sizes=(5,))[5]
-    spec = csirl_utils.SCENARIOS["merge"]
+    spec = csirl.SCENARIOS["merge"]
     cfg = _tiny_cfg(tmp_path, f"expert.path={path}", "expert.end_at=termination", "expert.num_trajectories=5")
     demos = builders.load_experts(cfg.expert, spec)
     expected = import_published(path, end_at="termination", scenario="merge")
@@ -326,7 +328,7 @@ def test_expert_end_at_cuts_a_published_file_where_our_scene_ends(tmp_path):
     assert max(demos.lengths.tolist()) < 60 and demos.metadata["end_at"] == "termination"
     npz = tmp_path / "demos.npz"
     expected.save(npz)
-    with pytest.raises(csirl_utils.ExpertDataError, match="expert.end_at=termination applies to published files"):
+    with pytest.raises(csirl.ExpertDataError, match="expert.end_at=termination applies to published files"):
         builders.load_experts(_tiny_cfg(tmp_path, f"expert.path={npz}", "expert.end_at=termination").expert, spec)
 
 
@@ -353,30 +355,30 @@ def test_expert_end_at_cuts_a_published_file_where_our_scene_ends(tmp_path):
     ],
 )
 def test_config_errors_name_the_problem(override, message):
-    with pytest.raises(csirl_utils.ConfigError, match=message):
-        csirl_utils.load_config(override)
+    with pytest.raises(csirl.ConfigError, match=message):
+        csirl.load_config(override)
 
 
 def test_paper_preset_is_the_published_procedure():
-    cfg = csirl_utils.load_config(["preset=paper"])
+    cfg = csirl.load_config(["preset=paper"])
     assert cfg.csirl.updates_per_round == 20000 and cfg.csirl.meta_every == 1
     assert cfg.replay_buffer.clear_each_round and cfg.optim.utd_ratio == 1.0
-    spec = csirl_utils.SCENARIOS["merge"]
-    assert csirl_utils.matching_feature_indices(cfg, spec) == spec.ego_feature_indices  # published search
-    position = csirl_utils.load_config(["csirl.matching_features=position"])
-    assert csirl_utils.matching_feature_indices(position, spec) == spec.position_feature_indices
-    assert csirl_utils.total_frames(cfg, curriculum_length=50) == 50 * (20000 + 1280)
-    assert csirl_utils.load_config(["preset=paper", "csirl.meta_every=4"]).csirl.meta_every == 4
+    spec = csirl.SCENARIOS["merge"]
+    assert csirl.matching_feature_indices(cfg, spec) == spec.ego_feature_indices  # published search
+    position = csirl.load_config(["csirl.matching_features=position"])
+    assert csirl.matching_feature_indices(position, spec) == spec.position_feature_indices
+    assert csirl.total_frames(cfg, curriculum_length=50) == 50 * (20000 + 1280)
+    assert csirl.load_config(["preset=paper", "csirl.meta_every=4"]).csirl.meta_every == 4
 
 
 @pytest.mark.parametrize("enabled", [False, True])
 def test_ego_relative_features_switch_reaches_every_network(enabled):
     from torchrl_csirl.modules import EgoRelativeFeatures
 
-    cfg = csirl_utils.load_config([f"model.ego_relative_features={str(enabled).lower()}"])
-    assert csirl_utils.load_config(["preset=paper"]).model.ego_relative_features is False
-    spec = csirl_utils.SCENARIOS[cfg.env.scenario]
-    modules = csirl_utils.make_loss_modules(cfg, spec)
+    cfg = csirl.load_config([f"model.ego_relative_features={str(enabled).lower()}"])
+    assert csirl.load_config(["preset=paper"]).model.ego_relative_features is False
+    spec = csirl.SCENARIOS[cfg.env.scenario]
+    modules = csirl.make_loss_modules(cfg, spec)
     for net in (modules.actor, modules.sac.qvalue_network, modules.reward_network):
         found = [m for m in net.modules() if isinstance(m, EgoRelativeFeatures)]
         assert len(found) == (1 if enabled else 0)
@@ -385,16 +387,16 @@ def test_ego_relative_features_switch_reaches_every_network(enabled):
 def test_reward_reference_switch_wraps_the_reward_network_around_expert_states():
     from torchrl_csirl.modules import ExpertCenteredReward
 
-    cfg = csirl_utils.load_config(["csirl.reward_reference=expert", "csirl.reward_scale=0.5"])
-    spec = csirl_utils.SCENARIOS[cfg.env.scenario]
+    cfg = csirl.load_config(["csirl.reward_reference=expert", "csirl.reward_scale=0.5"])
+    spec = csirl.SCENARIOS[cfg.env.scenario]
     demos = builders.load_experts(cfg.expert, spec)
-    reward = csirl_utils.make_loss_modules(cfg, spec, demos=demos).reward_network
+    reward = csirl.make_loss_modules(cfg, spec, demos=demos).reward_network
     assert isinstance(reward, ExpertCenteredReward) and reward.scale == 0.5
     assert reward.reference_observations.shape == (256, spec.obs_dim)
-    assert not isinstance(csirl_utils.make_loss_modules(csirl_utils.load_config([]), spec).reward_network,
+    assert not isinstance(csirl.make_loss_modules(csirl.load_config([]), spec).reward_network,
                           ExpertCenteredReward)
     with pytest.raises(ValueError, match="needs the demonstrations"):
-        csirl_utils.make_loss_modules(cfg, spec)
+        csirl.make_loss_modules(cfg, spec)
 
 
 @pytest.mark.parametrize(
@@ -409,16 +411,16 @@ def test_reward_reference_switch_wraps_the_reward_network_around_expert_states()
     ],
 )
 def test_envs_per_worker_keeps_whole_episodes_per_batch(scenario, overrides, expected):
-    cfg = csirl_utils.load_config([f"env.scenario={scenario}", *overrides])
-    assert builders.envs_per_worker(cfg.collector, csirl_utils.SCENARIOS[scenario]) == expected
+    cfg = csirl.load_config([f"env.scenario={scenario}", *overrides])
+    assert builders.envs_per_worker(cfg.collector, csirl.SCENARIOS[scenario]) == expected
 
 
 def test_collection_with_several_envs_per_worker_is_reproducible():
     """2 workers x 2 envs: a seeded batch is the same twice (what exact resume relies on)."""
-    cfg = csirl_utils.load_config(["collector.frames_per_batch=100", "collector.init_random_frames=0",
+    cfg = csirl.load_config(["collector.frames_per_batch=100", "collector.init_random_frames=0",
                                    "collector.envs_per_worker=2"])
     torch.manual_seed(0)
-    actor = csirl_utils.make_loss_modules(cfg, csirl_utils.SCENARIOS["merge"]).actor
+    actor = csirl.make_loss_modules(cfg, csirl.SCENARIOS["merge"]).actor
     batches = []
     collector = builders.make_collector("merge", cfg.collector, actor)
     try:
@@ -441,10 +443,10 @@ def test_worker_processes_act_with_the_weights_the_main_process_trains():
     """The policy copies in the 2 worker processes follow in-place updates of the loss's actor
     parameters (what the optimiser does) and a ``load_state_dict`` (what a resume does), with no
     explicit weight sync."""
-    cfg = csirl_utils.load_config(["collector.frames_per_batch=40", "collector.init_random_frames=0",
+    cfg = csirl.load_config(["collector.frames_per_batch=40", "collector.init_random_frames=0",
                                    "collector.envs_per_worker=2"])
     torch.manual_seed(0)
-    modules = csirl_utils.make_loss_modules(cfg, csirl_utils.SCENARIOS["merge"])
+    modules = csirl.make_loss_modules(cfg, csirl.SCENARIOS["merge"])
     collector = builders.make_collector("merge", cfg.collector, modules.actor)
 
     try:
@@ -479,7 +481,7 @@ def test_summarize_runs_groups_seeds_by_configuration_variant(tmp_path, capsys):
                                   ("c", ["model.ego_relative_features=false", "collector.main_threads=1"], 0.9)]:
         run_dir = tmp_path / name
         run_dir.mkdir()
-        cfg = csirl_utils.load_config([f"seed={ord(name)}", f"logger.output_dir={tmp_path}", *overrides])
+        cfg = csirl.load_config([f"seed={ord(name)}", f"logger.output_dir={tmp_path}", *overrides])
         OmegaConf.save(cfg, run_dir / "config.yaml")
         (run_dir / "summary.json").write_text(json.dumps(
             {"scenario": "merge", "method": "csirl", "preset": "default", "seed": ord(name), "accomplish_rate": rate}))
@@ -492,7 +494,7 @@ def test_summarize_runs_groups_seeds_by_configuration_variant(tmp_path, capsys):
 
 
 def test_meta_gradient_balance_reports_both_parts(capsys):
-    """recipes/meta_gradient_balance.py: with the published L1 weight the regulariser's part dominates."""
+    """tools/meta_gradient_balance.py: with the published L1 weight the regulariser's part dominates."""
     import meta_gradient_balance
 
     out = meta_gradient_balance.main(["--frames", "60", "--steps", "2", "replay_buffer.batch_size=32"])
@@ -586,23 +588,23 @@ def test_unnamed_runs_get_a_fresh_directory(tmp_path):
 def test_resume_merges_schema_saved_config_and_command_line(tmp_path):
     from omegaconf import OmegaConf
 
-    cfg = csirl_utils.load_config(["preset=paper", "seed=4", "csirl.meta_every=3"])
+    cfg = csirl.load_config(["preset=paper", "seed=4", "csirl.meta_every=3"])
     saved = OmegaConf.to_container(cfg)
     del saved["logger"]["overwrite"]  # a key added after the run was made takes the schema default
     saved["checkpoint"]["resume"] = "/somewhere/else"
     OmegaConf.save(OmegaConf.create(saved), tmp_path / "config.yaml")
-    resumed = csirl_utils.load_run_config(str(tmp_path), ["collector.total_frames=9000"])
+    resumed = csirl.load_run_config(str(tmp_path), ["collector.total_frames=9000"])
     assert resumed.seed == 4 and resumed.csirl.meta_every == 3 and resumed.csirl.updates_per_round == 20000
     assert resumed.collector.total_frames == 9000 and resumed.logger.overwrite is False
     assert resumed.checkpoint.resume is None and resumed.preset == "paper"
     with pytest.raises(config.ConfigError, match="a resumed run keeps its preset"):
-        csirl_utils.load_run_config(str(tmp_path), ["preset=default"])
+        csirl.load_run_config(str(tmp_path), ["preset=default"])
     with pytest.raises(config.ConfigError, match="csirl.meta_every=0: must be an integer > 0"):
-        csirl_utils.load_run_config(str(tmp_path), ["csirl.meta_every=0"])
+        csirl.load_run_config(str(tmp_path), ["csirl.meta_every=0"])
     saved["csirl"]["meta_every"] = "often"  # a hand-edited config.yaml is checked too, and named
     OmegaConf.save(OmegaConf.create(saved), tmp_path / "config.yaml")
     with pytest.raises(config.ConfigError, match=r"csirl.meta_every=often: must be an integer > 0 \(in .*config.yaml\)"):
-        csirl_utils.load_run_config(str(tmp_path))
+        csirl.load_run_config(str(tmp_path))
 
 
 def test_device_is_read_and_a_missing_gpu_is_a_config_error():
@@ -610,7 +612,7 @@ def test_device_is_read_and_a_missing_gpu_is_a_config_error():
     assert run.resolve_device("auto").type == ("cuda" if torch.cuda.is_available() else "cpu")
     if not torch.cuda.is_available():
         with pytest.raises(config.ConfigError, match="device=cuda: CUDA is not available"):
-            csirl_utils.load_config(["device=cuda"])
+            csirl.load_config(["device=cuda"])
 
 
 def test_policy_mirror_copies_the_learner_weights_in_place():
@@ -635,7 +637,7 @@ def test_help_lists_every_key_with_what_it_accepts():
     assert "csirl.meta_every = 2  # an integer > 0;" in proc.stdout
     assert "device = cpu  # one of cpu, cuda, auto" in proc.stdout
     assert len([line for line in proc.stdout.splitlines() if " = " in line]) == len(config.flatten_config(
-        csirl_utils.load_config([])))
+        csirl.load_config([])))
 
 
 def test_method_registry_reads_each_method_with_its_recipe_schema():

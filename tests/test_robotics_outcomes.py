@@ -1,4 +1,4 @@
-"""recipes/robotics_outcomes.py: how a robotics policy's test episodes end (real AntMaze and Relocate envs)."""
+"""tools/robotics_outcomes.py: how a robotics policy's test episodes end (real AntMaze and Relocate envs)."""
 from __future__ import annotations
 
 import json
@@ -10,8 +10,8 @@ import pytest
 import torch
 from tensordict import TensorDict
 
-RECIPES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "recipes")
-sys.path.insert(0, RECIPES)
+TOOLS = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "tools")
+sys.path.insert(0, TOOLS)  # the analysis scripts
 
 import robotics_outcomes  # noqa: E402
 

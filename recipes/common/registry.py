@@ -1,5 +1,5 @@
-"""Which recipe trained a method: the registry that run-level tools (``summarize_runs.py``, the
-sweep) use to read a run's configuration against its own recipe's defaults.
+"""Which recipe trained a method: the registry that run-level tools (``tools/summarize_runs.py``,
+the sweep) use to read a run's configuration against its own recipe's defaults.
 
 A recipe registers its method names with the function that loads its configuration; the tools
 import the recipes they know (:data:`RECIPE_MODULES`) and look a method up by name.
@@ -21,8 +21,8 @@ from omegaconf import DictConfig
 
 __all__ = ["RECIPE_MODULES", "known_methods", "load_config_for", "register_recipe"]
 
-#: the recipe modules (importable from recipes/) that register methods
-RECIPE_MODULES = ("csirl_utils", "imitation_utils")
+#: the glue modules (importable with recipes/ on sys.path) that register their recipes' methods
+RECIPE_MODULES = ("common.csirl", "common.imitation")
 
 _LOADERS: dict[str, Callable[[list[str]], DictConfig]] = {}
 

@@ -22,6 +22,7 @@ import os
 
 from tensordict import TensorDictBase
 
+from torchrl_csirl._paths import EXPERTS_DIR
 from torchrl_csirl.data.expert import ExpertDemonstrations
 
 __all__ = [
@@ -34,8 +35,6 @@ __all__ = [
     "load_expert_demonstrations",
 ]
 
-EXPERTS_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "experts")
-"""Folder holding the shipped ``.npz`` files."""
 DATASET_SIZES = (1, 5, 10, 15, 20, 25)
 """The paper's dataset sizes."""
 CURRICULA = ("empty", "traffic")

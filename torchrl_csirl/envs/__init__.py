@@ -8,6 +8,7 @@ Importing this package registers the gymnasium ids ``csirl/highway-fast-v0``,
   episode limit); :data:`TASKS` all of them by name.
 * :data:`SCENARIOS` / :class:`ScenarioSpec`: the driving scenarios (plus the Kinematics feature
   ranges, the highway-env config, the published matching-reward scale).
+* :func:`sample_lane_centres`: a driving scene's lane centre lines (``ScenarioSpec.lane_centres``).
 * :func:`make_gym_env` (gymnasium), :func:`make_env` (TorchRL ``GymEnv``) and
   :func:`make_serial_env` (several copies in one process, e.g. per collector worker).
 * :class:`YieldingParallelEnv`: a ``ParallelEnv`` whose main process sleeps while the workers step.
@@ -30,6 +31,7 @@ from torchrl_csirl.envs.scenarios import (
     make_gym_env,
     register_scenarios,
     resolve_scenario,
+    sample_lane_centres,
     scenario_config_overrides,
 )
 from torchrl_csirl.envs.spec import TaskSpec
@@ -54,6 +56,7 @@ __all__ = [
     "normalized_accomplish_rate",
     "register_scenarios",
     "resolve_scenario",
+    "sample_lane_centres",
     "scenario_config_overrides",
     "success_from_rollout",
     "YieldingParallelEnv",

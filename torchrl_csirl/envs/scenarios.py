@@ -32,8 +32,12 @@ __all__ = [
     "make_gym_env",
     "register_scenarios",
     "resolve_scenario",
+    "sample_lane_centres",
     "scenario_config_overrides",
 ]
+
+#: spacing [m] of the lane centre-line points (:func:`sample_lane_centres`)
+LANE_SAMPLE_SPACING = 1.0
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -92,6 +96,11 @@ class ScenarioSpec(TaskSpec):
                 lo, hi = self.features_range[name]
                 out.append(-1.0 + (position[i] - lo) * 2.0 / (hi - lo))
         return np.asarray(out)
+
+    def lane_centres(self, spacing: float = LANE_SAMPLE_SPACING) -> np.ndarray:
+        """Points along the road's lane centre lines (:func:`sample_lane_centres`): what
+        :class:`~torchrl_csirl.modules.LaneFeatures` measures the ego against."""
+        return sample_lane_centres(self.name, spacing)
 
     def default_config(self) -> dict:
         """A deep copy of the scenario's full highway-env config."""
@@ -289,3 +298,33 @@ def scenario_config_overrides(name: str | ScenarioSpec, **config_overrides) -> d
             value = merged
         config[key] = value
     return config
+
+
+def sample_lane_centres(scenario: str, spacing: float = LANE_SAMPLE_SPACING) -> np.ndarray:
+    """Points along every lane centre line of a driving scenario's road, within its observed x, y ranges.
+
+    Returns:
+        array ``(P, 4)``: x [m], y [m], heading [rad], half width [m] of each point.
+
+    Examples:
+        >>> points = sample_lane_centres("roundabout")
+        >>> points.shape[1], bool((points[:, 3] == 2.0).all())
+        (4, True)
+    """
+    spec = SCENARIOS[scenario]
+    (x_low, x_high), (y_low, y_high) = spec.features_range["x"], spec.features_range["y"]
+    env = make_gym_env(scenario)
+    try:
+        env.reset(seed=0)
+        network = env.unwrapped.road.network
+        rows = []
+        for start in network.graph:
+            for end in network.graph[start]:
+                for lane in network.graph[start][end]:
+                    for s in np.arange(0.0, lane.length + spacing / 2, spacing):
+                        x, y = lane.position(float(s), 0.0)
+                        if x_low <= x <= x_high and y_low <= y <= y_high:
+                            rows.append((x, y, lane.heading_at(float(s)), lane.width_at(float(s)) / 2))
+    finally:
+        env.close()
+    return np.asarray(rows, dtype=np.float32)

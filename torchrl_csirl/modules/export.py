@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from typing import Any
 
 import torch
@@ -53,7 +54,8 @@ def _input_features_config(actor: ProbabilisticActor) -> dict[str, Any] | None:
     return found[0].config() if found else None  # the outermost map (a chain comes before its members)
 
 
-def load_policy(path: str | os.PathLike) -> ProbabilisticActor:
+def load_policy(path: str | os.PathLike,
+                lane_centres: Callable[[str], Any] | None = None) -> ProbabilisticActor:
     """Loads a policy saved by :func:`save_policy` (a file, or a run directory holding ``policy.pt``).
 
     The returned :class:`~torchrl.modules.ProbabilisticActor` acts deterministically (the mode)
@@ -62,6 +64,10 @@ def load_policy(path: str | os.PathLike) -> ProbabilisticActor:
 
         policy = load_policy("runs/merge-csirl-s0-...")
         rollout = make_env(policy.metadata["scenario"]).rollout(60, policy)
+
+    ``lane_centres(scenario)`` supplies the road's lane points to a policy whose
+    :class:`~torchrl_csirl.modules.LaneFeatures` were saved by scenario name only (saved before the
+    points were stored with them): pass :func:`torchrl_csirl.envs.sample_lane_centres`.
 
     Raises:
         FileNotFoundError: no policy file at ``path``.
@@ -77,7 +83,7 @@ def load_policy(path: str | os.PathLike) -> ProbabilisticActor:
         raise ValueError(f"{path!r} is not a torchrl-csirl policy file (format {POLICY_FORMAT}).")
     features = payload.get("input_features")
     actor = make_actor(payload["obs_dim"], payload["action_dim"],
-                       input_features=feature_map_from_config(features) if features else None)
+                       input_features=feature_map_from_config(features, lane_centres) if features else None)
     actor.load_state_dict(payload["state_dict"])
     actor.metadata = {"obs_dim": int(payload["obs_dim"]), "action_dim": int(payload["action_dim"]),
                       **payload["metadata"]}

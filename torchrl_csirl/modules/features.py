@@ -10,7 +10,7 @@ the networks stay MLPs over a fixed feature map (the learner still sees only the
 """
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import torch
@@ -189,12 +189,14 @@ def make_input_features(spec: Any, ego_relative: bool = True, lane: bool = False
     return maps[0] if len(maps) == 1 else FeatureChain(*maps)
 
 
-def feature_map_from_config(config: dict[str, Any]) -> nn.Module:
+def feature_map_from_config(config: dict[str, Any],
+                            lane_centres: Callable[[str], Any] | None = None) -> nn.Module:
     """Rebuilds an input map from its ``config()`` (a saved policy's; a config without ``kind`` is an
-    :class:`EgoRelativeFeatures`', as saved before lane features existed)."""
+    :class:`EgoRelativeFeatures`', as saved before lane features existed). ``lane_centres``: see
+    :meth:`LaneFeatures.from_config`."""
     kind = config.get("kind", "ego")
     if kind == "chain":
-        return FeatureChain(*(feature_map_from_config(c) for c in config["maps"]))
+        return FeatureChain(*(feature_map_from_config(c, lane_centres) for c in config["maps"]))
     if kind == "lane":
-        return LaneFeatures.from_config(config)
+        return LaneFeatures.from_config(config, lane_centres)
     return EgoRelativeFeatures(**{k: v for k, v in config.items() if k != "kind"})

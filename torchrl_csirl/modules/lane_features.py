@@ -7,55 +7,20 @@ thousandths in the input (docs/RESULTS.md, "Where the roundabout and intersectio
 the road"). :class:`LaneFeatures` appends what a driver sees directly: the signed offset of the ego
 from the nearest lane centre line of the scene, in half lane widths, and, where the observation
 has the ego's heading, the heading relative to that lane. The road of each scenario is fixed, so
-the centre lines are sampled once from highway-env's road network; the module has no parameters
-and reads only the observation (demonstrations need nothing new).
+the centre lines are sampled once from highway-env's road network
+(:func:`torchrl_csirl.envs.sample_lane_centres`, through the scenario's spec) and saved with the
+module; the module has no parameters and reads only the observation (demonstrations need nothing new).
 """
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 import torch
 from torch import nn
 
-__all__ = ["LaneFeatures", "sample_lane_centres"]
-
-#: spacing [m] of the sampled centre-line points
-LANE_SAMPLE_SPACING = 1.0
-
-
-def sample_lane_centres(scenario: str, spacing: float = LANE_SAMPLE_SPACING) -> np.ndarray:
-    """Points along every lane centre line of a driving scenario's road, within its observed x, y ranges.
-
-    Returns:
-        array ``(P, 4)``: x [m], y [m], heading [rad], half width [m] of each point.
-
-    Examples:
-        >>> points = sample_lane_centres("roundabout")
-        >>> points.shape[1], bool((points[:, 3] == 2.0).all())
-        (4, True)
-    """
-    from torchrl_csirl.envs import SCENARIOS, make_gym_env
-
-    spec = SCENARIOS[scenario]
-    (x_low, x_high), (y_low, y_high) = spec.features_range["x"], spec.features_range["y"]
-    env = make_gym_env(scenario)
-    try:
-        env.reset(seed=0)
-        network = env.unwrapped.road.network
-        rows = []
-        for start in network.graph:
-            for end in network.graph[start]:
-                for lane in network.graph[start][end]:
-                    for s in np.arange(0.0, lane.length + spacing / 2, spacing):
-                        x, y = lane.position(float(s), 0.0)
-                        if x_low <= x <= x_high and y_low <= y <= y_high:
-                            rows.append((x, y, lane.heading_at(float(s)), lane.width_at(float(s)) / 2))
-    finally:
-        env.close()
-    return np.asarray(rows, dtype=np.float32)
-
+__all__ = ["LaneFeatures"]
 
 class LaneFeatures(nn.Module):
     """Appends the ego's lane-relative position (and heading) to an observation's features.
@@ -69,15 +34,16 @@ class LaneFeatures(nn.Module):
     feature map that appends after the observation.
 
     Args:
-        centres: ``(P, 4)`` centre-line points: x, y, heading, half width (:func:`sample_lane_centres`).
+        centres: ``(P, 4)`` centre-line points: x, y, heading, half width
+            (:func:`torchrl_csirl.envs.sample_lane_centres`).
         obs_dim (int): size of the observation (the input's first entries).
         x_index, y_index (int): the ego's normalised x and y in the observation.
         x_range, y_range (pair of float): the ranges mapped to [-1, 1] by the observation.
         cos_index, sin_index (int, optional): the ego's heading cosine and sine, if observed.
         in_features (int, optional): width of the input (``obs_dim`` unless a map precedes this one).
         clip (float): bound of the lateral offset. Defaults to ``3.0``.
-        scenario (str, optional): the scenario the points come from (:meth:`config` then rebuilds
-            from it instead of storing the points).
+        scenario (str, optional): the scenario the points come from (a label: :meth:`config` stores
+            the points themselves).
 
     Examples:
         >>> import numpy as np, torch
@@ -123,7 +89,8 @@ class LaneFeatures(nn.Module):
     @classmethod
     def from_scenario(cls, spec: Any, in_features: int | None = None, clip: float = 3.0) -> LaneFeatures:
         """The module for a driving scenario (a :class:`~torchrl_csirl.envs.ScenarioSpec`): its road's centre lines
-        and its observation layout (the heading where the scenario observes ``cos_h``, ``sin_h``).
+        (``spec.lane_centres()``) and its observation layout (the heading where the scenario observes
+        ``cos_h``, ``sin_h``).
 
         Examples:
             >>> from torchrl_csirl.envs import SCENARIOS
@@ -133,7 +100,7 @@ class LaneFeatures(nn.Module):
         """
         features = list(spec.features)
         heading = ("cos_h" in features and "sin_h" in features)
-        return cls(sample_lane_centres(spec.name), int(spec.obs_dim), features.index("x"), features.index("y"),
+        return cls(spec.lane_centres(), int(spec.obs_dim), features.index("x"), features.index("y"),
                    spec.features_range["x"], spec.features_range["y"],
                    features.index("cos_h") if heading else None, features.index("sin_h") if heading else None,
                    in_features, clip, scenario=spec.name)
@@ -150,7 +117,7 @@ class LaneFeatures(nn.Module):
         """The constructor arguments (to rebuild the module, e.g. with a saved policy)."""
         return {
             "kind": "lane", "scenario": self.scenario,
-            "centres": None if self.scenario else self._centres.tolist(),
+            "centres": self._centres.tolist(),
             "obs_dim": self.obs_dim, "x_index": self.x_index, "y_index": self.y_index,
             "x_range": list(self.x_range), "y_range": list(self.y_range),
             "cos_index": self.cos_index, "sin_index": self.sin_index,
@@ -158,11 +125,24 @@ class LaneFeatures(nn.Module):
         }
 
     @classmethod
-    def from_config(cls, config: dict[str, Any]) -> LaneFeatures:
-        """The inverse of :meth:`config` (the points re-sampled from the scenario's road where it names one)."""
+    def from_config(cls, config: dict[str, Any],
+                    lane_centres: Callable[[str], np.ndarray] | None = None) -> LaneFeatures:
+        """The inverse of :meth:`config`.
+
+        A config saved with the scenario's name and no points (policies saved before the points
+        were stored) takes them from ``lane_centres(scenario)``, e.g.
+        :func:`torchrl_csirl.envs.sample_lane_centres`.
+
+        Raises:
+            ValueError: no points in ``config`` and no ``lane_centres``.
+        """
         config = {k: v for k, v in config.items() if k != "kind"}
         if config.get("centres") is None:
-            config["centres"] = sample_lane_centres(config["scenario"])
+            if lane_centres is None:
+                raise ValueError(
+                    f"these lane features were saved with the name of their scenario ({config.get('scenario')}) "
+                    "and not their points; pass lane_centres=torchrl_csirl.envs.sample_lane_centres to rebuild them.")
+            config["centres"] = lane_centres(config["scenario"])
         return cls(**config)
 
     @staticmethod

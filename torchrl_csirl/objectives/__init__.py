@@ -1,5 +1,6 @@
 """Losses of the CSIRL learner (ensemble SAC, the meta-gradient reward loss, the actor's
-behavioural-cloning term) and of the imitation baselines (docs/BASELINES.md)."""
+behavioural-cloning term; :func:`make_csirl_learner` builds them all) and of the imitation
+baselines (docs/BASELINES.md)."""
 from __future__ import annotations
 
 from torchrl_csirl.objectives.behaviour_cloning import ActorBehaviourCloning
@@ -9,6 +10,7 @@ from torchrl_csirl.objectives.ensemble_sac import (
     reinitialize_module,
 )
 from torchrl_csirl.objectives.meta_reward import MetaRewardLoss
+from torchrl_csirl.objectives.csirl_learner import CSIRLLearner, make_csirl_learner
 from torchrl_csirl.objectives._imitation import SACHyperparameters, make_sac_learner, orthogonal_regularization
 from torchrl_csirl.objectives.dac import (
     AbsorbingLogit,
@@ -30,6 +32,7 @@ from torchrl_csirl.objectives.valuedice import (
 __all__ = [
     "AbsorbingLogit",
     "ActorBehaviourCloning",
+    "CSIRLLearner",
     "DACDiscriminatorLoss",
     "DACHyperparameters",
     "EnsembleSACLoss",
@@ -45,6 +48,7 @@ __all__ = [
     "gail_discriminator_input",
     "initial_observations",
     "inverse_soft_q_objective",
+    "make_csirl_learner",
     "make_dac_discriminator",
     "make_gail_discriminator",
     "make_sac_learner",

@@ -36,7 +36,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 
-from torchrl_csirl.data.shipped import EXPERTS_DIR
+from torchrl_csirl._paths import EXPERTS_DIR
 from torchrl_csirl.envs.robotics.tasks import (
     ANTMAZE_SUCCESS_RADIUS,
     ANTMAZE_UMAZE_MAP,

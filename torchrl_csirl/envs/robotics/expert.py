@@ -18,7 +18,7 @@ import torch
 from tensordict.nn import TensorDictModule
 from torch import nn
 
-from torchrl_csirl.data.shipped import EXPERTS_DIR
+from torchrl_csirl._paths import EXPERTS_DIR
 
 __all__ = ["DAPG_POLICY_PATH", "DAPGRelocateExpert", "DAPGRelocatePolicy"]
 

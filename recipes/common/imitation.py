@@ -74,6 +74,7 @@ from common.config import (
     option,
 )
 from common.registry import register_recipe
+from common.robotics import RoboticsSections
 from common.run import ExpertDataError, expert_accomplish_rate, resolve_device
 from torchrl_csirl.data import ExpertDemonstrations
 from torchrl_csirl.envs import ScenarioSpec, TaskSpec, resolve_scenario
@@ -88,7 +89,7 @@ from torchrl_csirl.trainers.imitation import (
 )
 from torchrl_csirl.transforms import CombineRewards, ProgressReward
 
-__all__ = ["ImitationHighwayConfig", "METHODS", "REFERENCE_METHODS", "load_config", "load_run_config", "make_trainer",
+__all__ = ["ImitationHighwayConfig", "ImitationRoboticsConfig", "METHODS", "REFERENCE_METHODS", "load_config", "load_run_config", "make_trainer",
            "evaluate_reference"]
 
 #: the loss-based baselines of :func:`~torchrl_csirl.trainers.imitation.make_imitation_method`
@@ -152,6 +153,19 @@ ImitationHighwayConfig = dataclasses.make_dataclass(
 )
 ImitationHighwayConfig.__doc__ = "``recipes/imitation_highway.py``: one baseline under CSIRL's default budget and evaluation."
 ImitationHighwayConfig.__module__ = __name__
+
+
+@dataclass
+class RoboticsImitationExpertConfig(ImitationExpertConfig):
+    curriculum: str = option("expert", choices=("expert",),
+                             help="the task's shipped file (its trajectory order; the baselines use no curriculum)")
+
+
+@dataclass
+class ImitationRoboticsConfig(RoboticsSections, ImitationHighwayConfig):
+    """``recipes/imitation_robotics.py``: the driving baselines' schema with the robotics sections."""
+
+    expert: RoboticsImitationExpertConfig = field(default_factory=RoboticsImitationExpertConfig)
 
 
 def check_method(overrides: list[str], csirl_recipe: str = "recipes/csirl_highway.py") -> None:

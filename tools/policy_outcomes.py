@@ -1,6 +1,6 @@
 """How a driving policy's test episodes end, and how fast it drives: any scenario.
 
-``python recipes/policy_outcomes.py <run dir or policy.pt> [--episodes 50] [--seed 1000000]``
+``python tools/policy_outcomes.py <run dir or policy.pt> [--episodes 50] [--seed 1000000]``
 
 Rolls out the saved deterministic policy on the recipe's test episodes (seeds
 ``seed .. seed + episodes - 1``, as the final evaluation does) and reports, per group of
@@ -24,7 +24,7 @@ from collections import Counter, defaultdict
 import torch
 from torchrl.envs import EnvBase
 
-from common.policy_cli import format_cell, load_test_policy, mean_or_none, roll_test_episodes
+from policy_cli import format_cell, load_test_policy, mean_or_none, roll_test_episodes
 
 from torchrl_csirl._compat import gym_env_of
 from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, accomplish_rate_from_rollout, success_from_rollout

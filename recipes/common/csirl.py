@@ -20,7 +20,7 @@ from typing import Any, Callable, Optional
 import torch
 from omegaconf import DictConfig
 from torchrl.data import TensorDictReplayBuffer
-from torchrl.objectives import BCLoss, SoftUpdate
+from torchrl.objectives import BCLoss
 
 from common import config as config_lib
 from common.builders import (
@@ -46,27 +46,22 @@ from common.config import (
     option,
 )
 from common.registry import register_recipe
+from common.robotics import RoboticsExpertConfig, RoboticsSections
 from common.run import ExpertDataError, resolve_device
 from torchrl_csirl.curriculum import SubgoalCurriculum
 from torchrl_csirl.data import DemonstrationMixer
 from torchrl_csirl.envs import FAILURE_KEYS, SCENARIOS, ScenarioSpec, resolve_scenario  # noqa: F401 - SCENARIOS: used by tests
 from torchrl_csirl.data import ExpertDemonstrations
-from torchrl_csirl.modules import (
-    REWARD_ACTIVATIONS,
-    ExpertCenteredReward,
-    expert_reference_states,
-    make_actor,
-    make_qvalue,
-    make_reward_network,
-)
-from torchrl_csirl.objectives import ActorBehaviourCloning, EnsembleSACLoss, MetaRewardLoss
+from torchrl_csirl.modules import REWARD_ACTIVATIONS, expert_reference_states
+from torchrl_csirl.objectives import ActorBehaviourCloning, CSIRLLearner, make_csirl_learner
 from torchrl_csirl.objectives.meta_reward import GRADIENT_BALANCES
 from torchrl_csirl.trainers import MetaRewardUpdate, SACUpdate, SubgoalSelectionHook
 from torchrl_csirl.transforms import CombineRewards, IntrinsicReward, SubgoalMatchingReward
 
-__all__ = ["ConfigError", "CSIRLConfig", "CSIRLHighwayConfig", "ExpertDataError", "load_config", "make_trainer"]
+__all__ = ["ConfigError", "CSIRLConfig", "CSIRLHighwayConfig", "CSIRLRoboticsConfig", "ExpertDataError", "load_config", "make_trainer"]
 
-CONFIG_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "config", "csirl_highway")
+RECIPES_DIR = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+CONFIG_DIR = os.path.join(RECIPES_DIR, "config", "csirl_highway")  # the preset config group
 
 
 # ---------------------------------------------------------------------------------------- config
@@ -131,6 +126,13 @@ class CSIRLHighwayConfig:
     checkpoint: CheckpointConfig = field(default_factory=CheckpointConfig)
 
 
+@dataclass
+class CSIRLRoboticsConfig(RoboticsSections, CSIRLHighwayConfig):
+    """``recipes/csirl_robotics.py``: the driving recipe's defaults with the robotics sections."""
+
+    expert: RoboticsExpertConfig = field(default_factory=RoboticsExpertConfig)
+
+
 def load_config(overrides: list[str] | None = None) -> DictConfig:
     """The default configuration, the preset (``preset=paper``) and ``key=value`` overrides.
 
@@ -168,18 +170,10 @@ def total_frames(cfg: DictConfig, curriculum_length: int) -> int:
 
 
 # ---------------------------------------------------------------------------------------- models
-@dataclass
-class LossModules:
-    actor: Any
-    sac: EnsembleSACLoss
-    target_updater: SoftUpdate
-    reward_network: Any
-    meta: MetaRewardLoss | None
-
-
 def make_loss_modules(cfg: DictConfig, spec: ScenarioSpec, device: torch.device | str = "cpu",
-                      demos: ExpertDemonstrations | None = None) -> LossModules:
-    """Actor, ensemble SAC loss, target updater, reward network and meta-loss (None for CSIRL-B), on ``device``.
+                      demos: ExpertDemonstrations | None = None) -> CSIRLLearner:
+    """Actor, ensemble SAC loss, target updater, reward network and meta-loss (None for CSIRL-B), on ``device``:
+    :func:`~torchrl_csirl.objectives.make_csirl_learner` with the ``csirl`` and ``optim`` sections.
 
     With ``model.ego_relative_features`` every network reads the observation through
     :class:`~torchrl_csirl.modules.EgoRelativeFeatures` (a fixed map, no parameters), with
@@ -187,41 +181,23 @@ def make_loss_modules(cfg: DictConfig, spec: ScenarioSpec, device: torch.device 
     ``csirl.reward_reference=expert`` the reward network is wrapped in
     :class:`~torchrl_csirl.modules.ExpertCenteredReward` over 256 states of ``demos``.
     """
-    features = model_input_features(cfg.model, spec)
-    actor = make_actor(spec.obs_dim, spec.action_dim, input_features=features)
-    sac = EnsembleSACLoss(
-        actor,
-        make_qvalue(spec.obs_dim, spec.action_dim, input_features=features),
-        num_qvalue_nets=cfg.csirl.num_qvalue_nets,
-        alpha_init=cfg.csirl.alpha,
-        fixed_alpha=cfg.csirl.fixed_alpha,
-        gamma=cfg.csirl.gamma,
-        dispersion=cfg.csirl.dispersion,
-    ).to(device)
-    target_updater = SoftUpdate(sac, tau=cfg.optim.tau)
-    reward_network = make_reward_network(spec.obs_dim, input_features=features,
-                                         activation=cfg.csirl.reward_activation)
+    reference = None
     if cfg.csirl.reward_reference == "expert":
         if demos is None:
             raise ValueError("csirl.reward_reference=expert needs the demonstrations (demos=).")
         reference = expert_reference_states(demos.transitions()["observation"], seed=cfg.seed)
-        reward_network = ExpertCenteredReward(reward_network, reference, scale=cfg.csirl.reward_scale)
-    reward_network = reward_network.to(device)
-    meta = None
-    if cfg.csirl.intrinsic:
-        meta = MetaRewardLoss(sac, reward_network, lr_inner=cfg.csirl.lr_inner, scale=cfg.csirl.meta_scale,
-                              reward_l1_coef=cfg.csirl.reward_l1_coef,
-                              gradient_balance=cfg.csirl.gradient_balance, joint_sac_update=True)
-    return LossModules(actor, sac, target_updater, reward_network, meta)
+    c = cfg.csirl
+    return make_csirl_learner(
+        spec.obs_dim, spec.action_dim, input_features=model_input_features(cfg.model, spec),
+        num_qvalue_nets=c.num_qvalue_nets, alpha_init=c.alpha, fixed_alpha=c.fixed_alpha, gamma=c.gamma,
+        dispersion=c.dispersion, tau=cfg.optim.tau, intrinsic=c.intrinsic, reward_activation=c.reward_activation,
+        reward_reference=reference, reward_scale=c.reward_scale, lr_inner=c.lr_inner, meta_scale=c.meta_scale,
+        reward_l1_coef=c.reward_l1_coef, gradient_balance=c.gradient_balance, device=device)
 
 
-def make_optimizers(cfg: DictConfig, modules: LossModules) -> dict[str, torch.optim.Optimizer]:
-    """Adam for the actor + critics, Adam for the reward network."""
-    sac_params = [p for p in modules.sac.parameters() if p.requires_grad]
-    return {
-        "optim_sac": torch.optim.Adam(sac_params, lr=cfg.optim.lr),
-        "optim_reward": torch.optim.Adam(modules.reward_network.parameters(), lr=cfg.optim.reward_lr),
-    }
+def make_optimizers(cfg: DictConfig, modules: CSIRLLearner) -> dict[str, torch.optim.Optimizer]:
+    """Adam for the actor + critics, Adam for the reward network (``optim.lr``, ``optim.reward_lr``)."""
+    return modules.optimizers(lr=cfg.optim.lr, reward_lr=cfg.optim.reward_lr)
 
 
 def matching_feature_indices(cfg: DictConfig, spec: ScenarioSpec) -> tuple[int, ...]:
@@ -246,7 +222,7 @@ def make_matching(cfg: DictConfig, spec: ScenarioSpec, curriculum_obs: torch.Ten
     )
 
 
-def make_reward_transforms(cfg: DictConfig, matching: SubgoalMatchingReward, modules: LossModules) -> list:
+def make_reward_transforms(cfg: DictConfig, matching: SubgoalMatchingReward, modules: CSIRLLearner) -> list:
     """Matching reward, ``r_w`` (unless CSIRL-B) and their sum into ``("next", "reward")``, at sampling time."""
     transforms, keys = [matching], ["matching_reward"]
     if modules.meta is not None:
@@ -263,14 +239,14 @@ def make_sampler(cfg: DictConfig, online: TensorDictReplayBuffer, expert: Tensor
     return DemonstrationMixer(online, expert, cfg.replay_buffer.expert_fraction).sample
 
 
-def make_actor_bc(cfg: DictConfig, modules: LossModules, expert: TensorDictReplayBuffer) -> ActorBehaviourCloning | None:
+def make_actor_bc(cfg: DictConfig, modules: CSIRLLearner, expert: TensorDictReplayBuffer) -> ActorBehaviourCloning | None:
     """The actor's behavioural-cloning term on ``expert.batch_size`` pairs (``csirl.actor_bc_coef`` > 0), else None."""
     if cfg.csirl.actor_bc_coef == 0:
         return None
     return ActorBehaviourCloning(BCLoss(modules.actor, loss_function="l2"), expert, cfg.csirl.actor_bc_coef)
 
 
-def make_update_step(cfg: DictConfig, modules: LossModules, optimizers: dict, online: TensorDictReplayBuffer,
+def make_update_step(cfg: DictConfig, modules: CSIRLLearner, optimizers: dict, online: TensorDictReplayBuffer,
                      expert: TensorDictReplayBuffer) -> SACUpdate | MetaRewardUpdate:
     """CSIRL's update: a joint SAC + meta-gradient step every ``csirl.meta_every`` updates; CSIRL-B's: SAC."""
     sac_update = SACUpdate(modules.sac, optimizers["optim_sac"], modules.target_updater, cfg.optim.max_grad_norm,

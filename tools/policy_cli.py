@@ -1,5 +1,5 @@
 """The command line of the scripts that roll a saved policy out on the recipe's test episodes
-(``recipes/policy_outcomes.py``, ``recipes/robotics_outcomes.py``): the arguments, the policy and
+(``tools/policy_outcomes.py``, ``tools/robotics_outcomes.py``): the arguments, the policy and
 its task, checked; and the small formatting helpers of their tables.
 """
 from __future__ import annotations
@@ -12,7 +12,7 @@ import torch
 from tensordict import TensorDictBase
 from torchrl.envs import EnvBase, ExplorationType, set_exploration_type
 
-from torchrl_csirl.envs import make_env
+from torchrl_csirl.envs import make_env, sample_lane_centres
 from torchrl_csirl.modules import load_policy
 
 __all__ = ["format_cell", "load_test_policy", "mean_or_none", "roll_test_episodes"]
@@ -48,7 +48,7 @@ def load_test_policy(description: str, argv: list[str] | None, tasks: Collection
     args = parser.parse_args(argv)
     if args.episodes <= 0:
         parser.error(f"--episodes must be positive, got {args.episodes}")
-    policy = load_policy(args.policy)
+    policy = load_policy(args.policy, lane_centres=sample_lane_centres)  # lane features saved by name only
     task = policy.metadata.get("scenario")
     if task not in tasks:
         parser.error(f"{args.policy}: a policy for {task!r}, not one of the {kind} {sorted(tasks)}")

@@ -1,6 +1,6 @@
 """How much of the reward network's meta-gradient comes from imitation, how much from the L1 term.
 
-``python recipes/meta_gradient_balance.py [key=value ...]`` (the recipe's configuration keys, e.g.
+``python tools/meta_gradient_balance.py [key=value ...]`` (the recipe's configuration keys, e.g.
 ``env.scenario=roundabout csirl.reward_l1_coef=1e-5``; ``checkpoint.resume=<run dir>`` loads a
 trained run's configuration and its actor, critics and reward network instead of fresh ones).
 
@@ -26,11 +26,11 @@ import sys
 import torch
 from tensordict import TensorDict
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "recipes"))  # the recipe glue: common
 
 from common.builders import load_experts, requested_config  # noqa: E402
 from common.run import resolve_resume  # noqa: E402
-from csirl_utils import load_config, load_run_config, make_loss_modules, make_matching  # noqa: E402
+from common.csirl import load_config, load_run_config, make_loss_modules, make_matching  # noqa: E402
 
 from torchrl_csirl.envs import SCENARIOS, make_env  # noqa: E402
 from torchrl_csirl.objectives import MetaRewardLoss  # noqa: E402

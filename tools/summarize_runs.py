@@ -8,8 +8,8 @@ thread counts do not count), e.g. ``replay_buffer.expert_fraction=0``.
 
 Usage::
 
-    python recipes/summarize_runs.py runs/                     # every run under runs/
-    python recipes/summarize_runs.py runs/merge-s0 runs/merge-s1 runs/merge-s2
+    python tools/summarize_runs.py runs/                     # every run under runs/
+    python tools/summarize_runs.py runs/merge-s0 runs/merge-s1 runs/merge-s2
 
 Examples:
     >>> from summarize_runs import summarize  # doctest: +SKIP
@@ -22,17 +22,17 @@ from __future__ import annotations
 import argparse
 import functools
 import json
-import math
 import os
 import sys
 from collections import defaultdict
 
 from omegaconf import OmegaConf
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "recipes"))  # the recipe glue: common
 
 from common.config import flatten_config, format_override  # noqa: E402
 from common.registry import load_config_for  # noqa: E402
+from common.summaries import find_summaries, mean_std  # noqa: E402
 
 #: configuration keys that do not change what a run learns (or are shown elsewhere in the key)
 NOT_A_VARIANT = ("seed", "device", "preset", "env.scenario", "csirl.intrinsic", "collector.main_threads", "logger.", "checkpoint.")
@@ -51,25 +51,6 @@ FIELDS = (
     "updates_per_s",
     "collect_fps",
 )
-
-
-def find_summaries(paths: list[str]) -> list[str]:
-    """``summary.json`` files of the run directories given, or of those directly under a folder."""
-    found = []
-    for path in paths:
-        if os.path.isfile(os.path.join(path, "summary.json")):
-            found.append(os.path.join(path, "summary.json"))
-        elif os.path.isdir(path):
-            found.extend(
-                os.path.join(path, name, "summary.json")
-                for name in sorted(os.listdir(path))
-                if os.path.isfile(os.path.join(path, name, "summary.json"))
-            )
-        else:
-            raise FileNotFoundError(f"{path}: neither a run directory with summary.json nor a folder of runs")
-    if not found:
-        raise FileNotFoundError(f"no summary.json under {paths} (runs not finished?)")
-    return found
 
 
 @functools.lru_cache(maxsize=None)
@@ -94,42 +75,6 @@ def variant(run_dir: str, preset: str, method: str = "csirl") -> str:
         if not key.startswith(NOT_A_VARIANT) and default.get(key, object()) != value
     ]
     return " ".join(changed)
-
-
-def mean_std(values: list[float]) -> dict[str, float]:
-    """Mean and sample standard deviation (0 for a single value)."""
-    mean = sum(values) / len(values)
-    var = sum((v - mean) ** 2 for v in values) / (len(values) - 1) if len(values) > 1 else 0.0
-    return {"mean": mean, "std": math.sqrt(var)}
-
-
-#: two-sided 5 % critical values of Student's t by degrees of freedom (more than 10: 2.2 and below)
-_T_CRITICAL_5 = {1: 12.71, 2: 4.30, 3: 3.18, 4: 2.78, 5: 2.57, 6: 2.45, 7: 2.36, 8: 2.31, 9: 2.26, 10: 2.23}
-
-
-def welch_test(a: list[float], b: list[float]) -> dict[str, float | bool] | None:
-    """Welch's t-test of ``mean(a) - mean(b)`` over seeds: ``difference``, ``t``, ``dof`` and
-    ``beyond_noise`` (two-sided, 5 %); ``None`` with fewer than two values on a side.
-
-    Examples:
-        >>> r = welch_test([0.95, 0.96, 0.97], [0.90, 0.91, 0.92])
-        >>> round(r["difference"], 3), round(r["t"], 1), r["beyond_noise"]
-        (0.05, 6.1, True)
-        >>> welch_test([0.9, 0.8, 0.95], [0.85, 0.9, 0.8])["beyond_noise"]
-        False
-    """
-    if len(a) < 2 or len(b) < 2:
-        return None
-    ma, mb = mean_std(a), mean_std(b)
-    va, vb = ma["std"] ** 2 / len(a), mb["std"] ** 2 / len(b)
-    difference = ma["mean"] - mb["mean"]
-    if va + vb == 0:
-        return {"difference": difference, "t": math.inf if difference else 0.0, "dof": float(len(a) + len(b) - 2),
-                "beyond_noise": difference != 0}
-    t = difference / math.sqrt(va + vb)
-    dof = (va + vb) ** 2 / (va**2 / (len(a) - 1) + vb**2 / (len(b) - 1))
-    critical = _T_CRITICAL_5.get(max(1, int(dof)), 2.2)
-    return {"difference": difference, "t": t, "dof": dof, "beyond_noise": abs(t) > critical}
 
 
 def summarize(summaries: list[dict]) -> dict[str, dict]:

@@ -1,6 +1,6 @@
 """Does a trained baseline prefer ending the episode? Its critic on terminating vs continuing transitions.
 
-``python recipes/termination_probe.py <run dir> [key=value ...] [--samples 4096] [--seed 0]``
+``python tools/termination_probe.py <run dir> [key=value ...] [--samples 4096] [--seed 0]``
 
 Reads a run of ``recipes/imitation_highway.py`` (its last checkpoint, with the replay buffer)
 and samples its replay (the learner's own transitions) and its demonstrations. For each it
@@ -36,12 +36,12 @@ import tempfile
 import torch
 from tensordict import TensorDictBase
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "recipes"))  # the recipe glue: common
 
 from common.builders import resume_run  # noqa: E402
 from common.config import ConfigError  # noqa: E402
 from common.run import run_script  # noqa: E402
-from imitation_utils import load_run_config, make_trainer  # noqa: E402
+from common.imitation import load_run_config, make_trainer  # noqa: E402
 
 from torchrl_csirl.objectives._imitation import sample  # noqa: E402
 from torchrl_csirl.transforms import absorbing_self_loops  # noqa: E402

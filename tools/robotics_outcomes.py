@@ -1,6 +1,6 @@
 """How a robotics policy's test episodes end: AntMaze U-maze or Adroit Relocate.
 
-``python recipes/robotics_outcomes.py <run dir or policy.pt> [--episodes 50] [--seed 1000000]``
+``python tools/robotics_outcomes.py <run dir or policy.pt> [--episodes 50] [--seed 1000000]``
 
 Rolls out the saved deterministic policy on the recipe's test episodes (seeds
 ``seed .. seed + episodes - 1``, as the final evaluation does) and reports how they end:
@@ -27,7 +27,7 @@ from collections import Counter, defaultdict
 
 import numpy as np
 
-from common.policy_cli import format_cell, load_test_policy, mean_or_none, roll_test_episodes
+from policy_cli import format_cell, load_test_policy, mean_or_none, roll_test_episodes
 
 from torchrl_csirl._compat import gym_env_of
 from torchrl_csirl.envs import accomplish_rate_from_rollout

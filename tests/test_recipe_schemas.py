@@ -1,0 +1,46 @@
+"""Every recipe's typed schema is importable from ``recipes/common`` (a documentation build's
+configuration reference reads them there) and is the schema the recipe itself uses."""
+from __future__ import annotations
+
+import importlib
+import os
+import sys
+
+import pytest
+
+RECIPES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "recipes")
+sys.path.insert(0, RECIPES)
+
+import common  # noqa: E402
+from common import config  # noqa: E402
+
+
+def _schema(recipe: str) -> type:
+    module, _, name = common.RECIPE_SCHEMAS[recipe].partition(":")
+    return getattr(importlib.import_module(module), name)
+
+
+def test_every_configured_recipe_has_its_schema_listed():
+    configured = {name[:-3] for name in os.listdir(RECIPES)
+                  if name.endswith(".py") and "help_requested" in open(os.path.join(RECIPES, name)).read()}
+    # the robotics recipes pass their schema to their driving recipe's main
+    configured |= {"csirl_robotics", "imitation_robotics"}
+    assert set(common.RECIPE_SCHEMAS) == configured
+
+
+@pytest.mark.parametrize("recipe", sorted(common.RECIPE_SCHEMAS))
+def test_schema_describes_every_key_and_is_the_recipes_own(recipe):
+    schema = _schema(recipe)
+    lines = config.describe(schema)
+    assert any(line.startswith("seed = ") for line in lines)
+    for klass in schema.__mro__:
+        config.attribute_docs(klass)
+    script = importlib.import_module(recipe)
+    assert getattr(script, schema.__name__) is schema
+
+
+def test_the_glue_finds_the_recipes_preset_config_group():
+    from common import csirl
+
+    assert config.preset_names(csirl.CONFIG_DIR) == ("default", "paper")
+    assert csirl.load_config(["preset=paper"]).preset == "paper"
