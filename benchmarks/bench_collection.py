@@ -15,7 +15,7 @@ Two ways to use worker processes:
   gathers the batches.
 * ``--parallel-env``: one ``Collector`` over a ``ParallelEnv`` of W workers. The policy runs in
   the main process on the whole batch at every step, the workers only step the environments,
-  and the two alternate (docs/PERFORMANCE.md explains why this scales worse). By default the
+  and the two alternate (docs/performance.md explains why this scales worse). By default the
   env is our ``YieldingParallelEnv``; ``--spin`` measures TorchRL's own ``ParallelEnv``, whose
   main process spin-waits, ``--pipe`` its pipe mode. The main process runs with
   ``--main-threads`` torch threads (1: it must not compete with the workers for the cores).

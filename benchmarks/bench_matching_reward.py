@@ -2,7 +2,7 @@
 
 Compares, in the same process, :class:`~torchrl_csirl.transforms.SubgoalMatchingReward` on a
 sampled batch with a transition-by-transition numpy loop of the same equations (the published
-code's cost per transition, for scale, is in docs/PERFORMANCE.md). Prints one JSON line at the end.
+code's cost per transition, for scale, is in docs/performance.md). Prints one JSON line at the end.
 
 Usage::
 

@@ -26,7 +26,7 @@ Figures 6 and 7)::
 
     python recipes/benchmark.py report runs/benchmark [more folders or run dirs] [--out runs/benchmark/report]
 
-See docs/BENCHMARK.md.
+See docs/benchmark.md.
 """
 from __future__ import annotations
 
@@ -64,7 +64,7 @@ CSIRL_METHODS: dict[str, tuple[str, ...]] = {
     "csirl-nocur": ("csirl.fixed_subgoal=true",),  # no curriculum: the subgoal is the last state
     "csirl-noexp": ("replay_buffer.expert_fraction=0",),  # no expert transitions in the SAC batch
     # not an ablation: CSIRL with TD3+BC-style cloning on its actor, the setting that learns Relocate
-    # (docs/RESULTS.md "Relocate and AntMaze: behavioural cloning against CSIRL")
+    # (docs/studies/index.md "Relocate and AntMaze: behavioural cloning against CSIRL")
     "csirl-bc": ("csirl.actor_bc_coef=10",),
 }
 #: the ablation and variant rows (not in the paper's table, so not in a default sweep): after csirl in a report
@@ -474,7 +474,7 @@ def robotics_tables(rows: list[dict[str, Any]]) -> list[str]:
         methods, scenarios, lambda m, s: _score(cell.get((m, s)), None, "return", _return_format(cell.get((m, s)))))
     lines += [""] + _method_table(
         "Success rate (AntMaze: goal reached; Relocate: ball at the target) / progress (the accomplish rate's "
-        "analogue, docs/ROBOTICS.md), mean over seeds.",
+        "analogue, docs/studies/robotics.md), mean over seeds.",
         methods, scenarios, lambda m, s: _outcomes(cell.get((m, s)), "accomplish_rate"))
     lines += [""] + _method_table(
         "Cost per run: wall time [min] (start-up and final evaluation included) and updates/s, mean over runs.",

@@ -5,7 +5,7 @@ meta-learned intrinsic reward, from the shipped expert demonstrations, and repor
 test accomplish rate. Configuration: the typed schema in ``recipes/common/csirl.py``
 (``python recipes/csirl_highway.py --help`` lists every key, its default and what it accepts;
 e.g. ``env.scenario=roundabout seed=1 csirl.intrinsic=false``); ``preset=paper`` is the published
-procedure. See docs/RECIPE.md.
+procedure. See docs/recipes.md.
 
 The run directory (``logger.output_dir``/<name>) receives ``config.yaml``, ``metrics.jsonl``,
 ``metrics.csv``, ``checkpoints/last``, ``policy.pt``, the plots and ``summary.json``; the last

@@ -1,13 +1,13 @@
 """CSIRL on a robotics task, end to end: ``python recipes/csirl_robotics.py env.task=relocate [key=value ...]``.
 
 The driving recipe (``recipes/csirl_highway.py``) on the paper's robotics tasks
-(``env.task=relocate | antmaze-umaze``, also spelled ``env.scenario``, docs/SCENARIOS.md): the same learner, matching
+(``env.task=relocate | antmaze-umaze``, also spelled ``env.scenario``, docs/scenarios.md): the same learner, matching
 reward, curriculum, meta-learned reward, outputs, logging, checkpoints, resume and final JSON
 line; the task's spec supplies the dimensions, the matching features ``h(s)`` and the episode
 limit. Differences from the driving recipe's configuration:
 
 * ``expert.curriculum=expert``: the task's shipped file (Relocate: 25 DAPG trajectories; AntMaze:
-  25 trajectories of the waypoint-driven ant, docs/EXPERTS.md), or ``expert.path=<.npz>``;
+  25 trajectories of the waypoint-driven ant, docs/experts.md), or ``expert.path=<.npz>``;
 * ``model.ego_relative_features=false`` (that input map is the driving scenes');
 * ``collector.frames_per_batch=1400`` so that each of 2 workers' environments runs whole
   AntMaze episodes (700 steps; collection resets every environment at each batch start);
@@ -15,7 +15,7 @@ limit. Differences from the driving recipe's configuration:
   rate is the task's progress measure; the curriculum picture is the maze from above with the
   subgoals (AntMaze) or the matching features along the curriculum trajectory (Relocate).
 
-Budgets are not tuned yet (docs/ROBOTICS.md, docs/RESULTS.md).
+Budgets are not tuned yet (docs/studies/robotics.md, docs/studies/index.md).
 """
 from __future__ import annotations
 

@@ -280,7 +280,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         if args.empty_road or args.scenario not in SHIPPED_SCENARIOS:
             parser.error(
                 f"--shipped writes the driving scenarios' curriculum datasets ({', '.join(SHIPPED_SCENARIOS)}); "
-                "for relocate use --out (docs/EXPERTS.md gives the command)"
+                "for relocate use --out (docs/experts.md gives the command)"
             )
         out_dir = args.shipped_dir or os.path.join(EXPERTS_DIR, args.scenario)
         result = generate_shipped(args.scenario, out_dir, SHIPPED_SEED if args.seed is None else args.seed)

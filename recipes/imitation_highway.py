@@ -5,7 +5,7 @@ the CSIRL recipe's budget, networks, input features, demonstrations and evaluati
 outputs. Methods: ``sac`` (SAC on the true distance reward), ``bc`` (behavioural cloning),
 ``random`` and ``expert`` (reference rows, no training); CSIRL itself is
 ``recipes/csirl_highway.py``. Configuration: the typed schema in ``recipes/common/imitation.py``
-(``python recipes/imitation_highway.py --help`` lists every key). See docs/BENCHMARK.md.
+(``python recipes/imitation_highway.py --help`` lists every key). See docs/benchmark.md.
 
 The run directory (``logger.output_dir``/<name>) receives ``config.yaml``, ``metrics.jsonl``,
 ``metrics.csv``, ``summary.json`` and, for a trained method, ``checkpoints/last``, ``policy.pt``

@@ -7,8 +7,8 @@ robotics sections of ``recipes/csirl_robotics.py`` (the task's shipped 25 expert
 ``model.ego_relative_features=false``, ``collector.frames_per_batch=1400``). Two rows differ
 from driving: ``sac`` learns from the environment's own reward (the task's true reward:
 Relocate's dense reward, AntMaze's goal indicator) and ``expert`` is the task's expert (the DAPG
-hand, the waypoint-driven ant; docs/EXPERTS.md). The summary's ``return`` is the paper's metric
-here. See docs/ROBOTICS.md.
+hand, the waypoint-driven ant; docs/experts.md). The summary's ``return`` is the paper's metric
+here. See docs/studies/robotics.md.
 
 Example (BC on Relocate; ``python recipes/imitation_robotics.py --help`` lists every key)::
 

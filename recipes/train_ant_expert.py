@@ -11,7 +11,7 @@ offline, a learning curve of the chain success (all 4 goals reached), ``policy.p
 At the end, the trained policy drives the ant through the U-maze as
 :class:`~torchrl_csirl.envs.robotics.WaypointAntExpert` on ``expert_eval.episodes`` AntMaze
 episodes from seed ``expert_eval.seed`` (unseen: the training task draws its own hops), and the
-summary reports that success rate (the expert's acceptance figure, docs/ROBOTICS.md) beside the
+summary reports that success rate (the expert's acceptance figure, docs/studies/robotics.md) beside the
 chain success (``hop_success_rate``: the share of test episodes that reached all 4 goals).
 ``device=auto`` trains on a GPU when there is one.
 

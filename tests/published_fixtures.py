@@ -1,7 +1,7 @@
 """Synthetic expert files in the layout of the authors' published data (issue 17, section 1).
 
 The published files are not available here; :func:`write_published_files` writes files that
-reproduce every fact checked against them (SPEC section 3, ``docs/EXPERTS.md``), built from the
+reproduce every fact checked against them (SPEC section 3, ``docs/experts.md``), built from the
 shipped demonstrations of our own expert (real episodes of our scenes):
 
 * one file per dataset size N in :data:`PUBLISHED_SIZES`, a dict saved with ``numpy.save``

@@ -175,7 +175,7 @@ def test_waypoint_expert_checks_its_policy(tmp_path):
 
 def test_shipped_ant_expert_reaches_the_goal():
     """The shipped goal-reaching ant, driven by waypoints, solves AntMaze on seeds it never saw
-    (docs/EXPERTS.md, "AntMaze expert", gives its rate over 100-episode ranges)."""
+    (docs/experts.md, "AntMaze expert", gives its rate over 100-episode ranges)."""
     env = make_gym_env("antmaze-umaze")
     expert = make_expert("antmaze-umaze")
     episodes = [rollout_expert(env, seed=seed, expert=expert, scenario="antmaze-umaze") for seed in range(20000, 20005)]

@@ -1,4 +1,4 @@
-"""The imitation baselines (docs/BASELINES.md): each loss's defining property on a tiny problem."""
+"""The imitation baselines (docs/baselines.md): each loss's defining property on a tiny problem."""
 from __future__ import annotations
 
 import math

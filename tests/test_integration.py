@@ -104,7 +104,7 @@ def test_demo_runs_end_to_end(tmp_path) -> None:
 
 
 def test_velocity_in_the_matching_search_penalises_forward_driving_on_merge() -> None:
-    """Why ``csirl.matching_features=position`` exists (docs/ALGORITHM.md, "matching features").
+    """Why ``csirl.matching_features=position`` exists (docs/algorithm.md, "matching features").
 
     Driving straight on at the initial 30 m/s (the empty-road expert accelerates to 40 m/s), the
     nearest expert state found on the whole ego row (velocities included) stays an early one while
@@ -145,7 +145,7 @@ def _constant_speed_matching_reward(speed: float, search: str, target: str, step
 
 
 def test_matching_reward_per_step_against_speed_on_merge() -> None:
-    """What each search / target pair pays for driving at a constant speed (docs/ALGORITHM.md, section 3).
+    """What each search / target pair pays for driving at a constant speed (docs/algorithm.md, section 3).
 
     With the search on the position and the paper's target (the final state past the subgoal) the
     reward is the progress itself (1 per metre on merge); with the published ``next`` target it

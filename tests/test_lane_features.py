@@ -43,7 +43,7 @@ def test_the_expert_drives_within_its_lanes(scenario):
     assert extra.shape == (len(obs), 3 if "cos_h" in spec.features else 1)
     lateral = extra[:, 0]
     # the expert keeps to the road: within a half lane width of some centre line (1.01: the roundabout's
-    # exit bend at 30 m/s, docs/RESULTS.md), mostly well inside it
+    # exit bend at 30 m/s, docs/studies/index.md), mostly well inside it
     assert lateral.abs().max() <= 1.05 and (lateral.abs() < 1).float().mean() > 0.98
     if extra.shape[1] == 3:  # and heads along its lane
         assert extra[:, 1].mean() > 0.9 and torch.allclose(extra[:, 1] ** 2 + extra[:, 2] ** 2, torch.ones(len(obs)))

@@ -12,7 +12,7 @@ they were last on, the ego's position and its lateral offset from that lane's ce
 summary: the mean absolute offset; a lane is half its width on either side of that line). On merge the episodes are also split by the traffic ahead at reset:
 two main-road vehicles ahead of the ego slow to 20 m/s; when they share a lane the other one is
 **free**, when they do not both lanes are **blocked** and finishing means squeezing past them (the
-expert nudges, docs/EXPERTS.md). The last line is JSON.
+expert nudges, docs/experts.md). The last line is JSON.
 """
 from __future__ import annotations
 

@@ -10,7 +10,7 @@ Rolls out the saved deterministic policy on the recipe's test episodes (seeds
   flips, and **where the ant ended**: the maze cell, counted along the cell route from the start
   (``0`` is the start cell, the goal cell the last; ``off`` a cell off the route), with the mean
   end position in each. A policy pulled in a straight line toward a target round the corner stops
-  in the start arm (cells 0-1), facing the central wall (docs/RESULTS.md, "AntMaze: CSIRL with
+  in the start arm (cells 0-1), facing the central wall (docs/studies/index.md, "AntMaze: CSIRL with
   cloning at 3 seeds").
 * **Relocate**: ``at_target`` (the ball within 0.1 m of the target at the last step), ``lost`` (it
   was there at some step, not at the end) or ``never``; the progress, the return, and the

@@ -21,7 +21,7 @@ taught that ending it pays, whatever the expert did. Per method, the reward it l
 ``dac.absorbing_observation=placeholder`` for a run saved before that key existed). Methods: ``sac``,
 ``sqil``, ``gail``, ``dac``, ``iqlearn`` (a soft-Q critic) and ``valuedice``. The run itself is
 not touched (its configuration and checkpoint are read in a temporary copy). The last line is
-JSON; it is also written to ``<run dir>/termination_probe.json``. docs/BASELINES.md, "Ending the
+JSON; it is also written to ``<run dir>/termination_probe.json``. docs/baselines.md, "Ending the
 episode", reads it for DAC, IQ-Learn and ValueDICE on merge.
 """
 from __future__ import annotations

@@ -214,7 +214,7 @@ def make_collector(scenario: str, collector: DictConfig, policy: nn.Module, fram
     Each worker process holds ``envs_per_worker`` environments *and a copy of the policy* (TorchRL's
     multi-process synchronous collector, ``Collector(..., num_collectors=W, sync=True)``); the
     workers wait while the main process updates, which gets every core (``collector.main_threads``).
-    Why this scales better than a ``ParallelEnv`` driven from the main process: docs/PERFORMANCE.md.
+    Why this scales better than a ``ParallelEnv`` driven from the main process: docs/performance.md.
 
     The workers act with the weights the main process trains because TorchRL moves the policy's
     parameter storage into shared memory *in place*: optimiser steps and ``load_state_dict`` reach

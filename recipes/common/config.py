@@ -121,7 +121,7 @@ class ExpertConfig:
     path: Optional[str] = option(None, help="your own demonstrations (.npz, or a published pickle)")
     end_at: str = option("recording", choices=PUBLISHED_END_AT,
                          help="where a published file's trajectories end: recording (whole recording) | first_done "
-                              "| termination (where our scenario ends the episode); docs/EXPERTS.md")
+                              "| termination (where our scenario ends the episode); docs/experts.md")
     batch_size: int = option(32, above=0, help="expert pairs per meta / cloning step")
 
 
@@ -155,7 +155,7 @@ class UpdateRatioConfig:
 class ModelConfig:
     ego_relative_features: bool = option(True, help="networks also read the other vehicles' offsets from the ego")
     lane_features: bool = option(False, help="networks also read the ego's offset from the nearest lane centre line "
-                                             "(and its heading relative to that lane; docs/RECIPE.md)")
+                                             "(and its heading relative to that lane; docs/recipes.md)")
 
 
 @dataclass

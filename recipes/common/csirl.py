@@ -109,7 +109,7 @@ class CSIRLConfig:
 
 @dataclass
 class CSIRLHighwayConfig:
-    """``recipes/csirl_highway.py``: the default preset ("our cheaper procedure", docs/RECIPE.md)."""
+    """``recipes/csirl_highway.py``: the default preset ("our cheaper procedure", docs/recipes.md)."""
 
     preset: str = option("default", help="default | paper (config group recipes/config/csirl_highway/preset)")
     seed: int = option(0, minimum=0, help="random seed")
@@ -204,7 +204,7 @@ def matching_feature_indices(cfg: DictConfig, spec: ScenarioSpec) -> tuple[int, 
     """Observation entries of the nearest-expert-state search (``csirl.matching_features``).
 
     ``ego`` (paper and code): the whole ego row, velocities included; ``position``: the ego
-    position only, the entries the matching potential measures (docs/ALGORITHM.md).
+    position only, the entries the matching potential measures (docs/algorithm.md).
     """
     return spec.ego_feature_indices if cfg.csirl.matching_features == "ego" else spec.position_feature_indices
 

@@ -13,7 +13,7 @@ Methods (``method=<name>``):
   frames are not used by its update.
 * ``gail``, ``dac``, ``valuedice``, ``sqil``, ``iqlearn``: built by
   :func:`~torchrl_csirl.trainers.imitation.make_imitation_method`; the ``<method>`` section holds
-  the fields of its hyperparameter dataclass (docs/BASELINES.md gives their sources).
+  the fields of its hyperparameter dataclass (docs/baselines.md gives their sources).
 * ``random``, ``expert``: reference rows, no training: uniform random actions, and the expert
   driver (:class:`~torchrl_csirl.envs.expert_policy.ExpertDriverPolicy`), scored on the same
   test episodes.

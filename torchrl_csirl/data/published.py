@@ -16,7 +16,7 @@ The pickle is read with a **restricted unpickler** that only reconstructs plain 
 numpy arrays/dtypes/scalars: any other global (``os.system``, ``builtins.eval``, ...) is refused
 with :class:`pickle.UnpicklingError`, so no code from the file is ever executed.
 
-What the published files look like (see ``docs/EXPERTS.md``): every trajectory is recorded for
+What the published files look like (see ``docs/experts.md``): every trajectory is recorded for
 the full padded width ``L`` (``lengths`` = ``L``), and ``dones`` is True on the **last five
 steps of every trajectory** whatever happened (padding of the recorder); some roundabout
 trajectories also carry an earlier ``done`` (the ego left the road and the recorder went on).

@@ -6,7 +6,7 @@ and ``"traffic"`` (trajectory 0 recorded with traffic); both files share traject
 (successful expert episodes with traffic). Relocate (the DAPG policy) and AntMaze (the waypoint-driven
 ant): one file each, ``"expert"``. The paper's dataset sizes N in {1, 5, 10, 15, 20, 25} are the nested
 prefixes: the dataset of size N is the first N trajectories, so every size contains the
-curriculum trajectory. See ``docs/EXPERTS.md`` for how the files were generated.
+curriculum trajectory. See ``docs/experts.md`` for how the files were generated.
 
 Examples:
     >>> from torchrl_csirl.data.shipped import load_expert_demonstrations, curriculum_trajectory
@@ -87,7 +87,7 @@ def expert_dataset_path(scenario: str, curriculum: str | None = None) -> str:
     if not os.path.exists(path):
         raise FileNotFoundError(
             f"No shipped expert dataset for {scenario!r} ({curriculum}); available: "
-            f"{available_expert_datasets()}. Regenerate it with the command in docs/EXPERTS.md."
+            f"{available_expert_datasets()}. Regenerate it with the command in docs/experts.md."
         )
     return path
 
@@ -98,8 +98,8 @@ def load_expert_demonstrations(
     """Load the shipped expert demonstrations of a scenario.
 
     Args:
-        scenario: ``"highway-fast"``, ``"merge"``, ``"roundabout"``, ``"intersection"`` or
-            ``"relocate"``.
+        scenario: ``"highway-fast"``, ``"merge"``, ``"roundabout"``, ``"intersection"``,
+            ``"relocate"`` or ``"antmaze-umaze"``.
         num_trajectories: one of the paper's sizes ``(1, 5, 10, 15, 20, 25)``; the dataset of size N
             is the first N trajectories of the file (nested prefixes).
         curriculum: driving: ``"empty"`` (trajectory 0 recorded on an empty road, the paper's

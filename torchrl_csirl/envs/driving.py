@@ -110,7 +110,7 @@ class CSIRLDrivingMixin:
                 "finish_position": [0.0, 0.0],
                 "offroad_terminal": True,
                 # the task ends at the finish in every scene (stock highway-fast and roundabout
-                # drive on): docs/SCENARIOS.md, "Episodes end at the finish"
+                # drive on): docs/scenarios.md, "Episodes end at the finish"
                 "arrival_terminal": True,
                 "fast": True,
             }
@@ -344,7 +344,7 @@ class CSIRLRoundaboutEnv(CSIRLDrivingMixin, RoundaboutEnv):
                 "other_speed": 16.0,
                 "finish_radius": 5.0,
                 # stock: other vehicles collide with each other; False lets them pass through each
-                # other as in highway-fast-v0 (measured: no gain for the expert, docs/SCENARIOS.md)
+                # other as in highway-fast-v0 (measured: no gain for the expert, docs/scenarios.md)
                 "other_vehicles_collide": True,
             }
         )
@@ -587,7 +587,7 @@ class CSIRLIntersectionEnv(CSIRLDrivingMixin, IntersectionEnv):
                 "initial_vehicle_count": 10,
                 "spawn_probability": 0.6,
                 "normalize_reward": True,
-                # scene deviation (docs/SCENARIOS.md): the other vehicles do not collide with each
+                # scene deviation (docs/scenarios.md): the other vehicles do not collide with each
                 # other (as in highway-fast-v0); True restores stock highway-env behaviour
                 "other_vehicles_collide": False,
             }

@@ -81,7 +81,7 @@ class ExpertConfig:
         close_following: optional ``(time_headway, jam_distance)`` of extra "close following"
             candidates (at the highest target speed, on every candidate lane): closing up on the
             vehicle ahead opens room to cut in front of a vehicle in the next lane (merge); also
-            used in the roundabout, where a tighter gap measured more successes (docs/EXPERTS.md).
+            used in the roundabout, where a tighter gap measured more successes (docs/experts.md).
         approach_roads: on the last ``approach_roads`` roads before a road with fewer lanes (the
             roundabout's exit), every lane-choosing behaviour drives on the one lane that leads
             onto it; with ``approach_roads > 0`` route progress is also measured along that lane
@@ -305,7 +305,7 @@ def _overlaps_lane(vehicle: Any, lane: Any) -> bool:
     """Whether a vehicle's outline is on a lane: its centre within half a lane + half its width, or a corner on it.
 
     The corners matter for a vehicle turned across a lane: its centre can be clear of the lane while
-    its front is in it (docs/EXPERTS.md, the intersection's test episode 49).
+    its front is in it (docs/experts.md, the intersection's test episode 49).
     """
     long, lat = lane.local_coordinates(vehicle.position)
     within = -vehicle.LENGTH / 2 <= long <= lane.length + vehicle.LENGTH / 2

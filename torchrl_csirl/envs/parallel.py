@@ -27,7 +27,7 @@ class YieldingParallelEnv(ParallelEnv):
     Args:
         *args: as :class:`~torchrl.envs.ParallelEnv` (``num_workers``, ``create_env_fn``, ...).
         poll_interval: seconds slept between two polls of the workers' done flags, small against
-            a driving scenario's step (docs/PERFORMANCE.md); the default 50 us adds at most the
+            a driving scenario's step (docs/performance.md); the default 50 us adds at most the
             sleep overshoot per step. ``0`` yields the CPU (``time.sleep(0)``) between polls.
         **kwargs: as :class:`~torchrl.envs.ParallelEnv`.
 

@@ -1,6 +1,6 @@
 """The paper's four driving scenarios: specifications, gymnasium registration, factory.
 
-Each :class:`ScenarioSpec` describes one scene (see ``docs/SCENARIOS.md``): the gymnasium id
+Each :class:`ScenarioSpec` describes one scene (see ``docs/scenarios.md``): the gymnasium id
 registered on ``import torchrl_csirl.envs``, the flattened observation layout (which entries
 are the ego vehicle, which are its position), the episode limit, the finish position used by
 the accomplish-rate metric and the published matching-reward scale.
@@ -203,6 +203,7 @@ SCENARIOS: dict[str, ScenarioSpec] = {
         ),
     )
 }
+"""The four driving scenarios by name: ``"highway-fast"``, ``"merge"``, ``"roundabout"``, ``"intersection"``."""
 
 
 TASKS: dict[str, TaskSpec] = {**SCENARIOS, **ROBOTICS_TASKS, ANT_GOAL_SPEC.name: ANT_GOAL_SPEC}

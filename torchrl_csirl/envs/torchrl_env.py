@@ -121,7 +121,7 @@ def make_serial_env(name: str, num_envs: int, seed: int | None = None, **kwargs)
     environment factory of a multi-process collector's workers (the recipe) or of a
     :class:`~torchrl.envs.ParallelEnv` it gives ``k`` environments per worker process, and the
     policy forward and the per-step bookkeeping run once per ``k`` frames
-    (``benchmarks/bench_collection.py --envs-per-worker``, docs/PERFORMANCE.md).
+    (``benchmarks/bench_collection.py --envs-per-worker``, docs/performance.md).
 
     Args:
         name: scenario name or gym id.

@@ -7,7 +7,7 @@ swapping, batching rules, TensorDict wrapping) costs about as much as the arithm
 :class:`FusedCriticEnsemble` reads the same stacked parameters and evaluates the whole ensemble
 directly: one batched matmul per layer, the bias added as vmap adds it, the activations called
 on the whole ``[N, batch, width]`` block. The values are bit-identical to the vmapped critic;
-see docs/PERFORMANCE.md for the timings.
+see docs/performance.md for the timings.
 """
 from __future__ import annotations
 

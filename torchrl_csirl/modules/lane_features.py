@@ -3,7 +3,7 @@
 The driving observations give the ego's absolute position normalised over wide ranges (the
 roundabout and the intersection map +-100 m to [-1, 1]), so a lane's 2 m half-width is 0.02 of an
 input's range: the difference between driving on the exit lane and leaving the road is a few
-thousandths in the input (docs/RESULTS.md, "Where the roundabout and intersection policies leave
+thousandths in the input (docs/studies/index.md, "Where the roundabout and intersection policies leave
 the road"). :class:`LaneFeatures` appends what a driver sees directly: the signed offset of the ego
 from the nearest lane centre line of the scene, in half lane widths, and, where the observation
 has the ego's heading, the heading relative to that lane. The road of each scenario is fixed, so
@@ -37,9 +37,12 @@ class LaneFeatures(nn.Module):
         centres: ``(P, 4)`` centre-line points: x, y, heading, half width
             (:func:`torchrl_csirl.envs.sample_lane_centres`).
         obs_dim (int): size of the observation (the input's first entries).
-        x_index, y_index (int): the ego's normalised x and y in the observation.
-        x_range, y_range (pair of float): the ranges mapped to [-1, 1] by the observation.
-        cos_index, sin_index (int, optional): the ego's heading cosine and sine, if observed.
+        x_index (int): the ego's normalised x in the observation.
+        y_index (int): the ego's normalised y in the observation.
+        x_range (pair of float): the x range mapped to [-1, 1] by the observation.
+        y_range (pair of float): the y range mapped to [-1, 1] by the observation.
+        cos_index (int, optional): the ego's heading cosine, if observed.
+        sin_index (int, optional): the ego's heading sine, if observed.
         in_features (int, optional): width of the input (``obs_dim`` unless a map precedes this one).
         clip (float): bound of the lateral offset. Defaults to ``3.0``.
         scenario (str, optional): the scenario the points come from (a label: :meth:`config` stores

@@ -23,7 +23,7 @@ __all__ = [
 
 #: Hidden-layer activations of :class:`RewardMLP` by name. ``"relu"`` is the paper's; the smooth ones
 #: have a non-zero derivative everywhere, so no unit stops receiving gradient for good (ReLU units
-#: of ``r_w`` do die in training: docs/RESULTS.md, "The meta-gradient's parts normalised").
+#: of ``r_w`` do die in training: docs/studies/index.md, "The meta-gradient's parts normalised").
 REWARD_ACTIVATIONS: dict[str, type[nn.Module]] = {"relu": nn.ReLU, "elu": nn.ELU, "silu": nn.SiLU, "tanh": nn.Tanh}
 
 
@@ -139,7 +139,7 @@ class ExpertCenteredReward(TensorDictModuleBase):
     its mean over a fixed set ``E`` of expert states.
 
     Without it the meta-gradient of ``r_w`` is dominated by a constant shift (a living bonus or
-    penalty that saturates ``tanh`` within a few hundred updates, docs/RESULTS.md), or, with the
+    penalty that saturates ``tanh`` within a few hundred updates, docs/studies/index.md), or, with the
     ``|r_w|`` regulariser, by the regulariser (``r_w`` stays near 0 and inert). Subtracting the mean
     over expert states removes the constant direction exactly: for any ``c``,
     ``r_w + c`` gives the same ``r'``, so the meta-gradient can only move ``r_w`` *between* states

@@ -1,6 +1,6 @@
 """Losses of the CSIRL learner (ensemble SAC, the meta-gradient reward loss, the actor's
 behavioural-cloning term; :func:`make_csirl_learner` builds them all) and of the imitation
-baselines (docs/BASELINES.md)."""
+baselines (docs/baselines.md)."""
 from __future__ import annotations
 
 from torchrl_csirl.objectives.behaviour_cloning import ActorBehaviourCloning

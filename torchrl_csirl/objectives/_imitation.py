@@ -155,7 +155,7 @@ class AbsorbingStateSettings:
             per terminal state, observed as the terminal observation: our default, since every
             driving demonstration ends in a terminating success while the learner also terminates
             by crashing) or ``"placeholder"`` (the paper's single absorbing state, a zero
-            observation). docs/BASELINES.md, "DAC's absorbing states", gives the evidence.
+            observation). docs/baselines.md, "DAC's absorbing states", gives the evidence.
     """
 
     absorbing_states: bool = True

@@ -70,7 +70,7 @@ def make_csirl_learner(
 ) -> CSIRLLearner:
     """Builds CSIRL's actor, ensemble-SAC loss, target updater, reward network and meta-gradient loss.
 
-    The defaults are ``recipes/csirl_highway.py``'s default preset (docs/RECIPE.md; the paper's
+    The defaults are ``recipes/csirl_highway.py``'s default preset (docs/recipes.md; the paper's
     values where they differ are ``fixed_alpha=True`` and, in the recipe, ``meta_every=1``).
     The networks are 256 x 256 MLPs (:func:`~torchrl_csirl.modules.make_actor`,
     :func:`~torchrl_csirl.modules.make_qvalue`, :func:`~torchrl_csirl.modules.make_reward_network`).

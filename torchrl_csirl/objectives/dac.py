@@ -15,7 +15,7 @@ Adversarial imitation made sample efficient and unbiased:
 The learner is SAC (the paper uses TD3): every SAC-based baseline, and CSIRL, then share one learner.
 
 The values were checked against the authors' published code (``google-research/dac``); section and
-equation numbers of the paper are not quoted (docs/BASELINES.md gives every source).
+equation numbers of the paper are not quoted (docs/baselines.md gives every source).
 """
 from __future__ import annotations
 

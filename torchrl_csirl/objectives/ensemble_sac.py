@@ -106,7 +106,7 @@ class EnsembleSACLoss(SACLoss):
       (critic loss, actor loss, target) goes through a
       :class:`~torchrl_csirl.modules.FusedCriticEnsemble` (one batched matmul per layer over the
       same stacked parameters) instead of ``torch.vmap``; values are bit-identical, see
-      docs/PERFORMANCE.md for the speed. ``fused_qvalue=False`` keeps the vmap.
+      docs/performance.md for the speed. ``fused_qvalue=False`` keeps the vmap.
     * CSIRL defaults: fixed ``alpha = 0.01``, ``gamma = 0.99`` (TD(0)), squared-error
       critic loss summed over critics.
     * a **differentiable-reward mode** (:attr:`differentiable_reward` or the

@@ -56,7 +56,7 @@ class IQLearnHyperparameters(SACHyperparameters):
             a single Q-function. :class:`EnsembleSACLoss` needs at least 2: with one critic
             TorchRL's SACLoss does not register the critic's parameters).
         alpha_init: SAC temperature, fixed at 0.01 (the authors' settings fix a small temperature per
-            task, 1e-3 to 1e-2 on MuJoCo; docs/BASELINES.md gives the sources).
+            task, 1e-3 to 1e-2 on MuJoCo; docs/baselines.md gives the sources).
         fixed_alpha: keep the temperature fixed (the authors found SAC's learned temperature unstable
             with IQ-Learn).
         actor_lr: Adam learning rate of the actor (3e-5, the authors' continuous-control setting; the

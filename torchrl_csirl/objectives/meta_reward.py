@@ -175,7 +175,7 @@ class MetaRewardLoss(LossModule):
 
     **Balance of the two parts.** With ``gradient_balance="sum"`` (the paper) the reward network
     receives ``dL_meta/dw``, in which the regulariser's part is 3 to 10^5 times the
-    imitation part (it does not pass through the two inner steps; docs/ALGORITHM.md section 5);
+    imitation part (it does not pass through the two inner steps; docs/algorithm.md section 5);
     with ``"normalized"`` it receives :func:`balanced_meta_gradient` of the two parts, which
     weighs their directions ``1 : reward_l1_coef`` whatever their sizes. ``"loss_meta"`` keeps the
     value of ``L_meta`` either way; ``"meta_grad_norm"`` is the norm of what is applied.

@@ -32,7 +32,7 @@ terminal transition leads to an absorbing state ``s_a`` that loops on itself wit
 ``B^pi nu(s, a) = gamma nu(s_a, 0)`` after a termination, and every transition entering ``s_a``
 adds one self-loop sample, whose residual is ``(1 - gamma) nu(s_a, 0)``, to its side. With the
 absorbing state of :class:`~torchrl_csirl.objectives._imitation.AbsorbingStateSettings`' default,
-one per terminal observation (docs/BASELINES.md, "DAC's absorbing states"). Without them
+one per terminal observation (docs/baselines.md, "DAC's absorbing states"). Without them
 (``absorbing_states=False``), ``B^pi nu = 0`` after a termination.
 """
 from __future__ import annotations

@@ -6,7 +6,7 @@ CSIRL recipe (same network sizes and input map for every method) and returns an
 replay buffers, the states to checkpoint and a factory of the update step that
 :class:`~torchrl_csirl.trainers.CSIRLTrainer` calls once per update. The losses are in
 :mod:`torchrl_csirl.objectives` and the update steps in :mod:`torchrl_csirl.trainers.imitation_updates`;
-docs/BASELINES.md describes every method, its hyperparameters and their sources.
+docs/baselines.md describes every method, its hyperparameters and their sources.
 """
 from __future__ import annotations
 

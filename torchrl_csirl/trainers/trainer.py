@@ -90,7 +90,7 @@ class CSIRLTrainer:
     4. a metrics row is passed to the ``log`` ops.
 
     Collection is reproducible per batch: before each batch the collector's environments are
-    re-seeded with ``seed + batch index`` and reset, so a resumed run collects the same data as an
+    re-seeded with ``seed + 7919 * batch index`` and reset, so a resumed run collects the same data as an
     uninterrupted one (episodes cut at a batch end are simply not continued).
 
     Args:

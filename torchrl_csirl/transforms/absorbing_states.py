@@ -42,7 +42,7 @@ class AbsorbingStates(Transform):
       demonstrations end in a terminal *success* (a goal reached) and the learner can also
       terminate by failing (a crash): with a single absorbing state both endings share one
       learned reward, and the failure inherits the reward of the expert's success
-      (docs/BASELINES.md, "DAC's absorbing states").
+      (docs/baselines.md, "DAC's absorbing states").
 
     The batch keeps its size (TorchRL's replay buffers need that): the absorbing state's self-loop
     transitions, one per terminal transition as in the paper's replay buffer, are built where

@@ -1,7 +1,7 @@
 """The AntMaze expert's pieces: a short-hop goal-reaching ant and the waypoint controller driving it.
 
 D4RL and Minari built their AntMaze data from a goal-reaching ant policy driven through the maze
-by waypoints from a path planner (SPEC section 5, docs/ROBOTICS.md). No such policy is reachable
+by waypoints from a path planner (SPEC section 5, docs/studies/robotics.md). No such policy is reachable
 offline, so we train our own:
 
 * :class:`AntGoalEnv` (task ``"ant-goal"``, :func:`~torchrl_csirl.envs.make_env`): the U-maze ant
@@ -68,7 +68,7 @@ CHAIN_HOPS = 4  # goals per ant-goal episode (a single hop never showed the ant 
 CONTROL_COST = 0.1  # x |a|^2 (gymnasium's ant: 0.5; lower, so that ending an episode early never pays)
 ANT_POLICY_PATH = os.path.join(EXPERTS_DIR, "antmaze-umaze", "ant_goal_policy.pt")
 """The shipped goal-reaching ant (a :func:`~torchrl_csirl.modules.save_policy` file trained by
-``recipes/train_ant_expert.py``; docs/EXPERTS.md gives the run and its figures)."""
+``recipes/train_ant_expert.py``; docs/experts.md gives the run and its figures)."""
 
 
 def free_cells(maze_map: Any = ANTMAZE_UMAZE_MAP) -> list[tuple[int, int]]:
@@ -135,7 +135,7 @@ class AntGoalEnv(AntMazeUMazeEnv):
 
     Why chained: with one hop per episode (the first version) the trained ant reached 85-95 % of
     its hops yet flipped in 9 of 10 AntMaze episodes, where the waypoint keeps moving ahead and the
-    ant walks for ~250 steps without a stop (docs/ROBOTICS.md).
+    ant walks for ~250 steps without a stop (docs/studies/robotics.md).
 
     Examples:
         >>> env = AntGoalEnv()
@@ -325,7 +325,7 @@ class WaypointAntExpert:
     The waypoint is :func:`pursuit_waypoint` (``lookahead`` metres ahead on the route through
     the cell centres), and the policy's mean action is multiplied by ``action_gain``: the shipped
     ant, trained at full gain on open ground, flips in the maze's corridors at full gain
-    (docs/EXPERTS.md, "AntMaze expert": 0.80 success at gain 1 with :func:`next_waypoint`,
+    (docs/experts.md, "AntMaze expert": 0.80 success at gain 1 with :func:`next_waypoint`,
     0.99 on the same seeds at gain 0.6 with a 3 m look-ahead).
 
     Args:

@@ -20,7 +20,7 @@ the remaining distance to the goal and ``d_0`` its value at reset:
   The straight-line distance would be wrong in a U: the ant first moves away from the goal.
 * Relocate: ``d`` is the object-target distance (``|obs[36:39]|``).
 
-See ``docs/SCENARIOS.md``.
+See ``docs/scenarios.md``.
 """
 from __future__ import annotations
 
