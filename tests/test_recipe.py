@@ -162,6 +162,28 @@ def test_csirl_b_switch_trains_without_the_reward_network(tmp_path):
         run.close()
 
 
+@pytest.mark.parametrize("override, expected", [((), 2_000_000), (("eval.validation_seed=null",), 1_000_000)])
+def test_learning_curve_evaluates_validation_episodes_apart_from_the_test_ones(tmp_path, monkeypatch, override,
+                                                                              expected):
+    """The periodic evaluation (the curve) plays seeds ``eval.validation_seed + i``; the final test
+    evaluation keeps ``eval.seed + i``; ``eval.validation_seed=null`` is the old behaviour."""
+    seeds = []
+
+    def fake_evaluate(env, policy, *, episodes, max_steps, seed):
+        seeds.append(seed)
+        return {"accomplish_rate": 0.0, "success_rate": 0.0, "crash_rate": 0.0, "env_return": 0.0}
+
+    monkeypatch.setattr(builders, "evaluate_policy", fake_evaluate)
+    cfg = _tiny_cfg(tmp_path, "csirl.intrinsic=false", "collector.total_frames=300", *override)
+    run = csirl.make_trainer(cfg, str(tmp_path))
+    try:
+        run.trainer.train()
+        run.evaluate(2)
+    finally:
+        run.close()
+    assert seeds[:-1] and set(seeds[:-1]) == {expected} and seeds[-1] == 1_000_000
+
+
 def test_fixed_subgoal_switch_keeps_the_subgoal_at_the_last_curriculum_state(tmp_path):
     cfg = _tiny_cfg(tmp_path, "csirl.fixed_subgoal=true", "collector.total_frames=300")
     run = csirl.make_trainer(cfg, str(tmp_path))

@@ -416,9 +416,11 @@ def assemble_trainer(
         progress_bar=cfg.logger.progress_bar and sys.stderr.isatty(),
     )
 
-    def run_eval() -> dict[str, float]:
+    curve_seed = cfg.eval.seed if cfg.eval.validation_seed is None else cfg.eval.validation_seed
+
+    def run_eval() -> dict[str, float]:  # the learning curve: validation episodes, not the test ones
         return evaluate_policy(eval_env, mirror.policy, episodes=cfg.eval.episodes,
-                               max_steps=spec.max_steps, seed=cfg.eval.seed)
+                               max_steps=spec.max_steps, seed=curve_seed)
 
     evaluation = EvaluationHook(run_eval, every_rounds=cfg.eval.every_rounds)
     checkpoint = CheckpointHook(os.path.join(run_dir, "checkpoints"),

@@ -172,7 +172,11 @@ class EvalConfig:
     episodes: int = option(10, above=0, help="deterministic episodes per evaluation")
     every_rounds: int = option(1, above=0, help="evaluation cadence in rounds")
     final_episodes: int = option(50, above=0, help="episodes of the reported test accomplish rate")
-    seed: int = option(1_000_000, minimum=0, help="eval episode i uses seed + i")
+    seed: int = option(1_000_000, minimum=0, help="test episode i (the final evaluation) uses seed + i")
+    validation_seed: Optional[int] = option(
+        2_000_000, minimum=0,
+        help="the periodic evaluations' (learning curve) episode i uses validation_seed + i, a range apart "
+             "from the test episodes; null: the test seeds (runs recorded before this key)")
     video: bool = option(True, help="film the final evaluation's first episode into videos/ (mp4, or gif without "
                                     "imageio-ffmpeg) and log it to W&B; recipes/watch.py films more")
 
