@@ -11,6 +11,7 @@ Usage::
 
     git worktree add /tmp/base 58670cb
     python benchmarks/bench_revisions.py --before /tmp/base --batch 256
+    python benchmarks/bench_revisions.py --before /tmp/base --batch 8 --hidden 8 --threads 1  # overhead
 
 Prints one final JSON line.
 """
@@ -28,11 +29,15 @@ _STEPS = {"sac_update": "plain_step", "csirl_iteration": "csirl_step"}
 _WORKER = r"""
 import sys, time, torch
 sys.path.insert(0, "benchmarks")
-from bench_update import _Learner
-batch, threads, warmup = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3])
+import bench_update
+batch, threads, warmup, hidden = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4])
+if hidden:  # smaller networks: what is left is the per-call overhead
+    make_actor, make_qvalue = bench_update.make_actor, bench_update.make_qvalue
+    bench_update.make_actor = lambda obs, act: make_actor(obs, act, hidden=(hidden, hidden))
+    bench_update.make_qvalue = lambda obs, act: make_qvalue(obs, act, hidden=(hidden, hidden))
 torch.set_num_threads(threads)
-learner = _Learner(True, True, batch, torch.device("cpu"))
-steps = sys.argv[4:]
+learner = bench_update._Learner(True, True, batch, torch.device("cpu"))
+steps = sys.argv[5:]
 for _ in range(warmup):
     for step in steps:
         getattr(learner, step)()
@@ -47,7 +52,8 @@ for line in sys.stdin:
 
 def _worker(tree: str, args: argparse.Namespace) -> subprocess.Popen:
     env = dict(os.environ, PYTHONPATH=tree, RL_WARNINGS="0")
-    cmd = [sys.executable, "-c", _WORKER, str(args.batch), str(args.threads), str(args.warmup), *_STEPS.values()]
+    cmd = [sys.executable, "-c", _WORKER, *map(str, (args.batch, args.threads, args.warmup, args.hidden)),
+           *_STEPS.values()]
     proc = subprocess.Popen(cmd, cwd=tree, env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     if proc.stdout.readline().strip() != "ready":
         raise RuntimeError(f"the worker in {tree} did not start")
@@ -68,6 +74,8 @@ def main() -> None:
     parser.add_argument("--iters", type=int, default=30)
     parser.add_argument("--warmup", type=int, default=5)
     parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--hidden", type=int, default=0,
+                        help="hidden width of the actor and critics (0: bench_update.py's 256)")
     args = parser.parse_args()
     workers = {side: _worker(getattr(args, side), args) for side in ("before", "after")}
     times = {side: {name: [] for name in _STEPS} for side in workers}
@@ -80,7 +88,7 @@ def main() -> None:
         for proc in workers.values():
             proc.stdin.close()
             proc.wait()
-    result = {"batch": args.batch, "threads": args.threads, "iters": args.iters}
+    result = {"batch": args.batch, "threads": args.threads, "iters": args.iters, "hidden": args.hidden or 256}
     for name in _STEPS:
         before, after = times["before"][name], times["after"][name]
         result[f"{name}_ms_before"] = round(statistics.median(before), 2)
