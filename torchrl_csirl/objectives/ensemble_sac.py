@@ -96,8 +96,8 @@ def qvalue_dispersion(qvalues: torch.Tensor, dispersion: str = "variance") -> to
 class EnsembleSACLoss(SACLoss):
     """SAC loss with ``N`` independently initialised critics, as used by CSIRL.
 
-    A thin subclass of :class:`~torchrl.objectives.SACLoss` (version 2, no value
-    network). All SAC equations are TorchRL's; this class adds:
+    A subclass of :class:`~torchrl.objectives.SACLoss` (version 2, no value network) with
+    its interface (keys, ``set_keys``, value estimator, out keys). This class adds:
 
     * **independent critic initialisation**: :meth:`SACLoss.convert_to_functional` would
       expand a single critic and resample every parameter uniformly between its min and
@@ -112,6 +112,17 @@ class EnsembleSACLoss(SACLoss):
       :class:`~torchrl_csirl.modules.FusedCriticEnsemble` (one batched matmul per layer over the
       same stacked parameters) instead of ``torch.vmap``; values are bit-identical, see
       docs/PERFORMANCE.md for the speed. ``fused_qvalue=False`` keeps the vmap.
+    * **a fused path for the losses** (``fused``): for an actor built by
+      :func:`~torchrl_csirl.modules.make_actor` and the fused critics, ``forward``,
+      :meth:`qvalue_v2_loss`, :meth:`actor_loss` and the critic target compute SACLoss's
+      equations on tensors: the actor is evaluated from its parameter TensorDict by a
+      :class:`~torchrl_csirl.modules.FusedTanhNormalActor` (no ``to_module`` swap, no
+      TensorDict modules, no distribution objects), the TD(0) target is TorchRL's
+      ``td0_return_estimate``, losses are reduced by SACLoss's own reduction. Same random draws,
+      same operations in the same order: losses and gradients are bit-identical to SACLoss's
+      path (``tests/test_fused_sac.py``). Options it does not implement (``skip_done_states``,
+      other value estimators, ``reduction="none"`` in ``forward``) run SACLoss's path;
+      :meth:`fused_applies` says which one runs. ``fused=False`` always runs SACLoss's.
     * CSIRL defaults: fixed ``alpha = 0.01``, ``gamma = 0.99`` (TD(0)), squared-error
       critic loss summed over critics.
     * a **differentiable-reward mode** (:attr:`differentiable_reward` or the
@@ -153,6 +164,9 @@ class EnsembleSACLoss(SACLoss):
             :class:`~torchrl_csirl.modules.FusedCriticEnsemble` (``True``; an error if the critic
             is not supported) or with SACLoss's ``torch.vmap`` (``False``). Defaults to ``None``:
             fused when the critic is supported.
+        fused (bool, optional): compute the losses on the fused path (``True``; an error if the
+            actor or the critics are not supported) or on SACLoss's (``False``). Defaults to
+            ``None``: fused when supported (the results are bit-identical).
         **kwargs: forwarded to :class:`~torchrl.objectives.SACLoss`.
 
     Examples:
