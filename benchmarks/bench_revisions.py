@@ -5,7 +5,9 @@ runs in its own worker process, importing its own ``torchrl_csirl`` and its own
 ``benchmarks/bench_update.py`` learner. The driver asks the two workers in turn for one timed step
 (a SAC update, a CSIRL iteration), so both sides see the same machine load, and reports the
 medians and the median of the per-round ratios ``after / before`` (robust to load drift).
-Only one worker computes at a time; each uses ``--threads`` torch threads.
+Only one worker computes at a time; each uses ``--threads`` torch threads, and the driver pauses
+``--pause`` seconds before each step, so that the other worker's OpenMP threads have stopped
+spinning (without it, two threads per worker measured 1.3-1.6x slower than ``bench_update.py``).
 
 Usage::
 
@@ -23,6 +25,7 @@ import os
 import statistics
 import subprocess
 import sys
+import time
 
 _STEPS = {"sac_update": "plain_step", "csirl_iteration": "csirl_step"}
 
@@ -74,6 +77,7 @@ def main() -> None:
     parser.add_argument("--iters", type=int, default=30)
     parser.add_argument("--warmup", type=int, default=5)
     parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--pause", type=float, default=0.05, help="seconds between two timed steps")
     parser.add_argument("--hidden", type=int, default=0,
                         help="hidden width of the actor and critics (0: bench_update.py's 256)")
     args = parser.parse_args()
@@ -83,6 +87,7 @@ def main() -> None:
         for _ in range(args.iters):
             for name, step in _STEPS.items():
                 for side, proc in workers.items():
+                    time.sleep(args.pause)  # the other worker's OpenMP threads stop spinning
                     times[side][name].append(_ask(proc, step))
     finally:
         for proc in workers.values():
