@@ -11,7 +11,9 @@ Adam step. 5 critics 2x256, observation size 25, action size 2,
 expert batch 32, ``torch.set_num_threads(2)``; warm-up then the median over iterations.
 The measurements are interleaved so that their ratios are robust to machine load.
 ``--reference`` also times, interleaved in the same process, the same learner with the critics
-evaluated by SACLoss's ``torch.vmap`` (``reference_*`` keys and the ``*_speedup`` ratios).
+evaluated by SACLoss's ``torch.vmap`` and the losses on SACLoss's own path (``reference_*`` keys
+and the ``*_speedup`` ratios). ``--stock-losses`` times the SACLoss path of the losses
+(``EnsembleSACLoss(fused=False)``) with the fused critics.
 
 Usage::
 
@@ -57,10 +59,12 @@ def _online_batch(batch: int, device: torch.device) -> TensorDict:
 class _Learner:
     """One learner (ensemble SAC, reward net, optimisers) and its three timed steps."""
 
-    def __init__(self, fused_qvalue: bool, fused_adam: bool, batch: int, device: torch.device) -> None:
+    def __init__(
+        self, fused_qvalue: bool, fused_adam: bool, batch: int, device: torch.device, fused: bool | None = None
+    ) -> None:
         torch.manual_seed(0)
         self.sac = sac = EnsembleSACLoss(
-            make_actor(OBS_DIM, ACTION_DIM), make_qvalue(OBS_DIM, ACTION_DIM), fused_qvalue=fused_qvalue
+            make_actor(OBS_DIM, ACTION_DIM), make_qvalue(OBS_DIM, ACTION_DIM), fused_qvalue=fused_qvalue, fused=fused
         ).to(device)
         self.updater = SoftUpdate(sac, tau=0.005)
         self.reward_net = make_reward_network(OBS_DIM).to(device)
@@ -154,6 +158,10 @@ def main() -> None:
         help="evaluate the critic ensemble with SACLoss's torch.vmap instead of the fused ensemble",
     )
     parser.add_argument(
+        "--stock-losses", dest="fused", action="store_false", default=None,
+        help="compute the SAC losses on SACLoss's own path (EnsembleSACLoss(fused=False))",
+    )
+    parser.add_argument(
         "--reference", action="store_true",
         help="also time the vmapped-critic learner (reference_* keys), interleaved in this process",
     )
@@ -162,7 +170,7 @@ def main() -> None:
     torch.set_num_threads(args.threads)
     device = torch.device(args.device)
 
-    learners = {"": _Learner(args.fused_qvalue, args.fused_adam, args.batch, device)}
+    learners = {"": _Learner(args.fused_qvalue, args.fused_adam, args.batch, device, args.fused)}
     if args.reference:
         learners["reference_"] = _Learner(False, args.fused_adam, args.batch, device)
     steps = ("plain", "csirl", "sequential")
@@ -182,6 +190,7 @@ def main() -> None:
         "iters": args.iters,
         "fused_adam": args.fused_adam,
         "fused_qvalue": learners[""].sac.fused_qvalue,
+        "fused_losses": learners[""].sac.fused,
     }
     for prefix in learners:
         result.update(_summary(prefix, times[prefix]))

@@ -26,7 +26,10 @@ def _batch(n: int = 6, obs: int = 4, act: int = 2) -> TensorDict:
 @pytest.fixture
 def loss():
     torch.manual_seed(0)
-    return EnsembleSACLoss(make_actor(4, 2, hidden=(8,)), make_qvalue(4, 2, hidden=(8,)), num_qvalue_nets=3)
+    # SACLoss's own path (fused=False): these tests pin the TorchRL behaviour it relies on
+    return EnsembleSACLoss(
+        make_actor(4, 2, hidden=(8,)), make_qvalue(4, 2, hidden=(8,)), num_qvalue_nets=3, fused=False
+    )
 
 
 def test_sac_internals_exist_with_the_signatures_we_override():
@@ -92,6 +95,36 @@ def test_alpha_and_its_reduced_loss(loss):
     log_prob = torch.randn(6)
     value = _compat.sac_reduced_alpha_loss(loss, log_prob, _batch())
     assert value.shape == torch.Size([]) and torch.isclose(value, loss.alpha_loss(log_prob).mean())
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_fused_actor_draws_and_scores_as_tanh_normal(dtype):
+    """The fused actor writes TorchRL's ``TanhNormal`` (low -1, high 1, safe tanh) out op for op:
+    same random draw, bit-identical action, log-probability and gradients (saturated draws included)."""
+    from torchrl.modules import TanhNormal
+    from torchrl.modules.distributions.utils import rsample_and_log_prob
+
+    from torchrl_csirl.modules.fused_actor import FusedTanhNormalActor
+
+    loc = (torch.randn(7, 3, dtype=dtype) * torch.tensor([1.0, 1.0, 30.0], dtype=dtype)).requires_grad_(True)
+    scale = torch.rand(7, 3, dtype=dtype).add(0.05).requires_grad_(True)
+    results = []
+    for sample in (
+        lambda: rsample_and_log_prob(TanhNormal(loc, scale, low=-1.0, high=1.0)),
+        lambda: FusedTanhNormalActor.rsample_and_log_prob(loc, scale),
+    ):
+        torch.manual_seed(3)
+        action, log_prob = sample()
+        grads = torch.autograd.grad((action.sum() + log_prob.sum()), (loc, scale))
+        results.append((action, log_prob, *grads))
+    for stock, fused in zip(*results):
+        assert torch.equal(stock, fused)
+    torch.manual_seed(3)
+    stock_rsample = TanhNormal(loc, scale, low=-1.0, high=1.0).rsample()
+    torch.manual_seed(3)
+    assert torch.equal(FusedTanhNormalActor.rsample(loc, scale), stock_rsample)
+    deterministic = TanhNormal(loc, scale, low=-1.0, high=1.0).deterministic_sample
+    assert torch.equal(FusedTanhNormalActor.deterministic_sample(loc), deterministic)
 
 
 def test_parallel_env_internals():

@@ -18,6 +18,7 @@ from typing import Any
 import torch
 from tensordict import TensorDictBase
 from torchrl.envs import EnvBase, ParallelEnv
+from torchrl.modules.distributions.utils import safetanh_noeps as _safetanh_noeps
 from torchrl.objectives import SACLoss
 
 __all__ = [
@@ -27,7 +28,9 @@ __all__ = [
     "detached_qvalue_params",
     "gym_env_of",
     "sac_alpha",
+    "sac_reduce_loss",
     "sac_reduced_alpha_loss",
+    "safe_tanh",
     "set_qvalue_ensemble_evaluator",
     "vmap_qvalue_networks",
 ]
@@ -91,8 +94,22 @@ def sac_alpha(loss: SACLoss) -> torch.Tensor:
 
 def sac_reduced_alpha_loss(loss: SACLoss, log_prob: torch.Tensor, tensordict: TensorDictBase) -> torch.Tensor:
     """The temperature loss reduced as SACLoss's ``forward`` reduces it (priority weights included)."""
+    return sac_reduce_loss(loss, loss.alpha_loss(log_prob), tensordict)
+
+
+def sac_reduce_loss(loss: SACLoss, value: torch.Tensor, tensordict: TensorDictBase) -> torch.Tensor:
+    """A per-sample loss reduced as SACLoss's losses reduce theirs (priority weights, masks, reduction)."""
     weights = loss._maybe_get_priority_weight(tensordict)
-    return loss._reduce_loss(loss.alpha_loss(log_prob), tensordict=tensordict, weights=weights)
+    return loss._reduce_loss(value, tensordict=tensordict, weights=weights)
+
+
+def safe_tanh(x: torch.Tensor) -> torch.Tensor:
+    """TorchRL's ``TanhNormal`` squashing: ``tanh(x)`` clamped to ``[-1 + r, 1 - r]`` (``r`` the dtype's resolution).
+
+    The autograd function ``SafeTanhTransform`` applies (``safetanh_noeps``, whose backward is
+    ``grad * (1 - tanh^2)`` of the clamped output).
+    """
+    return _safetanh_noeps(x)
 
 
 # ------------------------------------------------------------------------------ collectors and envs

@@ -173,7 +173,7 @@ class _ReLUDetachedMaskNoFunctorch(torch.autograd.Function):
         return torch.ops.aten.threshold_backward(grad, output, 0)
 
 
-_functorch_transforms_active = getattr(torch._C, "_are_functorch_transforms_active", lambda: True)
+functorch_transforms_active = getattr(torch._C, "_are_functorch_transforms_active", lambda: True)
 
 
 def masked_relu(x: torch.Tensor) -> torch.Tensor:
@@ -186,7 +186,7 @@ def masked_relu(x: torch.Tensor) -> torch.Tensor:
         >>> x.grad
         tensor([0., 0., 1.])
     """
-    if _functorch_transforms_active():
+    if functorch_transforms_active():
         return _ReLUDetachedMask.apply(x)
     return _ReLUDetachedMaskNoFunctorch.apply(x)
 

@@ -21,7 +21,7 @@ from torch import nn
 
 from torchrl_csirl.modules.actor_critic import ConcatMLP, MaskedReLU
 
-__all__ = ["FusedCriticEnsemble", "fused_critic_ensemble"]
+__all__ = ["FusedCriticEnsemble", "fused_critic_ensemble", "mlp_layer_keys", "parameter_free"]
 
 # parameter-free, element-wise layers that act the same on [M, H] and on [N, M, H]
 _ELEMENTWISE = (MaskedReLU, nn.ReLU, nn.Tanh, nn.ELU, nn.LeakyReLU, nn.SiLU, nn.GELU, nn.Identity)
@@ -84,7 +84,11 @@ class FusedCriticEnsemble:
 
     def critic_input(self, tensordict: TensorDictBase) -> torch.Tensor:
         """The concatenated input ``[*B, D]`` the critics share."""
-        inputs = [tensordict.get(key) for key in self.in_keys]
+        return self.concat_inputs([tensordict.get(key) for key in self.in_keys])
+
+    def concat_inputs(self, inputs: Sequence[torch.Tensor]) -> torch.Tensor:
+        """The critics' input ``[*B, D]`` from their input tensors, in the order of :attr:`in_keys`."""
+        inputs = list(inputs)
         if self.input_features is not None:
             inputs[0] = self.input_features(inputs[0])
         return torch.cat(inputs, dim=-1)
@@ -140,13 +144,41 @@ def fused_critic_ensemble(qvalue_network: nn.Module) -> FusedCriticEnsemble | No
     if len(qvalue_network.out_keys) != 1:
         return None
     concat = qvalue_network.module
-    features = concat.input_features
-    if features is not None and any(True for _ in (*features.parameters(), *features.buffers())):
+    if not parameter_free(concat.input_features):
         return None
-    prefix = _module_path(qvalue_network, concat.mlp)
+    layers = mlp_layer_keys(qvalue_network, concat.mlp)
+    if layers is None:
+        return None
+    linear_keys, activations = layers
+    return FusedCriticEnsemble(
+        qvalue_network.in_keys,
+        qvalue_network.out_keys[0],
+        linear_keys,
+        activations,
+        concat.input_features,
+    )
+
+
+def mlp_layer_keys(
+    root: nn.Module, mlp: nn.Module
+) -> tuple[list[tuple[NestedKey, NestedKey | None]], list[nn.Module]] | None:
+    """The ``(weight, bias)`` parameter keys (relative to ``root``) and activations of an MLP.
+
+    ``mlp`` (a submodule of ``root``) must alternate ``nn.Linear`` layers with parameter-free
+    element-wise activations and end on a linear layer; ``None`` otherwise. The keys are those of
+    ``TensorDict.from_module(root)``, which is how TorchRL losses store a network's parameters.
+
+    Examples:
+        >>> from torchrl_csirl.modules import make_qvalue
+        >>> critic = make_qvalue(4, 2, hidden=(8,))
+        >>> keys, activations = mlp_layer_keys(critic, critic.module.mlp)
+        >>> keys[0], len(activations)
+        ((('module', 'mlp', '0', 'weight'), ('module', 'mlp', '0', 'bias')), 1)
+    """
+    prefix = _module_path(root, mlp)
     linear_keys, activations = [], []
     expect_linear = True
-    for name, layer in concat.mlp.named_children():
+    for name, layer in mlp.named_children():
         if expect_linear and isinstance(layer, nn.Linear):
             bias = None if layer.bias is None else (*prefix, name, "bias")
             linear_keys.append(((*prefix, name, "weight"), bias))
@@ -157,13 +189,12 @@ def fused_critic_ensemble(qvalue_network: nn.Module) -> FusedCriticEnsemble | No
         expect_linear = not expect_linear
     if expect_linear or not linear_keys:  # must end on a linear layer
         return None
-    return FusedCriticEnsemble(
-        qvalue_network.in_keys,
-        qvalue_network.out_keys[0],
-        linear_keys,
-        activations,
-        concat.input_features,
-    )
+    return linear_keys, activations
+
+
+def parameter_free(module: nn.Module | None) -> bool:
+    """Whether ``module`` is ``None`` or holds neither parameters nor buffers."""
+    return module is None or not any(True for _ in (*module.parameters(), *module.buffers()))
 
 
 def _module_path(root: nn.Module, target: nn.Module) -> tuple[str, ...]:

@@ -6,21 +6,26 @@ import copy
 from collections.abc import Iterator, Sequence
 
 import torch
-from tensordict import TensorDictBase, TensorDictParams
-from tensordict.nn import TensorDictModule
+from tensordict import TensorDict, TensorDictBase
+from tensordict.nn import TensorDictModule, dispatch
 from torch import nn
 
+from torchrl.envs.utils import ExplorationType, set_exploration_type
 from torchrl.objectives import SACLoss
-from torchrl.objectives.utils import ValueEstimators
+from torchrl.objectives.utils import ValueEstimators, distance_loss
 from torchrl.objectives.value import TD0Estimator
+from torchrl.objectives.value.functional import td0_return_estimate
 
 from torchrl_csirl._compat import (
     check_sac_internals,
     detached_qvalue_params,
+    sac_alpha,
+    sac_reduce_loss,
     set_qvalue_ensemble_evaluator,
     vmap_qvalue_networks,
 )
 from torchrl_csirl.modules.ensemble import fused_critic_ensemble
+from torchrl_csirl.modules.fused_actor import fused_tanh_normal_actor
 
 __all__ = ["EnsembleSACLoss", "qvalue_dispersion", "reinitialize_module"]
 
@@ -91,8 +96,8 @@ def qvalue_dispersion(qvalues: torch.Tensor, dispersion: str = "variance") -> to
 class EnsembleSACLoss(SACLoss):
     """SAC loss with ``N`` independently initialised critics, as used by CSIRL.
 
-    A thin subclass of :class:`~torchrl.objectives.SACLoss` (version 2, no value
-    network). All SAC equations are TorchRL's; this class adds:
+    A subclass of :class:`~torchrl.objectives.SACLoss` (version 2, no value network) with
+    its interface (keys, ``set_keys``, value estimator, out keys). This class adds:
 
     * **independent critic initialisation**: :meth:`SACLoss.convert_to_functional` would
       expand a single critic and resample every parameter uniformly between its min and
@@ -107,6 +112,17 @@ class EnsembleSACLoss(SACLoss):
       :class:`~torchrl_csirl.modules.FusedCriticEnsemble` (one batched matmul per layer over the
       same stacked parameters) instead of ``torch.vmap``; values are bit-identical, see
       docs/performance.md for the speed. ``fused_qvalue=False`` keeps the vmap.
+    * **a fused path for the losses** (``fused``): for an actor built by
+      :func:`~torchrl_csirl.modules.make_actor` and the fused critics, ``forward``,
+      :meth:`qvalue_v2_loss`, :meth:`actor_loss` and the critic target compute SACLoss's
+      equations on tensors: the actor is evaluated from its parameter TensorDict by a
+      :class:`~torchrl_csirl.modules.FusedTanhNormalActor` (no ``to_module`` swap, no
+      TensorDict modules, no distribution objects), the TD(0) target is TorchRL's
+      ``td0_return_estimate``, losses are reduced by SACLoss's own reduction. Same random draws,
+      same operations in the same order: losses and gradients are bit-identical to SACLoss's
+      path (``tests/test_fused_sac.py``). Options it does not implement (``skip_done_states``,
+      other value estimators, ``reduction="none"`` in ``forward``) run SACLoss's path;
+      :meth:`fused_applies` says which one runs. ``fused=False`` always runs SACLoss's.
     * CSIRL defaults: fixed ``alpha = 0.01``, ``gamma = 0.99`` (TD(0)), squared-error
       critic loss summed over critics.
     * a **differentiable-reward mode** (:attr:`differentiable_reward` or the
@@ -148,6 +164,9 @@ class EnsembleSACLoss(SACLoss):
             :class:`~torchrl_csirl.modules.FusedCriticEnsemble` (``True``; an error if the critic
             is not supported) or with SACLoss's ``torch.vmap`` (``False``). Defaults to ``None``:
             fused when the critic is supported.
+        fused (bool, optional): compute the losses on the fused path (``True``; an error if the
+            actor or the critics are not supported) or on SACLoss's (``False``). Defaults to
+            ``None``: fused when supported (the results are bit-identical).
         **kwargs: forwarded to :class:`~torchrl.objectives.SACLoss`.
 
     Examples:
@@ -181,6 +200,7 @@ class EnsembleSACLoss(SACLoss):
         reinitialize_qvalue: bool = True,
         differentiable_reward: bool = False,
         fused_qvalue: bool | None = None,
+        fused: bool | None = None,
         **kwargs,
     ) -> None:
         if kwargs.get("value_network") is not None:
@@ -190,8 +210,8 @@ class EnsembleSACLoss(SACLoss):
         if dispersion not in _DISPERSIONS:
             raise ValueError(f"dispersion must be one of {_DISPERSIONS}, got {dispersion!r}.")
         members = self._make_members(qvalue_network, num_qvalue_nets, reinitialize_qvalue)
-        fused = None if fused_qvalue is False else fused_critic_ensemble(members[0])
-        if fused_qvalue and fused is None:
+        ensemble = None if fused_qvalue is False else fused_critic_ensemble(members[0])
+        if fused_qvalue and ensemble is None:
             raise ValueError(
                 "fused_qvalue=True needs critics built by make_qvalue (a TensorDictModule over a "
                 f"ConcatMLP of Linear layers and element-wise activations), got {members[0]}."
@@ -209,8 +229,36 @@ class EnsembleSACLoss(SACLoss):
         self.dispersion = dispersion
         self.differentiable_reward = differentiable_reward
         self.__dict__["_actor_loss_qvalue_params"] = None
-        self.__dict__["_fused_qvalue"] = fused
+        self.__dict__["_fused_qvalue"] = ensemble
         self._make_vmap()
+        self.__dict__["_fused_actor"] = self._make_fused_actor(actor_network, fused)
+
+    def _make_fused_actor(self, actor_network: TensorDictModule, fused: bool | None):
+        if fused is False:
+            return None
+        fused_actor = fused_tanh_normal_actor(actor_network)
+        if fused and (fused_actor is None or not self.fused_qvalue):
+            raise ValueError(
+                "fused=True needs the fused critic ensemble (fused_qvalue not False) and an actor "
+                f"built by make_actor (a tanh-Gaussian ProbabilisticActor), got {actor_network}."
+            )
+        return fused_actor if self.fused_qvalue else None
+
+    @property
+    def fused(self) -> bool:
+        """Whether the SAC losses take the fused path (:meth:`fused_applies` says when it applies)."""
+        return self.__dict__.get("_fused_actor") is not None
+
+    def fused_applies(self) -> bool:
+        """Whether the next loss evaluation takes the fused path.
+
+        It does when :attr:`fused` is set and the options are those it implements: TD(0) targets
+        without reward averaging, ``skip_done_states=False``. Otherwise SACLoss's own path runs.
+        """
+        if not self.fused or self.skip_done_states:
+            return False
+        estimator = self.value_estimator
+        return isinstance(estimator, TD0Estimator) and not estimator.average_rewards
 
     @property
     def fused_qvalue(self) -> bool:
@@ -310,7 +358,10 @@ class EnsembleSACLoss(SACLoss):
             self.differentiable_reward = prev
 
     def _compute_target_v2(self, tensordict: TensorDictBase) -> torch.Tensor:
-        target = super()._compute_target_v2(tensordict)
+        if self.fused_applies():
+            target = self._fused_target(tensordict)
+        else:
+            target = super()._compute_target_v2(tensordict)
         if not self.differentiable_reward:
             return target
         estimator = self.value_estimator
@@ -324,6 +375,127 @@ class EnsembleSACLoss(SACLoss):
             return target
         # d target / d reward = 1 for TD(0); ``reward - reward.detach()`` is exactly 0.
         return target + (reward - reward.detach()).reshape(target.shape)
+
+    # ------------------------------------------------------------------ fused path
+    @dispatch
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        """SACLoss's forward; on the fused path the same losses without TensorDict modules.
+
+        Returns ``loss_actor``, ``loss_qvalue``, ``loss_alpha``, ``alpha`` and ``entropy``, and
+        writes the TD errors at ``tensor_keys.priority`` of ``tensordict``, as SACLoss does.
+        """
+        if not self.fused_applies() or self.reduction == "none":
+            return super().forward(tensordict)
+        loss_qvalue, value_metadata = self.qvalue_v2_loss(tensordict)
+        loss_actor, actor_metadata = self.actor_loss(tensordict)
+        log_prob = actor_metadata["log_prob"]
+        loss_alpha = sac_reduce_loss(self, self.alpha_loss(log_prob), tensordict)
+        tensordict.set(self.tensor_keys.priority, value_metadata["td_error"])
+        if loss_actor.shape != loss_qvalue.shape:
+            raise RuntimeError(f"Losses shape mismatch: {loss_actor.shape} and {loss_qvalue.shape}")
+        out = {
+            "loss_actor": loss_actor,
+            "loss_qvalue": loss_qvalue,
+            "loss_alpha": loss_alpha,
+            "alpha": sac_alpha(self),
+            "entropy": (-log_prob).detach().mean(),
+        }
+        return TensorDict(out, batch_size=[])
+
+    def qvalue_v2_loss(self, tensordict: TensorDictBase) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+        """SACLoss's critic loss (``sum_k`` of the per-critic regression losses, reduced over the batch)."""
+        if not self.fused_applies():
+            return super().qvalue_v2_loss(tensordict)
+        target = self._compute_target_v2(tensordict)
+        pred = self._critic_values(tensordict, self.qvalue_network_params).squeeze(-1)
+        td_error = abs(pred - target)
+        loss = distance_loss(pred, target.expand_as(pred), loss_function=self.loss_function).sum(0)
+        return sac_reduce_loss(self, loss, tensordict), {"td_error": td_error.detach().max(0)[0]}
+
+    def actor_loss(self, tensordict: TensorDictBase) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+        """SACLoss's actor loss ``alpha log pi(a|s) - min_k Q_k(s, a)``, ``a ~ pi(s)`` reparameterised."""
+        if not self.fused_applies():
+            return super().actor_loss(tensordict)
+        fused_actor = self.__dict__["_fused_actor"]
+        loc, scale = fused_actor.dist_params(tensordict.get(fused_actor.in_key), self.actor_network_params)
+        action, log_prob = fused_actor.rsample_and_log_prob(loc, scale)
+        qvalue = self._critic_values(tensordict, self._cached_detached_qvalue_params, action)
+        min_qvalue = qvalue.min(0)[0].squeeze(-1)
+        if log_prob.shape != min_qvalue.shape:
+            raise RuntimeError(f"Losses shape mismatch: {log_prob.shape} and {min_qvalue.shape}")
+        loss = sac_alpha(self) * log_prob - min_qvalue
+        return sac_reduce_loss(self, loss, tensordict), {"log_prob": log_prob.detach()}
+
+    def sample_actions(
+        self,
+        observation: torch.Tensor,
+        actor_params: TensorDictBase | None = None,
+        *,
+        deterministic: bool = False,
+    ) -> torch.Tensor:
+        """Actions of the policy for ``observation`` (reparameterised draws, or the mean action).
+
+        Args:
+            observation (Tensor): ``[*B, obs]``, read as the actor's input entry.
+            actor_params (TensorDictBase, optional): the actor's parameters (graph-carrying tensors
+                allowed). Defaults to :attr:`actor_network_params`.
+
+        Keyword Args:
+            deterministic (bool): ``tanh(loc)`` instead of a draw. Defaults to ``False``.
+
+        Returns:
+            a ``[*B, action]`` tensor, differentiable w.r.t. ``actor_params``.
+        """
+        params = self.actor_network_params if actor_params is None else actor_params
+        fused_actor = self.__dict__.get("_fused_actor")
+        if fused_actor is not None:
+            loc, scale = fused_actor.dist_params(observation, params)
+            return fused_actor.deterministic_sample(loc) if deterministic else fused_actor.rsample(loc, scale)
+        actor = self.actor_network
+        td_in = TensorDict({actor.in_keys[0]: observation}, batch_size=observation.shape[:-1])
+        exploration = ExplorationType.DETERMINISTIC if deterministic else ExplorationType.RANDOM
+        with set_exploration_type(exploration), params.to_module(actor, preserve_module_state=False):
+            dist = actor.get_dist(td_in)
+            return dist.deterministic_sample if deterministic else dist.rsample()
+
+    def _critic_values(
+        self, tensordict: TensorDictBase, params: TensorDictBase, action: torch.Tensor | None = None
+    ) -> torch.Tensor:
+        """``[N, *B, 1]`` values of the critics on ``tensordict``'s entries (``action`` replacing its action)."""
+        fused_qvalue = self.__dict__["_fused_qvalue"]
+        action_key = self.tensor_keys.action
+        inputs = [
+            action if action is not None and key == action_key else tensordict.get(key)
+            for key in fused_qvalue.in_keys
+        ]
+        return fused_qvalue.values(fused_qvalue.concat_inputs(inputs), params)
+
+    def _fused_target(self, tensordict: TensorDictBase) -> torch.Tensor:
+        """SACLoss's TD(0) target ``r + gamma (1 - terminated) min_k (Q'_k(s', a') - alpha log pi(a'|s'))``."""
+        fused_actor = self.__dict__["_fused_actor"]
+        estimator = self.value_estimator
+        keys = estimator.tensor_keys
+        next_td = tensordict.get("next")
+        with torch.no_grad():
+            loc, scale = fused_actor.dist_params(next_td.get(fused_actor.in_key), self.actor_network_params)
+            next_action, next_log_prob = fused_actor.rsample_and_log_prob(loc, scale)
+            qvalue = self._critic_values(next_td, self.target_qvalue_network_params, next_action)
+            if qvalue.shape[-next_log_prob.ndim:] != next_log_prob.shape:
+                next_log_prob = next_log_prob.unsqueeze(-1)
+            next_value = (qvalue - sac_alpha(self) * next_log_prob).min(0)[0]
+            reward = next_td.get(keys.reward)
+            if estimator.gamma.device != reward.device:
+                estimator.gamma = estimator.gamma.to(reward.device)
+            gamma = estimator.gamma
+            steps_to_next_obs = tensordict.get(keys.steps_to_next_obs, None)
+            if steps_to_next_obs is not None:
+                gamma = gamma ** steps_to_next_obs.view_as(reward)
+            done = next_td.get(keys.done)
+            terminated = next_td.get(keys.terminated, default=done)
+            target = td0_return_estimate(
+                gamma=gamma, next_state_value=next_value, reward=reward, done=done, terminated=terminated
+            )
+        return target.squeeze(-1)
 
     # ------------------------------------------------------------------ parameter swapping
     @property
@@ -365,8 +537,6 @@ class EnsembleSACLoss(SACLoss):
                 raise ValueError(
                     f"{name}: expected batch size {current.batch_size}, got {params.batch_size}."
                 )
-            if not isinstance(params, TensorDictParams):
-                params = TensorDictParams(params, no_convert=True)
             swapped[name] = current
             self._modules[name] = params
         prev_override = self.__dict__.get("_actor_loss_qvalue_params")

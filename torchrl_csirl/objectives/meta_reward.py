@@ -5,10 +5,9 @@ from dataclasses import dataclass
 
 import torch
 from tensordict import TensorDict, TensorDictBase
-from tensordict.nn import TensorDictModule, TensorDictParams
+from tensordict.nn import TensorDictModule
 from tensordict.utils import NestedKey
 
-from torchrl.envs.utils import ExplorationType, set_exploration_type
 from torchrl.objectives.common import LossModule
 
 from torchrl_csirl._compat import sac_alpha, sac_reduced_alpha_loss
@@ -19,14 +18,10 @@ __all__ = ["MetaRewardLoss", "balanced_meta_gradient"]
 GRADIENT_BALANCES = ("sum", "normalized")
 
 
-def _leaves_like(params: TensorDictBase) -> TensorDictParams:
-    """Detached copies (sharing storage) of ``params`` that are fresh autograd leaves.
-
-    Returned as a :class:`~tensordict.nn.TensorDictParams` (not converted to ``nn.Parameter``),
-    which :meth:`EnsembleSACLoss.using_params` then swaps in without wrapping it again.
-    """
+def _leaves_like(params: TensorDictBase) -> TensorDict:
+    """Detached copies (sharing storage) of ``params`` that are fresh autograd leaves (a plain TensorDict)."""
     leaves = {key: value.detach().requires_grad_(True) for key, value in params.items(True, True)}
-    return TensorDictParams(TensorDict(leaves, batch_size=params.batch_size), no_convert=True)
+    return TensorDict(leaves, batch_size=params.batch_size)
 
 
 def sgd_lookahead(
@@ -357,21 +352,10 @@ class MetaRewardLoss(LossModule):
 
     def imitation_loss(self, expert: TensorDictBase, actor_params) -> torch.Tensor:
         """Eq. 11: ``mean (a_hat - a_e)^2`` with ``a_hat ~ pi_theta'(s_e)``."""
-        actor = self.sac_loss.actor_network
-        td_in = expert.select(self.tensor_keys.expert_observation, strict=True)
-        obs_key = actor.in_keys[0]
-        if self.tensor_keys.expert_observation != obs_key:
-            td_in = td_in.rename_key_(self.tensor_keys.expert_observation, obs_key)
-        exploration = (
-            ExplorationType.DETERMINISTIC
-            if self.deterministic_expert_action
-            else ExplorationType.RANDOM
+        observation = expert.get(self.tensor_keys.expert_observation)
+        a_hat = self.sac_loss.sample_actions(
+            observation, actor_params, deterministic=self.deterministic_expert_action
         )
-        with set_exploration_type(exploration), actor_params.to_module(
-            actor, preserve_module_state=False
-        ):
-            dist = actor.get_dist(td_in)
-            a_hat = dist.deterministic_sample if self.deterministic_expert_action else dist.rsample()
         a_e = expert.get(self.tensor_keys.expert_action)
         if a_hat.shape != a_e.shape:
             raise ValueError(

@@ -1,0 +1,106 @@
+"""``bench_update.py``'s learner steps timed in two checkouts, alternated step by step.
+
+Each checkout (``--before``: e.g. a ``git worktree`` of an older commit; ``--after``: this one)
+runs in its own worker process, importing its own ``torchrl_csirl`` and its own
+``benchmarks/bench_update.py`` learner. The driver asks the two workers in turn for one timed step
+(a SAC update, a CSIRL iteration), so both sides see the same machine load, and reports the
+medians and the median of the per-round ratios ``after / before`` (robust to load drift).
+Only one worker computes at a time; each uses ``--threads`` torch threads, and the driver pauses
+``--pause`` seconds before each step, so that the other worker's OpenMP threads have stopped
+spinning (without it, two threads per worker measured 1.3-1.6x slower than ``bench_update.py``).
+
+Usage::
+
+    git worktree add /tmp/base 58670cb
+    python benchmarks/bench_revisions.py --before /tmp/base --batch 256
+    python benchmarks/bench_revisions.py --before /tmp/base --batch 8 --hidden 8 --threads 1  # overhead
+
+Prints one final JSON line.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import time
+
+_STEPS = {"sac_update": "plain_step", "csirl_iteration": "csirl_step"}
+
+_WORKER = r"""
+import sys, time, torch
+sys.path.insert(0, "benchmarks")
+import bench_update
+batch, threads, warmup, hidden = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4])
+if hidden:  # smaller networks: what is left is the per-call overhead
+    make_actor, make_qvalue = bench_update.make_actor, bench_update.make_qvalue
+    bench_update.make_actor = lambda obs, act: make_actor(obs, act, hidden=(hidden, hidden))
+    bench_update.make_qvalue = lambda obs, act: make_qvalue(obs, act, hidden=(hidden, hidden))
+torch.set_num_threads(threads)
+learner = bench_update._Learner(True, True, batch, torch.device("cpu"))
+steps = sys.argv[5:]
+for _ in range(warmup):
+    for step in steps:
+        getattr(learner, step)()
+print("ready", flush=True)
+for line in sys.stdin:
+    step = getattr(learner, line.strip())
+    start = time.perf_counter()
+    step()
+    print((time.perf_counter() - start) * 1e3, flush=True)
+"""
+
+
+def _worker(tree: str, args: argparse.Namespace) -> subprocess.Popen:
+    env = dict(os.environ, PYTHONPATH=tree, RL_WARNINGS="0")
+    cmd = [sys.executable, "-c", _WORKER, *map(str, (args.batch, args.threads, args.warmup, args.hidden)),
+           *_STEPS.values()]
+    proc = subprocess.Popen(cmd, cwd=tree, env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    if proc.stdout.readline().strip() != "ready":
+        raise RuntimeError(f"the worker in {tree} did not start")
+    return proc
+
+
+def _ask(proc: subprocess.Popen, step: str) -> float:
+    proc.stdin.write(step + "\n")
+    proc.stdin.flush()
+    return float(proc.stdout.readline())
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--before", required=True, help="checkout timed as 'before'")
+    parser.add_argument("--after", default=os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    parser.add_argument("--batch", type=int, default=256)
+    parser.add_argument("--iters", type=int, default=30)
+    parser.add_argument("--warmup", type=int, default=5)
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--pause", type=float, default=0.05, help="seconds between two timed steps")
+    parser.add_argument("--hidden", type=int, default=0,
+                        help="hidden width of the actor and critics (0: bench_update.py's 256)")
+    args = parser.parse_args()
+    workers = {side: _worker(getattr(args, side), args) for side in ("before", "after")}
+    times = {side: {name: [] for name in _STEPS} for side in workers}
+    try:
+        for _ in range(args.iters):
+            for name, step in _STEPS.items():
+                for side, proc in workers.items():
+                    time.sleep(args.pause)  # the other worker's OpenMP threads stop spinning
+                    times[side][name].append(_ask(proc, step))
+    finally:
+        for proc in workers.values():
+            proc.stdin.close()
+            proc.wait()
+    result = {"batch": args.batch, "threads": args.threads, "iters": args.iters, "hidden": args.hidden or 256}
+    for name in _STEPS:
+        before, after = times["before"][name], times["after"][name]
+        result[f"{name}_ms_before"] = round(statistics.median(before), 2)
+        result[f"{name}_ms_after"] = round(statistics.median(after), 2)
+        result[f"{name}_after_over_before"] = round(statistics.median(a / b for a, b in zip(after, before)), 3)
+    print(json.dumps(result))
+
+
+if __name__ == "__main__":
+    main()
