@@ -14,13 +14,11 @@ from torchrl_csirl.modules import make_actor, make_qvalue
 from torchrl_csirl.objectives import EnsembleSACLoss
 from torchrl_csirl.trainers import shutdown_collector
 
+from transitions import random_transitions
+
 
 def _batch(n: int = 6, obs: int = 4, act: int = 2) -> TensorDict:
-    return TensorDict({
-        "observation": torch.randn(n, obs), "action": torch.rand(n, act) * 2 - 1,
-        ("next", "observation"): torch.randn(n, obs), ("next", "reward"): torch.randn(n, 1),
-        ("next", "done"): torch.zeros(n, 1, dtype=torch.bool),
-        ("next", "terminated"): torch.zeros(n, 1, dtype=torch.bool)}, [n])
+    return random_transitions(n, obs, act)
 
 
 @pytest.fixture

@@ -4,7 +4,6 @@ import math
 
 import pytest
 import torch
-from tensordict import TensorDict
 from tensordict.nn import TensorDictModule
 
 from torchrl.objectives import SACLoss, SoftUpdate
@@ -13,24 +12,15 @@ from torchrl_csirl.modules.actor_critic import make_actor, make_qvalue
 from torchrl_csirl.objectives import EnsembleSACLoss, qvalue_dispersion
 
 from devices import DEVICES
+from transitions import random_transitions
 
 OBS, ACT, HID = 5, 2, (16, 16)
 
 
 def _batch(n=8, seed=1, **flags):
     g = torch.Generator().manual_seed(seed)
-    td = TensorDict(
-        {
-            "observation": torch.randn(n, OBS, generator=g),
-            "action": torch.rand(n, ACT, generator=g) * 2 - 1,
-            ("next", "observation"): torch.randn(n, OBS, generator=g),
-            ("next", "reward"): torch.randn(n, 1, generator=g),
-            ("next", "done"): torch.zeros(n, 1, dtype=torch.bool),
-            ("next", "terminated"): torch.zeros(n, 1, dtype=torch.bool),
-            ("next", "truncated"): torch.zeros(n, 1, dtype=torch.bool),
-        },
-        [n],
-    )
+    td = random_transitions(n, OBS, ACT, generator=g)
+    td["next", "truncated"] = torch.zeros(n, 1, dtype=torch.bool)
     for key, value in flags.items():
         td["next", key] = torch.full((n, 1), value)
     return td

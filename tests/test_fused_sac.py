@@ -17,6 +17,8 @@ from torchrl.objectives.utils import ValueEstimators
 from torchrl_csirl.modules import make_actor, make_qvalue
 from torchrl_csirl.objectives import EnsembleSACLoss, MetaRewardLoss
 
+from transitions import random_transitions
+
 OBS, ACT, HID = 5, 2, (8, 8)
 TOL = dict(rtol=0, atol=1e-6)
 
@@ -47,18 +49,7 @@ def _pair(dtype=torch.float64, input_features=False, **kwargs) -> tuple[Ensemble
 
 
 def _batch(n=12, dtype=torch.float64, seed=1) -> TensorDict:
-    g = torch.Generator().manual_seed(seed)
-    td = TensorDict(
-        {
-            "observation": torch.randn(n, OBS, generator=g, dtype=dtype),
-            "action": torch.rand(n, ACT, generator=g, dtype=dtype) * 2 - 1,
-            ("next", "observation"): torch.randn(n, OBS, generator=g, dtype=dtype),
-            ("next", "reward"): torch.randn(n, 1, generator=g, dtype=dtype),
-            ("next", "done"): torch.zeros(n, 1, dtype=torch.bool),
-            ("next", "terminated"): torch.zeros(n, 1, dtype=torch.bool),
-        },
-        [n],
-    )
+    td = random_transitions(n, OBS, ACT, dtype=dtype, generator=torch.Generator().manual_seed(seed))
     td["next", "terminated"][:3] = True
     td["next", "done"][:5] = True  # 3 terminated, 2 truncated
     return td

@@ -11,6 +11,7 @@ from torchrl_csirl.objectives import EnsembleSACLoss, MetaRewardLoss
 from torchrl_csirl.objectives.meta_reward import sgd_lookahead
 
 from devices import DEVICES
+from transitions import random_transitions
 
 OBS, ACT = 3, 2
 
@@ -29,17 +30,7 @@ def _setup(dtype=torch.float64, num_critics=3, device="cpu", **meta_kwargs):
     meta = MetaRewardLoss(sac, reward, **meta_kwargs)
     g = torch.Generator().manual_seed(1)
     n = 5
-    online = TensorDict(
-        {
-            "observation": torch.randn(n, OBS, generator=g, dtype=dtype),
-            "action": torch.rand(n, ACT, generator=g, dtype=dtype) * 2 - 1,
-            ("next", "observation"): torch.randn(n, OBS, generator=g, dtype=dtype),
-            ("next", "matching_reward"): torch.randn(n, 1, generator=g, dtype=dtype),
-            ("next", "done"): torch.zeros(n, 1, dtype=torch.bool),
-            ("next", "terminated"): torch.zeros(n, 1, dtype=torch.bool),
-        },
-        [n],
-    )
+    online = random_transitions(n, OBS, ACT, dtype=dtype, generator=g, reward_key="matching_reward")
     online["next", "terminated"][0] = True
     expert = TensorDict(
         {
