@@ -41,6 +41,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from omegaconf import OmegaConf
+
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 from common.config import SCENARIO_NAMES  # noqa: E402
@@ -512,6 +514,30 @@ def eval_curve(run_dir: str, key: str = "eval_accomplish_rate") -> tuple[list[fl
     return frames, values
 
 
+def evaluation_schedule(run_dirs: list[str]) -> str:
+    """How the curves' points of ``run_dirs`` were evaluated (their ``config.yaml``), for a figure's title.
+
+    The periodic evaluations play ``eval.episodes`` episodes from ``eval.validation_seed`` (a range
+    apart from the test episodes) or, in runs recorded before that key or with it null, the first
+    test episodes.
+
+    Examples:
+        >>> evaluation_schedule([])
+        ''
+    """
+    kinds = set()
+    for run_dir in run_dirs:
+        path = os.path.join(run_dir, "config.yaml")
+        if not os.path.isfile(path):
+            continue
+        evaluation = OmegaConf.load(path).get("eval", {})
+        where = "validation" if evaluation.get("validation_seed") is not None else "test"
+        kinds.add(f"{evaluation.get('episodes', 10)} {where} episodes per point")
+    if len(kinds) > 1:
+        return "points of differing evaluations (" + "; ".join(sorted(kinds)) + ")"
+    return next(iter(kinds), "")
+
+
 def curve_kinds(scenario: str) -> list[tuple[str, str, str, str, bool]]:
     """The evaluation curves drawn for ``scenario``: ``(file prefix, summary key, curve key, y label, rate)``.
 
@@ -546,10 +572,12 @@ def learning_curve_figures(runs: list[dict[str, Any]], out_dir: str) -> list[str
                         references[run["method"]].append(float(run[summary_key]))
                 else:
                     curves[run["method"]].append(eval_curve(run["run_dir"], curve_key))
+            schedule = evaluation_schedule([r["run_dir"] for r in runs if r["scenario"] == scenario
+                                            and r["method"] not in REFERENCE_METHODS])
             path = plot_method_curves(curves, os.path.join(out_dir, f"{prefix}_{scenario}.png"),
                                       references={m: sum(v) / len(v) for m, v in references.items()},
-                                      title=f"{scenario}: {label}",
-                                      ylabel="test accomplish rate" if not is_robotics(scenario) else label,
+                                      title=f"{scenario}: {label}" + (f"\n{schedule}" if schedule else ""),
+                                      ylabel=label,
                                       rate=rate)
             paths.append(os.fspath(path))
     return paths

@@ -236,3 +236,17 @@ def test_help_lists_every_key_with_its_help(capsys):
     assert len(keys) == len(flatten_config(imitation.load_config(["method=bc"])))
     # sections from a hyperparameter dataclass show the help of its docstring
     assert any(line.strip().startswith("sac.tau = 0.005  # a number; Polyak") for line in keys)
+
+
+def test_curve_figures_say_which_episodes_their_points_played(tmp_path):
+    def run(name: str, evaluation: str) -> str:
+        folder = tmp_path / name
+        folder.mkdir()
+        (folder / "config.yaml").write_text(f"eval:\n{evaluation}")
+        return str(folder)
+
+    validation = run("v", "  episodes: 30\n  validation_seed: 2000000\n")
+    old = run("o", "  episodes: 10\n")  # recorded before eval.validation_seed
+    assert benchmark.evaluation_schedule([validation]) == "30 validation episodes per point"
+    assert benchmark.evaluation_schedule([old]) == "10 test episodes per point"
+    assert "differing" in benchmark.evaluation_schedule([validation, old])
