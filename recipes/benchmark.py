@@ -45,7 +45,7 @@ from omegaconf import OmegaConf
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-from common.config import SCENARIO_NAMES  # noqa: E402
+from common.config import SCENARIO_NAMES, EvalConfig  # noqa: E402
 from common.summaries import find_summaries, mean_std, welch_test  # noqa: E402
 
 from torchrl_csirl.envs.robotics import ROBOTICS_TASKS  # noqa: E402
@@ -532,7 +532,7 @@ def evaluation_schedule(run_dirs: list[str]) -> str:
             continue
         evaluation = OmegaConf.load(path).get("eval", {})
         where = "validation" if evaluation.get("validation_seed") is not None else "test"
-        kinds.add(f"{evaluation.get('episodes', 10)} {where} episodes per point")
+        kinds.add(f"{evaluation.get('episodes', EvalConfig.episodes)} {where} episodes per point")
     if len(kinds) > 1:
         return "points of differing evaluations (" + "; ".join(sorted(kinds)) + ")"
     return next(iter(kinds), "")
@@ -563,6 +563,8 @@ def learning_curve_figures(runs: list[dict[str, Any]], out_dir: str) -> list[str
 
     paths = []
     for scenario in [s for s in (*SCENARIO_ORDER, *ROBOTICS_ORDER) if any(r["scenario"] == s for r in runs)]:
+        schedule = evaluation_schedule([r["run_dir"] for r in runs if r["scenario"] == scenario
+                                        and r["method"] not in REFERENCE_METHODS])
         for prefix, summary_key, curve_key, label, rate in curve_kinds(scenario):
             curves: dict[str, list] = defaultdict(list)
             references: dict[str, list[float]] = defaultdict(list)
@@ -572,8 +574,6 @@ def learning_curve_figures(runs: list[dict[str, Any]], out_dir: str) -> list[str
                         references[run["method"]].append(float(run[summary_key]))
                 else:
                     curves[run["method"]].append(eval_curve(run["run_dir"], curve_key))
-            schedule = evaluation_schedule([r["run_dir"] for r in runs if r["scenario"] == scenario
-                                            and r["method"] not in REFERENCE_METHODS])
             path = plot_method_curves(curves, os.path.join(out_dir, f"{prefix}_{scenario}.png"),
                                       references={m: sum(v) / len(v) for m, v in references.items()},
                                       title=f"{scenario}: {label}" + (f"\n{schedule}" if schedule else ""),
