@@ -44,3 +44,26 @@ def test_the_glue_finds_the_recipes_preset_config_group():
 
     assert config.preset_names(csirl.CONFIG_DIR) == ("default", "paper")
     assert csirl.load_config(["preset=paper"]).preset == "paper"
+
+
+def test_a_scenarios_own_defaults_go_under_the_preset_and_the_command_line(tmp_path):
+    from common import csirl
+
+    scenes = config.scene_defaults(csirl.CONFIG_DIR)
+    assert "intersection" in scenes and "merge" not in scenes
+    (key, value), *_ = scenes["intersection"].items()
+    section, leaf = key.split(".")
+    # the scene's value, where the schema's default differs from it
+    assert config.flatten_config(csirl.load_config(["env.scenario=intersection"]))[key] == value
+    assert config.flatten_config(csirl.load_config(["env.scenario=merge"]))[key] != value
+    # a named preset and the command line go over it
+    assert csirl.load_config(["env.scenario=intersection", "preset=paper"]).model.lane_features is False
+    flipped = not value if isinstance(value, bool) else None
+    if flipped is not None:
+        cli = csirl.load_config(["env.scenario=intersection", f"{key}={str(flipped).lower()}"])
+        assert getattr(getattr(cli, section), leaf) is flipped
+    # an unknown key in a scene file is one line naming it
+    (tmp_path / "scene").mkdir()
+    (tmp_path / "scene" / "merge.yaml").write_text("model:\n  lane_featurs: true\n")
+    with pytest.raises(config.ConfigError, match="model.lane_featurs: unknown configuration key"):
+        config.load_config(csirl.CSIRLHighwayConfig, ["env.scenario=merge"], str(tmp_path))

@@ -219,13 +219,29 @@ def parse_overrides(overrides: list[str]) -> DictConfig:
         raise ConfigError(f"bad override: {_first_line(err)}") from None
 
 
+def scene_defaults_path(config_dir: str, scenario: str) -> str:
+    """``<config_dir>/scene/<scenario>.yaml``: a scenario's own defaults (the file may not exist)."""
+    return os.path.join(config_dir, "scene", f"{scenario}.yaml")
+
+
+def scene_defaults(config_dir: str) -> dict[str, dict[str, object]]:
+    """Every scenario that has its own defaults under ``config_dir``, as ``{scenario: {key: value}}``."""
+    folder = os.path.join(config_dir, "scene")
+    names = sorted(n[:-5] for n in os.listdir(folder) if n.endswith(".yaml")) if os.path.isdir(folder) else []
+    return {name: flatten_config(OmegaConf.load(scene_defaults_path(config_dir, name))) for name in names}
+
+
 def load_config(schema: type, overrides: list[str] | None = None, config_dir: str | None = None) -> DictConfig:
-    """Schema defaults, the ``preset`` (a config group under ``config_dir``), then ``overrides``.
+    """Schema defaults, the scenario's defaults, the ``preset``, then ``overrides``.
+
+    The scenario's defaults (``<config_dir>/scene/<env.scenario>.yaml``, where the scene has such a
+    file) are the default preset of that scene; a named preset (``preset=paper``) goes over them.
 
     Args:
         schema: the recipe's top-level dataclass.
         overrides: ``key=value`` strings (the command line).
-        config_dir: folder holding ``preset/<name>.yaml`` (None: no presets besides ``default``).
+        config_dir: folder holding ``preset/<name>.yaml`` and ``scene/<scenario>.yaml`` (None: no
+            presets besides ``default``, no scene defaults).
 
     Raises:
         ConfigError: one line naming the bad key or value.
@@ -234,6 +250,9 @@ def load_config(schema: type, overrides: list[str] | None = None, config_dir: st
     check_known_keys(schema, cli)
     base = OmegaConf.structured(schema)
     layers = []
+    scenario = OmegaConf.select(cli, "env.scenario", default=OmegaConf.select(base, "env.scenario", default=None))
+    if config_dir and isinstance(scenario, str) and os.path.isfile(scene_defaults_path(config_dir, scenario)):
+        layers.append(OmegaConf.load(scene_defaults_path(config_dir, scenario)))
     preset = cli.get("preset", base.get("preset", "default")) if "preset" in base else None
     if preset is not None:
         allowed = preset_names(config_dir) if config_dir else ("default",)
