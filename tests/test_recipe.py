@@ -515,6 +515,26 @@ def test_summarize_runs_groups_seeds_by_configuration_variant(tmp_path, capsys):
     assert "| merge/csirl/default model.ego_relative_features=false | 99 |" in capsys.readouterr().err
 
 
+
+def test_summarize_runs_variant_is_against_the_scenes_own_defaults(tmp_path):
+    """A run of a scene's defaults is no variant; a run older than an option had the recipe's default."""
+    import summarize_runs
+    from omegaconf import OmegaConf
+
+    def save(name: str, cfg) -> str:
+        (tmp_path / name).mkdir()
+        OmegaConf.save(cfg, tmp_path / name / "config.yaml")
+        return str(tmp_path / name)
+
+    scene = csirl.load_config(["env.scenario=intersection"])  # model.lane_features=true there
+    assert scene.model.lane_features
+    assert summarize_runs.variant(save("scene", scene), "default") == ""
+    off = csirl.load_config(["env.scenario=intersection", "model.lane_features=false"])
+    assert summarize_runs.variant(save("off", off), "default") == "model.lane_features=false"
+    old = OmegaConf.to_container(scene)
+    del old["model"]["lane_features"]  # recorded before the option existed: it ran without
+    assert summarize_runs.variant(save("old", OmegaConf.create(old)), "default") == "model.lane_features=false"
+
 def test_meta_gradient_balance_reports_both_parts(capsys):
     """tools/meta_gradient_balance.py: with the published L1 weight the regulariser's part dominates."""
     import meta_gradient_balance

@@ -30,7 +30,7 @@ from omegaconf import OmegaConf
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "recipes"))  # the recipe glue: common
 
-from common.config import flatten_config, format_override  # noqa: E402
+from common.config import ConfigError, flatten_config, format_override  # noqa: E402
 from common.registry import load_config_for  # noqa: E402
 from common.summaries import find_summaries, mean_std  # noqa: E402
 
@@ -54,13 +54,24 @@ FIELDS = (
 
 
 @functools.lru_cache(maxsize=None)
-def _preset_defaults(method: str, preset: str) -> dict[str, object]:
-    return flatten_config(load_config_for(method)([f"preset={preset}"]))
+def _preset_defaults(method: str, preset: str, scenario: str | None = None) -> dict[str, object]:
+    """The configuration ``preset`` gives on ``scenario`` (with that scene's own defaults, if any).
+
+    A scenario the method's recipe does not know (a robotics run summarised with a driving recipe's
+    loader) falls back on the recipe's default scenario.
+    """
+    overrides = [f"preset={preset}"]
+    try:
+        return flatten_config(load_config_for(method)([*overrides, f"env.scenario={scenario}"] if scenario else overrides))
+    except ConfigError:
+        if scenario is None:
+            raise
+        return _preset_defaults(method, preset)
 
 
 def variant(run_dir: str, preset: str, method: str = "csirl") -> str:
-    """``key=value`` of the run's configuration entries that differ from ``preset``'s defaults
-    (those of the recipe that trains ``method``).
+    """``key=value`` of the run's configuration entries that differ from ``preset``'s defaults on
+    the run's scenario (those of the recipe that trains ``method``, scene defaults included).
 
     Empty for a run of the preset as it is, or when the run directory has no ``config.yaml``.
     """
@@ -68,7 +79,11 @@ def variant(run_dir: str, preset: str, method: str = "csirl") -> str:
     if not os.path.isfile(path):
         return ""
     run = flatten_config(OmegaConf.load(path))
-    default = _preset_defaults(method, preset)
+    scenario = run.get("env.scenario")
+    default = _preset_defaults(method, preset, scenario if isinstance(scenario, str) else None)
+    # an option younger than the run is missing from its config: the run had the recipe's own default
+    recipe_default = _preset_defaults(method, "default")
+    run.update({key: recipe_default[key] for key in default.keys() - run.keys() if key in recipe_default})
     changed = [
         format_override(key, value)
         for key, value in sorted(run.items())
