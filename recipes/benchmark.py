@@ -36,6 +36,7 @@ import json
 import os
 import subprocess
 import sys
+import textwrap
 from collections import defaultdict
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -576,7 +577,7 @@ def learning_curve_figures(runs: list[dict[str, Any]], out_dir: str) -> list[str
                     curves[run["method"]].append(eval_curve(run["run_dir"], curve_key))
             path = plot_method_curves(curves, os.path.join(out_dir, f"{prefix}_{scenario}.png"),
                                       references={m: sum(v) / len(v) for m, v in references.items()},
-                                      title=f"{scenario}: {label}" + (f"\n{schedule}" if schedule else ""),
+                                      title=f"{scenario}: {label}" + (f"\n{textwrap.fill(schedule, 72)}" if schedule else ""),
                                       ylabel=label,
                                       rate=rate)
             paths.append(os.fspath(path))
