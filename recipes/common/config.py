@@ -251,8 +251,9 @@ def load_config(schema: type, overrides: list[str] | None = None, config_dir: st
     base = OmegaConf.structured(schema)
     layers = []
     scenario = OmegaConf.select(cli, "env.scenario", default=OmegaConf.select(base, "env.scenario", default=None))
-    if config_dir and isinstance(scenario, str) and os.path.isfile(scene_defaults_path(config_dir, scenario)):
-        layers.append(OmegaConf.load(scene_defaults_path(config_dir, scenario)))
+    scene_file = scene_defaults_path(config_dir, scenario) if config_dir and isinstance(scenario, str) else None
+    if scene_file and os.path.isfile(scene_file):
+        layers.append(OmegaConf.load(scene_file))
     preset = cli.get("preset", base.get("preset", "default")) if "preset" in base else None
     if preset is not None:
         allowed = preset_names(config_dir) if config_dir else ("default",)
