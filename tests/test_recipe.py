@@ -506,12 +506,14 @@ def test_summarize_runs_groups_seeds_by_configuration_variant(tmp_path, capsys):
         cfg = csirl.load_config([f"seed={ord(name)}", f"logger.output_dir={tmp_path}", *overrides])
         OmegaConf.save(cfg, run_dir / "config.yaml")
         (run_dir / "summary.json").write_text(json.dumps(
-            {"scenario": "merge", "method": "csirl", "preset": "default", "seed": ord(name), "accomplish_rate": rate}))
+            {"scenario": "merge", "method": "csirl", "preset": "default", "seed": ord(name), "accomplish_rate": rate,
+             "final_subgoal": ord(name) - 90, "curriculum_length": 45}))
     assert summarize_runs.variant(str(tmp_path / "c"), "default") == "model.ego_relative_features=false"
     stats = summarize_runs.main([str(tmp_path)])
     assert set(stats) == {"merge/csirl/default", "merge/csirl/default model.ego_relative_features=false"}
     assert stats["merge/csirl/default"]["accomplish_rate"]["mean"] == pytest.approx(0.6)
     assert stats["merge/csirl/default"]["seeds"] == [ord("a"), ord("b")]
+    assert stats["merge/csirl/default"]["final_subgoal"] == "7, 8 of 45"  # by seed
     assert "| merge/csirl/default model.ego_relative_features=false | 99 |" in capsys.readouterr().err
 
 

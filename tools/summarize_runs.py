@@ -2,7 +2,7 @@
 
 Reads ``summary.json`` of every run directory given (or found under a folder), groups the runs by
 (scenario, method, preset, variant) and prints a Markdown table (to stderr) and, last, one JSON
-line with the per-group statistics. The *variant* lists the run's configuration values that differ
+line with the per-group statistics (and, for CSIRL, where each seed's curriculum ended). The *variant* lists the run's configuration values that differ
 from its preset's defaults (read from the run's ``config.yaml``; seeds, logging, checkpointing and
 thread counts do not count), e.g. ``replay_buffer.expert_fraction=0``.
 
@@ -105,14 +105,28 @@ def summarize(summaries: list[dict]) -> dict[str, dict]:
             values = [float(r[field]) for r in runs if r.get(field) is not None]
             if values:
                 stats[field] = mean_std(values)
+        ends = curriculum_ends(runs)
+        if ends:
+            stats["final_subgoal"] = ends
         out[key] = stats
     return out
+
+
+def curriculum_ends(runs: list[dict]) -> str:
+    """Where each run's curriculum ended, by seed: ``"44, 42, 44 of 45"`` (empty without a curriculum)."""
+    ends = [(int(r["seed"]), r["final_subgoal"], r.get("curriculum_length")) for r in runs
+            if r.get("final_subgoal") is not None]
+    if not ends:
+        return ""
+    lengths = {length for *_, length in ends if length is not None}
+    text = ", ".join(str(end) for _, end, _ in sorted(ends))
+    return f"{text} of {lengths.pop()}" if len(lengths) == 1 else text
 
 
 def markdown_table(stats: dict[str, dict]) -> str:
     """One row per group: mean ± std of the main figures."""
     head = ("| scenario / method / preset | seeds | accomplish (raw) | expert-normalised | success | crash | AUC | frames "
-            "| updates | wall [min] |")
+            "| updates | wall [min] | final subgoal |")
     rows = [head, "|---" * (head.count("|") - 1) + "|"]
 
     def cell(s: dict, field: str, fmt: str = "{:.3f}", scale: float = 1.0) -> str:
@@ -125,7 +139,8 @@ def markdown_table(stats: dict[str, dict]) -> str:
             f"| {key} | {','.join(map(str, s['seeds']))} | {cell(s, 'accomplish_rate')} | "
             f"{cell(s, 'normalized_accomplish_rate')} | {cell(s, 'success_rate', '{:.2f}')} | "
             f"{cell(s, 'crash_rate', '{:.2f}')} | {cell(s, 'auc')} | "
-            f"{cell(s, 'frames', '{:.0f}')} | {cell(s, 'updates', '{:.0f}')} | {cell(s, 'total_wall_s', '{:.1f}', 1 / 60)} |"
+            f"{cell(s, 'frames', '{:.0f}')} | {cell(s, 'updates', '{:.0f}')} | {cell(s, 'total_wall_s', '{:.1f}', 1 / 60)} | "
+            f"{s.get('final_subgoal') or 'n/a'} |"
         )
     return "\n".join(rows)
 
