@@ -2,9 +2,10 @@
 
 Reads ``summary.json`` of every run directory given (or found under a folder), groups the runs by
 (scenario, method, preset, variant) and prints a Markdown table (to stderr) and, last, one JSON
-line with the per-group statistics (and, for CSIRL, where each seed's curriculum ended). The *variant* lists the run's configuration values that differ
-from its preset's defaults (read from the run's ``config.yaml``; seeds, logging, checkpointing and
-thread counts do not count), e.g. ``replay_buffer.expert_fraction=0``.
+line with the per-group statistics (and, for CSIRL, where each seed's curriculum ended). The
+*variant* lists the run's configuration values that differ from its preset's defaults (read from
+the run's ``config.yaml``; seeds, logging, checkpointing and thread counts do not count), e.g.
+``replay_buffer.expert_fraction=0``.
 
 Usage::
 
@@ -93,7 +94,8 @@ def variant(run_dir: str, preset: str, method: str = "csirl") -> str:
 
 
 def summarize(summaries: list[dict]) -> dict[str, dict]:
-    """Group run summaries by ``scenario/method/preset[ variant]``; mean/std of :data:`FIELDS` per group."""
+    """Group run summaries by ``scenario/method/preset[ variant]``; mean/std of :data:`FIELDS` per group,
+    and where each seed's curriculum ended (:func:`curriculum_ends`)."""
     groups: dict[str, list[dict]] = defaultdict(list)
     for s in summaries:
         key = f"{s['scenario']}/{s['method']}/{s['preset']}"
