@@ -94,8 +94,10 @@ def variant(run_dir: str, preset: str, method: str = "csirl") -> str:
 
 
 def summarize(summaries: list[dict]) -> dict[str, dict]:
-    """Group run summaries by ``scenario/method/preset[ variant]``; mean/std of :data:`FIELDS` per group,
-    and where each seed's curriculum ended (:func:`curriculum_ends`)."""
+    """Group run summaries by ``scenario/method/preset[ variant]``; mean/std of :data:`FIELDS` per group.
+
+    Each group also says where each seed's curriculum ended (:func:`curriculum_ends`).
+    """
     groups: dict[str, list[dict]] = defaultdict(list)
     for s in summaries:
         key = f"{s['scenario']}/{s['method']}/{s['preset']}"
