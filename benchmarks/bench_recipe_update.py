@@ -22,18 +22,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import statistics
-import sys
 import tempfile
 import time
 
 import torch
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "recipes"))
-
-from common import csirl  # noqa: E402
-from common.run import resolve_device  # noqa: E402
+from torchrl_csirl.launch import csirl
+from torchrl_csirl.launch.run import resolve_device
 
 
 def _fill(run, frames: int) -> None:

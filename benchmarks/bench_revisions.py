@@ -31,7 +31,6 @@ _STEPS = {"sac_update": "plain_step", "csirl_iteration": "csirl_step"}
 
 _WORKER = r"""
 import sys, time, torch
-sys.path.insert(0, "benchmarks")
 import bench_update
 batch, threads, warmup, hidden = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4])
 if hidden:  # smaller networks: what is left is the per-call overhead
@@ -54,7 +53,8 @@ for line in sys.stdin:
 
 
 def _worker(tree: str, args: argparse.Namespace) -> subprocess.Popen:
-    env = dict(os.environ, PYTHONPATH=tree, RL_WARNINGS="0")
+    # the checkout's package and its benchmarks/ (bench_update) first on the worker's path
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join((tree, os.path.join(tree, "benchmarks"))), RL_WARNINGS="0")
     cmd = [sys.executable, "-c", _WORKER, *map(str, (args.batch, args.threads, args.warmup, args.hidden)),
            *_STEPS.values()]
     proc = subprocess.Popen(cmd, cwd=tree, env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)

@@ -31,7 +31,6 @@ import time
 
 import torch
 from tensordict import TensorDict
-
 from torchrl.objectives import SoftUpdate
 
 from torchrl_csirl.modules import make_actor, make_qvalue, make_reward_network

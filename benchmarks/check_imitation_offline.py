@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
+
 import torch
 from bench_imitation_updates import build  # benchmarks/ is on the path when run as a script
 from torchrl.envs.utils import ExplorationType, set_exploration_type

@@ -42,7 +42,6 @@ from torchrl_csirl.modules import make_actor, make_qvalue, make_reward_network
 from torchrl_csirl.objectives import EnsembleSACLoss, MetaRewardLoss
 from torchrl_csirl.transforms import SubgoalMatchingReward
 
-
 LOGGED_LOSSES = ("loss_qvalue", "loss_actor", "loss_meta", "loss_imitation")
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 TINY_ROBOTICS_RUN = [
     "collector.total_frames=400",
     "collector.frames_per_batch=200",
+    "collector.cut_episodes=true",  # shorter than the episode limits
     "collector.num_workers=1",
     "collector.envs_per_worker=1",
     "collector.init_random_frames=200",

@@ -4,23 +4,22 @@ from __future__ import annotations
 import json
 import math
 import os
-import sys
 
 import numpy as np
 import pytest
 import torch
 from torchrl.envs.utils import check_env_specs
 
-RECIPES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "recipes")
-sys.path.insert(0, RECIPES)
-
-import generate_experts  # noqa: E402
-import train_ant_expert  # noqa: E402
-
-from torchrl_csirl.envs import make_env, make_gym_env, resolve_scenario  # noqa: E402
-from torchrl_csirl.envs.expert import make_expert, rollout_expert  # noqa: E402
-from torchrl_csirl.envs.robotics import ANTMAZE_UMAZE_MAP, WaypointAntExpert, maze_cell_route, next_waypoint, pursuit_waypoint  # noqa: E402
-from torchrl_csirl.envs.robotics.ant_goal import (  # noqa: E402
+from torchrl_csirl.envs import make_env, make_gym_env, resolve_scenario
+from torchrl_csirl.envs.expert import make_expert, rollout_expert
+from torchrl_csirl.envs.robotics import (
+    ANTMAZE_UMAZE_MAP,
+    WaypointAntExpert,
+    maze_cell_route,
+    next_waypoint,
+    pursuit_waypoint,
+)
+from torchrl_csirl.envs.robotics.ant_goal import (
     ARRIVAL_BONUS,
     CHAIN_HOPS,
     GOAL_VECTOR_CLIP,
@@ -29,7 +28,8 @@ from torchrl_csirl.envs.robotics.ant_goal import (  # noqa: E402
     heading_of,
     is_flipped,
 )
-from torchrl_csirl.modules import make_actor, save_policy  # noqa: E402
+from torchrl_csirl.modules import make_actor, save_policy
+from torchrl_csirl.scripts import generate_experts, train_ant_expert
 
 
 def _yaw_quaternion(yaw: float) -> np.ndarray:

@@ -7,14 +7,13 @@ import torch
 from tensordict import TensorDict
 from torchrl.collectors import Collector
 from torchrl.objectives import SACLoss
+from transitions import random_transitions
 
 from torchrl_csirl import _compat
 from torchrl_csirl.envs import SCENARIOS, make_env, make_serial_env
 from torchrl_csirl.modules import make_actor, make_qvalue
 from torchrl_csirl.objectives import EnsembleSACLoss
 from torchrl_csirl.trainers import shutdown_collector
-
-from transitions import random_transitions
 
 
 def _batch(n: int = 6, obs: int = 4, act: int = 2) -> TensorDict:

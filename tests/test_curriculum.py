@@ -10,7 +10,12 @@ from tensordict import TensorDict
 from tensordict.nn import TensorDictModule
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
-from torchrl_csirl.curriculum import SubgoalCurriculum, SubgoalSelection, critic_uncertainty, scan_subgoal
+from torchrl_csirl.curriculum import (
+    SubgoalCurriculum,
+    SubgoalSelection,
+    critic_uncertainty,
+    scan_subgoal,
+)
 
 
 class ScaledCritics:

@@ -9,7 +9,11 @@ import numpy as np
 import pytest
 import torch
 
-from torchrl_csirl.data import ExpertDemonstrations, RestrictedUnpickler, import_published
+from torchrl_csirl.data import (
+    ExpertDemonstrations,
+    RestrictedUnpickler,
+    import_published,
+)
 
 
 def _episode(length: int, obs_dim: int = 4, act_dim: int = 2, *, seed: int = 0, terminal: bool = True, reward: bool = False):

@@ -13,7 +13,6 @@ import tempfile
 
 import pytest
 import torch
-
 from markdown_examples import ROOT, _run_python_blocks
 
 

@@ -17,7 +17,7 @@ import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SUBPACKAGES = ("objectives", "transforms", "curriculum", "data", "envs", "envs.robotics", "modules",
-               "trainers", "visualization")
+               "trainers", "visualization", "launch")
 pytest.importorskip("mkdocs", reason="the docs extra (pip install -e '.[docs]')")
 
 
@@ -52,30 +52,19 @@ def test_api_reference_has_every_public_name(site: str) -> None:
 
 
 def test_configuration_reference_lists_every_key(site: str) -> None:
-    sys.path.insert(0, os.path.join(ROOT, "recipes"))
-    try:
-        from common.config import describe_rows
-    finally:
-        sys.path.pop(0)
+    from torchrl_csirl.launch import RECIPE_SCHEMAS
+    from torchrl_csirl.launch.config import describe_rows
+
     with open(os.path.join(ROOT, "docs", "configuration.md"), encoding="utf-8") as f:
         markers = re.findall(r"<!-- config-reference: ([\w.]+):(\w+) -->", f.read())
-    sys.path.insert(0, os.path.join(ROOT, "recipes"))
-    try:
-        from common import RECIPE_SCHEMAS
-    finally:
-        sys.path.pop(0)
     missing = set(RECIPE_SCHEMAS.values()) - {f"{m}:{n}" for m, n in markers}
     assert not missing, f"recipes without a table in docs/configuration.md: {missing}"
     with open(os.path.join(site, "configuration", "index.html"), encoding="utf-8") as f:
         html = f.read()
     assert "config-reference" not in html, "a marker was left unexpanded"
-    sys.path.insert(0, os.path.join(ROOT, "recipes"))
-    try:
-        for module, name in markers:
-            schema = getattr(importlib.import_module(module), name)
-            keys = [row.key for row in describe_rows(schema)]
-            assert keys, f"{module}:{name} has no keys"
-            absent = [k for k in keys if f"<code>{k}</code>" not in html]
-            assert not absent, f"{module}:{name}: keys missing from the page: {absent}"
-    finally:
-        sys.path.pop(0)
+    for module, name in markers:
+        schema = getattr(importlib.import_module(module), name)
+        keys = [row.key for row in describe_rows(schema)]
+        assert keys, f"{module}:{name} has no keys"
+        absent = [k for k in keys if f"<code>{k}</code>" not in html]
+        assert not absent, f"{module}:{name}: keys missing from the page: {absent}"

@@ -4,15 +4,13 @@ import math
 
 import pytest
 import torch
+from devices import DEVICES
 from tensordict.nn import TensorDictModule
-
 from torchrl.objectives import SACLoss, SoftUpdate
+from transitions import random_transitions
 
 from torchrl_csirl.modules.actor_critic import make_actor, make_qvalue
 from torchrl_csirl.objectives import EnsembleSACLoss, qvalue_dispersion
-
-from devices import DEVICES
-from transitions import random_transitions
 
 OBS, ACT, HID = 5, 2, (16, 16)
 

@@ -11,13 +11,11 @@ import torch
 from tensordict import TensorDict
 from tensordict.nn import TensorDictModule
 from torch import nn
-
 from torchrl.objectives.utils import ValueEstimators
+from transitions import random_transitions
 
 from torchrl_csirl.modules import make_actor, make_qvalue
 from torchrl_csirl.objectives import EnsembleSACLoss, MetaRewardLoss
-
-from transitions import random_transitions
 
 OBS, ACT, HID = 5, 2, (8, 8)
 TOL = dict(rtol=0, atol=1e-6)

@@ -5,25 +5,21 @@ from __future__ import annotations
 import csv
 import json
 import os
-import sys
 
 import pytest
+import termination_probe
 import torch
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-RECIPES, TOOLS = os.path.join(ROOT, "recipes"), os.path.join(ROOT, "tools")
-sys.path.insert(0, RECIPES)
-sys.path.insert(0, TOOLS)  # the analysis scripts
+from torchrl_csirl.launch import imitation
+from torchrl_csirl.launch.run import run_script
+from torchrl_csirl.scripts import benchmark, imitation_highway
 
-import benchmark  # noqa: E402
-import imitation_highway  # noqa: E402
-from common import imitation  # noqa: E402
-import termination_probe  # noqa: E402
-from common.run import run_script  # noqa: E402
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 # the tiniest budget that still has two rounds: 100-frame batches, rounds of 20 updates, 1 test episode
 TINY = [
     "collector.frames_per_batch=100",
+    "collector.cut_episodes=true",  # 50-frame shares of 60-step episodes
     "collector.init_random_frames=100",
     "collector.num_workers=1",
     "collector.main_threads=1",
@@ -206,7 +202,7 @@ def test_benchmark_runs_csirl_ablations_and_tells_which_differences_exceed_seed_
                 for c in todo}
     assert switches == {"csirl-nocur": ["csirl.fixed_subgoal=true"],
                         "csirl-noexp": ["replay_buffer.expert_fraction=0"], "csirl-b": ["csirl.intrinsic=false"]}
-    assert all(c.command[1].endswith("csirl_highway.py") for c in todo)
+    assert all(c.command[1:3] == ("-m", "torchrl_csirl.scripts.csirl_highway") for c in todo)
     # finished runs as the sweep leaves them: every summary says "csirl", the cell name says which ablation
     scores = {"csirl": [0.93, 0.94, 0.92], "csirl-nocur": [0.97, 0.95, 0.94], "csirl-noexp": [0.67, 0.70, 0.64]}
     for method, values in scores.items():
@@ -229,7 +225,7 @@ def test_benchmark_runs_csirl_ablations_and_tells_which_differences_exceed_seed_
 
 
 def test_help_lists_every_key_with_its_help(capsys):
-    from common.config import flatten_config
+    from torchrl_csirl.launch.config import flatten_config
 
     assert imitation_highway.main(["--help"]) == {}
     keys = [line for line in capsys.readouterr().out.splitlines() if " = " in line]

@@ -5,22 +5,16 @@ from __future__ import annotations
 import csv
 import json
 import os
-import sys
 
 import pytest
 import torch
+from robotics_budget import TINY_ROBOTICS_RUN
 
-RECIPES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "recipes")
-sys.path.insert(0, RECIPES)
-
-import benchmark  # noqa: E402
-import imitation_robotics  # noqa: E402
-from common import imitation  # noqa: E402
-from common.config import ConfigError  # noqa: E402
-
-from torchrl_csirl.envs import make_env, resolve_scenario  # noqa: E402
-from torchrl_csirl.envs.expert_policy import ExpertDriverPolicy  # noqa: E402
-from robotics_budget import TINY_ROBOTICS_RUN  # noqa: E402
+from torchrl_csirl.envs import make_env, resolve_scenario
+from torchrl_csirl.envs.expert_policy import ExpertDriverPolicy
+from torchrl_csirl.launch import imitation
+from torchrl_csirl.launch.config import ConfigError
+from torchrl_csirl.scripts import benchmark, imitation_robotics
 
 TINY = [*TINY_ROBOTICS_RUN, "updates_per_round=20"]  # rounds of 20 updates
 
@@ -80,14 +74,16 @@ def test_benchmark_sweeps_the_robotics_tasks_with_their_recipes_and_reports_the_
     out = str(tmp_path / "bench")
     todo, _ = benchmark.plan_cells(["csirl", "csirl-bc", "sqil"], ["relocate", "merge"], [0], out,
                                    ["csirl_robotics:csirl.delta=3", "csirl_highway:csirl.delta=2"])
-    recipes = {c.name: (os.path.basename(c.command[1]), [a for a in c.command if a.startswith("csirl.")]) for c in todo}
+    assert all(c.command[1] == "-m" for c in todo)  # the installed package's scripts
+    recipes = {c.name: (c.command[2], [a for a in c.command if a.startswith("csirl.")]) for c in todo}
+    scripts = "torchrl_csirl.scripts."
     assert recipes == {
-        "relocate-csirl-s0": ("csirl_robotics.py", ["csirl.delta=3"]),
-        "relocate-csirl-bc-s0": ("csirl_robotics.py", ["csirl.delta=3", "csirl.actor_bc_coef=10"]),
-        "relocate-sqil-s0": ("imitation_robotics.py", []),
-        "merge-csirl-s0": ("csirl_highway.py", ["csirl.delta=2"]),
-        "merge-csirl-bc-s0": ("csirl_highway.py", ["csirl.delta=2", "csirl.actor_bc_coef=10"]),
-        "merge-sqil-s0": ("imitation_highway.py", []),
+        "relocate-csirl-s0": (scripts + "csirl_robotics", ["csirl.delta=3"]),
+        "relocate-csirl-bc-s0": (scripts + "csirl_robotics", ["csirl.delta=3", "csirl.actor_bc_coef=10"]),
+        "relocate-sqil-s0": (scripts + "imitation_robotics", []),
+        "merge-csirl-s0": (scripts + "csirl_highway", ["csirl.delta=2"]),
+        "merge-csirl-bc-s0": (scripts + "csirl_highway", ["csirl.delta=2", "csirl.actor_bc_coef=10"]),
+        "merge-sqil-s0": (scripts + "imitation_highway", []),
     }
     # one real cell: BC on Relocate through Ray, on the tiny budget
     args = ["--methods", "bc", "--scenarios", "relocate", "--seeds", "0", "--output-dir", out, "--cpus-per-trial", "1",

@@ -16,7 +16,11 @@ from torchrl.envs.utils import check_env_specs
 from torchrl_csirl.data import load_expert_demonstrations
 from torchrl_csirl.envs import SCENARIOS, make_env
 from torchrl_csirl.modules import make_reward_network
-from torchrl_csirl.transforms import CombineRewards, IntrinsicReward, SubgoalMatchingReward
+from torchrl_csirl.transforms import (
+    CombineRewards,
+    IntrinsicReward,
+    SubgoalMatchingReward,
+)
 from torchrl_csirl.transforms.subgoal_matching import matching_reward
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

@@ -17,7 +17,7 @@ RECIPE = os.path.join("recipes", "csirl_highway.py")
 # 100-frame batches collected in the main process, one round that never ends before 400 frames: no
 # round checkpoint before the signal
 TINY = [
-    "collector.frames_per_batch=100", "collector.init_random_frames=100", "collector.num_workers=1",
+    "collector.frames_per_batch=100", "collector.cut_episodes=true", "collector.init_random_frames=100", "collector.num_workers=1",
     "collector.main_threads=1", "replay_buffer.warmup_frames=100", "replay_buffer.batch_size=32",
     "csirl.updates_per_round=1000", "csirl.num_qvalue_nets=2", "optim.utd_ratio=0.1", "eval.episodes=1",
     "eval.final_episodes=1", "eval.video=false", "logger.backend=none", "logger.progress_bar=false",

@@ -2,16 +2,15 @@ from __future__ import annotations
 
 import pytest
 import torch
+from devices import DEVICES
 from tensordict import TensorDict
 from tensordict.nn import TensorDictModule
 from torch import nn
+from transitions import random_transitions
 
 from torchrl_csirl.modules import make_actor, make_qvalue, make_reward_network
 from torchrl_csirl.objectives import EnsembleSACLoss, MetaRewardLoss
 from torchrl_csirl.objectives.meta_reward import sgd_lookahead
-
-from devices import DEVICES
-from transitions import random_transitions
 
 OBS, ACT = 3, 2
 

@@ -4,7 +4,6 @@ import pytest
 import torch
 from tensordict import TensorDict
 from torch import nn
-
 from torchrl.modules import TanhNormal
 
 from torchrl_csirl.modules import (

@@ -1,7 +1,9 @@
 """The example code of README.md and docs/algorithm.md runs as written."""
 from __future__ import annotations
 
-from markdown_examples import _run_python_blocks  # shared with tests/test_docs_examples.py
+from markdown_examples import (
+    _run_python_blocks,  # shared with tests/test_docs_examples.py
+)
 
 
 def test_readme_python_examples_run() -> None:

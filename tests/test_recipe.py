@@ -12,20 +12,21 @@ import numpy as np
 import pytest
 import torch
 
+from torchrl_csirl.launch import builders, config, csirl, run
+from torchrl_csirl.trainers import (
+    TrainingDivergedError,
+    load_checkpoint,
+    shutdown_collector,
+)
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RECIPES, TOOLS = os.path.join(ROOT, "recipes"), os.path.join(ROOT, "tools")
 RECIPE = os.path.join(RECIPES, "csirl_highway.py")
-sys.path.insert(0, RECIPES)
-sys.path.insert(0, TOOLS)  # the analysis scripts
-
-from common import csirl  # noqa: E402
-from common import builders, config, run  # noqa: E402
-
-from torchrl_csirl.trainers import TrainingDivergedError, load_checkpoint, shutdown_collector  # noqa: E402
 
 # a tiny budget: 100-frame batches, rounds of 20 updates, 2 evaluation episodes
 TINY = [
     "collector.frames_per_batch=100",
+    "collector.cut_episodes=true",  # 50-frame shares of 60-step episodes
     "collector.init_random_frames=100",
     "replay_buffer.warmup_frames=100",
     "replay_buffer.batch_size=64",
@@ -440,7 +441,7 @@ def test_envs_per_worker_keeps_whole_episodes_per_batch(scenario, overrides, exp
 def test_collection_with_several_envs_per_worker_is_reproducible():
     """2 workers x 2 envs: a seeded batch is the same twice (what exact resume relies on)."""
     cfg = csirl.load_config(["collector.frames_per_batch=100", "collector.init_random_frames=0",
-                                   "collector.envs_per_worker=2"])
+                             "collector.envs_per_worker=2", "collector.cut_episodes=true"])
     torch.manual_seed(0)
     actor = csirl.make_loss_modules(cfg, csirl.SCENARIOS["merge"]).actor
     batches = []
@@ -466,7 +467,7 @@ def test_worker_processes_act_with_the_weights_the_main_process_trains():
     parameters (what the optimiser does) and a ``load_state_dict`` (what a resume does), with no
     explicit weight sync."""
     cfg = csirl.load_config(["collector.frames_per_batch=40", "collector.init_random_frames=0",
-                                   "collector.envs_per_worker=2"])
+                             "collector.envs_per_worker=2", "collector.cut_episodes=true"])
     torch.manual_seed(0)
     modules = csirl.make_loss_modules(cfg, csirl.SCENARIOS["merge"])
     collector = builders.make_collector("merge", cfg.collector, modules.actor)
@@ -517,7 +518,6 @@ def test_summarize_runs_groups_seeds_by_configuration_variant(tmp_path, capsys):
     assert "| merge/csirl/default model.ego_relative_features=false | 99 |" in capsys.readouterr().err
 
 
-
 def test_summarize_runs_variant_is_against_the_scenes_own_defaults(tmp_path):
     """A run of a scene's defaults is no variant; a run older than an option had the recipe's default."""
     import summarize_runs
@@ -564,9 +564,7 @@ def test_meta_gradient_balance_of_a_trained_run(full_run):
 def test_policy_outcomes_reports_outcomes_and_speeds_and_splits_merge_by_the_traffic_ahead(tmp_path, capsys):
     import policy_outcomes
 
-    from torchrl_csirl.envs import make_env
-
-    from torchrl_csirl.envs import SCENARIOS
+    from torchrl_csirl.envs import SCENARIOS, make_env
     from torchrl_csirl.modules import make_actor, save_policy
 
     def saved(scenario):
@@ -685,7 +683,7 @@ def test_help_lists_every_key_with_what_it_accepts():
 
 
 def test_method_registry_reads_each_method_with_its_recipe_schema():
-    from common import registry
+    from torchrl_csirl.launch import registry
 
     assert {"csirl", "csirl-b"} <= set(registry.known_methods())
     assert registry.load_config_for("csirl-b")(["preset=paper"]).csirl.updates_per_round == 20000

@@ -1,18 +1,17 @@
-"""Every recipe's typed schema is importable from ``recipes/common`` (a documentation build's
-configuration reference reads them there) and is the schema the recipe itself uses."""
+"""Every script's typed schema is importable from ``torchrl_csirl.launch`` (a documentation build's
+configuration reference reads them there) and is the schema the script itself uses."""
 from __future__ import annotations
 
 import importlib
 import os
-import sys
 
 import pytest
 
-RECIPES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "recipes")
-sys.path.insert(0, RECIPES)
+import torchrl_csirl.launch as common
+import torchrl_csirl.scripts
+from torchrl_csirl.launch import config
 
-import common  # noqa: E402
-from common import config  # noqa: E402
+SCRIPTS = os.path.dirname(torchrl_csirl.scripts.__file__)
 
 
 def _schema(recipe: str) -> type:
@@ -21,8 +20,8 @@ def _schema(recipe: str) -> type:
 
 
 def test_every_configured_recipe_has_its_schema_listed():
-    configured = {name[:-3] for name in os.listdir(RECIPES)
-                  if name.endswith(".py") and "help_requested" in open(os.path.join(RECIPES, name)).read()}
+    configured = {name[:-3] for name in os.listdir(SCRIPTS)
+                  if name.endswith(".py") and "help_requested" in open(os.path.join(SCRIPTS, name)).read()}
     # the robotics recipes pass their schema to their driving recipe's main
     configured |= {"csirl_robotics", "imitation_robotics"}
     assert set(common.RECIPE_SCHEMAS) == configured
@@ -35,19 +34,19 @@ def test_schema_describes_every_key_and_is_the_recipes_own(recipe):
     assert any(line.startswith("seed = ") for line in lines)
     for klass in schema.__mro__:
         config.attribute_docs(klass)
-    script = importlib.import_module(recipe)
+    script = importlib.import_module(f"torchrl_csirl.scripts.{recipe}")
     assert getattr(script, schema.__name__) is schema
 
 
 def test_the_glue_finds_the_recipes_preset_config_group():
-    from common import csirl
+    from torchrl_csirl.launch import csirl
 
     assert config.preset_names(csirl.CONFIG_DIR) == ("default", "paper")
     assert csirl.load_config(["preset=paper"]).preset == "paper"
 
 
 def test_a_scenarios_own_defaults_go_under_the_preset_and_the_command_line(tmp_path):
-    from common import csirl
+    from torchrl_csirl.launch import csirl
 
     scenes = config.scene_defaults(csirl.CONFIG_DIR)
     assert "intersection" in scenes and "merge" not in scenes

@@ -9,8 +9,15 @@ import torch
 from torchrl.envs.utils import check_env_specs
 
 from torchrl_csirl.envs import TASKS, TaskSpec, make_env, make_gym_env, resolve_scenario
-from torchrl_csirl.envs.metrics import accomplish_rate_from_rollout, success_from_rollout
-from torchrl_csirl.envs.robotics import ROBOTICS_TASKS, maze_cell_route, route_remaining_length
+from torchrl_csirl.envs.metrics import (
+    accomplish_rate_from_rollout,
+    success_from_rollout,
+)
+from torchrl_csirl.envs.robotics import (
+    ROBOTICS_TASKS,
+    maze_cell_route,
+    route_remaining_length,
+)
 from torchrl_csirl.envs.robotics.tasks import AntMazeUMazeEnv, Route
 
 ROBOTICS = ("antmaze-umaze", "relocate")
@@ -159,9 +166,8 @@ def test_dapg_weights_checked(tmp_path):
 
 
 def test_shipped_relocate_dataset_is_reproduced(tmp_path):
-    from generate_experts import main
-
     from torchrl_csirl.data import load_expert_demonstrations
+    from torchrl_csirl.scripts.generate_experts import main
 
     demos = load_expert_demonstrations("relocate", 25)
     assert demos.num_trajectories == 25 and demos.observation_dim == 39 and demos.action_dim == 30
@@ -211,7 +217,11 @@ def _ant_like_minari_dataset(root, dataset_id, episodes=2, steps=5):
 
 def test_minari_round_trip_and_torchrl_replay(tmp_path):
     from torchrl_csirl.data import load_expert_demonstrations
-    from torchrl_csirl.data.minari import load_minari_dataset, minari_experience_replay, save_minari_dataset
+    from torchrl_csirl.data.minari import (
+        load_minari_dataset,
+        minari_experience_replay,
+        save_minari_dataset,
+    )
 
     demos = load_expert_demonstrations("relocate", 25).subset(2)
     save_minari_dataset(demos, "csirl/relocate/expert-v0", root=tmp_path, task="relocate")
@@ -239,7 +249,11 @@ def test_minari_round_trip_and_torchrl_replay(tmp_path):
 
 def test_minari_dict_observations_and_dimension_mismatch(tmp_path):
     from torchrl_csirl.data import load_expert_demonstrations
-    from torchrl_csirl.data.minari import load_minari_dataset, minari_experience_replay, save_minari_dataset
+    from torchrl_csirl.data.minari import (
+        load_minari_dataset,
+        minari_experience_replay,
+        save_minari_dataset,
+    )
 
     buffers = _ant_like_minari_dataset(tmp_path, "d4rl-like/antmaze/umaze-v0")
     demos = load_minari_dataset("d4rl-like/antmaze/umaze-v0", root=tmp_path, task="antmaze-umaze")
@@ -286,11 +300,7 @@ def test_torchrl_minari_replay_drops_contents_pinned(tmp_path, monkeypatch):
 @pytest.mark.parametrize("name", ROBOTICS)
 def test_trajectories_are_the_raw_gymnasium_robotics_ones(name):
     """Our env steps exactly as the gymnasium-robotics env it wraps (same seed, same actions)."""
-    import sys
-    from pathlib import Path
-
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-    from bench_envs import raw_robotics_env
+    from bench_envs import raw_robotics_env  # benchmarks/ (pytest's pythonpath)
 
     ours, raw = make_gym_env(name), raw_robotics_env(name)
     rng = np.random.default_rng(0)

@@ -2,23 +2,17 @@
 from __future__ import annotations
 
 import json
-import os
-import sys
 
 import numpy as np
 import pytest
+import robotics_outcomes
 import torch
 from tensordict import TensorDict
 
-TOOLS = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "tools")
-sys.path.insert(0, TOOLS)  # the analysis scripts
-
-import robotics_outcomes  # noqa: E402
-
-from torchrl_csirl._compat import gym_env_of  # noqa: E402
-from torchrl_csirl.envs import make_env  # noqa: E402
-from torchrl_csirl.envs.robotics import ROBOTICS_TASKS  # noqa: E402
-from torchrl_csirl.modules import make_actor, save_policy  # noqa: E402
+from torchrl_csirl._compat import gym_env_of
+from torchrl_csirl.envs import make_env
+from torchrl_csirl.envs.robotics import ROBOTICS_TASKS
+from torchrl_csirl.modules import make_actor, save_policy
 
 
 def _saved(tmp_path, task: str) -> str:

@@ -4,21 +4,16 @@ from __future__ import annotations
 
 import json
 import os
-import sys
 
 import pytest
+from robotics_budget import TINY_ROBOTICS_RUN
 
-RECIPES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "recipes")
-sys.path.insert(0, RECIPES)
-
-import csirl_robotics  # noqa: E402
-from common import builders  # noqa: E402
-from common.config import ConfigError  # noqa: E402
-from common.run import ExpertDataError  # noqa: E402
-
-from torchrl_csirl.data import load_expert_demonstrations  # noqa: E402
-from torchrl_csirl.envs import resolve_scenario  # noqa: E402
-from robotics_budget import TINY_ROBOTICS_RUN  # noqa: E402
+from torchrl_csirl.data import load_expert_demonstrations
+from torchrl_csirl.envs import resolve_scenario
+from torchrl_csirl.launch import builders
+from torchrl_csirl.launch.config import ConfigError
+from torchrl_csirl.launch.run import ExpertDataError
+from torchrl_csirl.scripts import csirl_robotics
 
 # rounds of 10 updates of a 2-critic ensemble on 32-transition batches
 TINY = [*TINY_ROBOTICS_RUN, "replay_buffer.batch_size=32", "csirl.updates_per_round=10", "csirl.num_qvalue_nets=2"]

@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+from devices import DEVICES
 from tensordict import TensorDict
 from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
 from torchrl.envs import Compose, ParallelEnv, SerialEnv, TransformedEnv
@@ -20,8 +21,6 @@ from torchrl_csirl.transforms import (
     matching_target_index,
     nearest_expert_index,
 )
-
-from devices import DEVICES
 
 OBS_DIM = 7  # ContinuousActionVecMockEnv
 

@@ -11,15 +11,17 @@ import pytest
 from omegaconf import OmegaConf
 from PIL import Image
 
+from torchrl_csirl.launch.config import ConfigError
+from torchrl_csirl.modules import make_actor, save_policy
+from torchrl_csirl.scripts import watch
+from torchrl_csirl.visualization import VideoError, write_video
+from torchrl_csirl.visualization.video import (
+    frame_stride,
+    make_render_env,
+    video_format_available,
+)
+
 RECIPES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "recipes")
-sys.path.insert(0, RECIPES)
-
-import watch  # noqa: E402
-from common.config import ConfigError  # noqa: E402
-
-from torchrl_csirl.modules import make_actor, save_policy  # noqa: E402
-from torchrl_csirl.visualization import VideoError, write_video  # noqa: E402
-from torchrl_csirl.visualization.video import frame_stride, make_render_env, video_format_available  # noqa: E402
 
 
 def _frames(n=4, h=7, w=9):
@@ -61,7 +63,7 @@ def test_a_machine_that_cannot_render_says_what_to_install(monkeypatch):
 
 
 def _run_dir(tmp_path, task="relocate", policy=True):
-    import csirl_robotics
+    from torchrl_csirl.scripts import csirl_robotics
 
     run_dir = tmp_path / "run"
     run_dir.mkdir()

@@ -16,7 +16,12 @@ from torchrl_csirl.visualization import (
     plot_subgoal_curriculum,
     render_curriculum,
 )
-from torchrl_csirl.visualization.scene import EGO_COLOR, ego_positions, render_scene, world_to_pixel
+from torchrl_csirl.visualization.scene import (
+    EGO_COLOR,
+    ego_positions,
+    render_scene,
+    world_to_pixel,
+)
 
 
 def _png_size(path) -> tuple[int, int]:

@@ -21,19 +21,15 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import sys
 
 import torch
 from tensordict import TensorDict
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "recipes"))  # the recipe glue: common
-
-from common.builders import load_experts, requested_config  # noqa: E402
-from common.run import resolve_resume  # noqa: E402
-from common.csirl import load_config, load_run_config, make_loss_modules, make_matching  # noqa: E402
-
-from torchrl_csirl.envs import SCENARIOS, make_env  # noqa: E402
-from torchrl_csirl.objectives import MetaRewardLoss  # noqa: E402
+from torchrl_csirl.envs import SCENARIOS, make_env
+from torchrl_csirl.launch.builders import load_experts, requested_config
+from torchrl_csirl.launch.csirl import load_config, load_run_config, make_loss_modules, make_matching
+from torchrl_csirl.launch.run import resolve_resume
+from torchrl_csirl.objectives import MetaRewardLoss
 
 
 def load_trained(modules, checkpoint: str) -> None:

@@ -9,7 +9,8 @@ and largest speed, the speed and the step at which crashed episodes ended, and t
 accomplish rate of the crashed and of the off-road episodes (an accomplish rate earned by driving
 far and then crashing is not expert-like), and where the off-road episodes left the road: the lane
 they were last on, the ego's position and its lateral offset from that lane's centre line (the
-summary: the mean absolute offset; a lane is half its width on either side of that line). On merge the episodes are also split by the traffic ahead at reset:
+summary: the mean absolute offset; a lane is half its width on either side of that line). On merge
+the episodes are also split by the traffic ahead at reset:
 two main-road vehicles ahead of the ego slow to 20 m/s; when they share a lane the other one is
 **free**, when they do not both lanes are **blocked** and finishing means squeezing past them (the
 expert nudges, docs/experts.md). The last line is JSON.
@@ -22,9 +23,8 @@ import sys
 from collections import Counter, defaultdict
 
 import torch
-from torchrl.envs import EnvBase
-
 from policy_cli import format_cell, load_test_policy, mean_or_none, roll_test_episodes
+from torchrl.envs import EnvBase
 
 from torchrl_csirl._compat import gym_env_of
 from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, accomplish_rate_from_rollout, success_from_rollout
@@ -129,7 +129,8 @@ def print_table(stats: dict[str, dict]) -> None:
           "| at a crash: speed, step, accomplish | off-road: accomplish, abs. lateral offset [m], lanes |", file=sys.stderr)
     print("|---|---|---|---|---|---|---|---|---|---|", file=sys.stderr)
     for name, s in stats.items():
-        crash = f"{format_cell(s['crash_speed'], '.1f')}, {format_cell(s['crash_step'], '.0f')}, {format_cell(s['crash_accomplish_rate'], '.2f')}"
+        crash = ", ".join(format_cell(s[key], fmt) for key, fmt in
+                          (("crash_speed", ".1f"), ("crash_step", ".0f"), ("crash_accomplish_rate", ".2f")))
         print(f"| {name} | {s['episodes']} | {format_cell(s['accomplish_rate'], '.3f')} | {s['success']} | {s['crash']} "
               f"| {s['offroad']} | {s['timeout']} | {format_cell(s['mean_speed'], '.1f')} / {format_cell(s['max_speed'], '.1f')} "
               f"| {crash} | {format_cell(s['offroad_accomplish_rate'], '.2f')}, {format_cell(s['offroad_lateral'], '.1f')}, "

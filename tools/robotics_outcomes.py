@@ -26,7 +26,6 @@ import sys
 from collections import Counter, defaultdict
 
 import numpy as np
-
 from policy_cli import format_cell, load_test_policy, mean_or_none, roll_test_episodes
 
 from torchrl_csirl._compat import gym_env_of

@@ -29,11 +29,9 @@ from collections import defaultdict
 
 from omegaconf import OmegaConf
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "recipes"))  # the recipe glue: common
-
-from common.config import ConfigError, flatten_config, format_override  # noqa: E402
-from common.registry import load_config_for  # noqa: E402
-from common.summaries import find_summaries, mean_std  # noqa: E402
+from torchrl_csirl.launch.config import ConfigError, flatten_config, format_override
+from torchrl_csirl.launch.registry import load_config_for
+from torchrl_csirl.launch.summaries import find_summaries, mean_std
 
 #: configuration keys that do not change what a run learns (or are shown elsewhere in the key)
 NOT_A_VARIANT = ("seed", "device", "preset", "env.scenario", "csirl.intrinsic", "collector.main_threads", "logger.", "checkpoint.")

@@ -30,21 +30,17 @@ import argparse
 import json
 import os
 import shutil
-import sys
 import tempfile
 
 import torch
 from tensordict import TensorDictBase
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "recipes"))  # the recipe glue: common
-
-from common.builders import resume_run  # noqa: E402
-from common.config import ConfigError  # noqa: E402
-from common.run import run_script  # noqa: E402
-from common.imitation import load_run_config, make_trainer  # noqa: E402
-
-from torchrl_csirl.objectives._imitation import sample  # noqa: E402
-from torchrl_csirl.transforms import absorbing_self_loops  # noqa: E402
+from torchrl_csirl.launch.builders import resume_run
+from torchrl_csirl.launch.config import ConfigError
+from torchrl_csirl.launch.imitation import load_run_config, make_trainer
+from torchrl_csirl.launch.run import run_script
+from torchrl_csirl.objectives._imitation import sample
+from torchrl_csirl.transforms import absorbing_self_loops
 
 PROBED_METHODS = ("sac", "sqil", "gail", "dac", "iqlearn", "valuedice")
 

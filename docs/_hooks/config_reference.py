@@ -2,26 +2,23 @@
 
 A page asks for a schema's table with a marker on a line of its own::
 
-    <!-- config-reference: common.csirl:CSIRLHighwayConfig -->
+    <!-- config-reference: torchrl_csirl.launch.csirl:CSIRLHighwayConfig -->
 
-``module:Class`` is imported with ``recipes/`` on ``sys.path`` (where the recipes' shared
-configuration lives) and replaced by a table of every key: its type and allowed values, its
-default and its help, read from the dataclasses by ``common.config.describe_rows`` — the same
-function behind every recipe's ``--help``, so the page can never drift from the code.
+``module:Class`` is imported (the schemas live in :mod:`torchrl_csirl.launch`) and replaced by a
+table of every key: its type and allowed values, its default and its help, read from the
+dataclasses by ``torchrl_csirl.launch.config.describe_rows`` — the same
+function behind every script's ``--help``, so the page can never drift from the code.
 
-``<!-- scene-defaults: common.csirl -->`` is replaced by the table of the scenarios' own defaults
-(``scene/<scenario>.yaml`` under that module's ``CONFIG_DIR``), read by ``common.config.scene_defaults``.
+``<!-- scene-defaults: torchrl_csirl.launch.csirl -->`` is replaced by the table of the scenarios' own defaults
+(``scene/<scenario>.yaml`` under that module's ``CONFIG_DIR``), read by ``torchrl_csirl.launch.config.scene_defaults``.
 """
 from __future__ import annotations
 
 import importlib
-import os
 import re
-import sys
 
 _MARKER = re.compile(r"^<!-- config-reference: ([\w.]+):(\w+) -->$", flags=re.M)
 _SCENES = re.compile(r"^<!-- scene-defaults: ([\w.]+) -->$", flags=re.M)
-_RECIPES = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), "recipes")
 
 
 def _cell(text: str) -> str:
@@ -29,15 +26,13 @@ def _cell(text: str) -> str:
 
 
 def _import(module: str):
-    if _RECIPES not in sys.path:
-        sys.path.insert(0, _RECIPES)
     return importlib.import_module(module)
 
 
 def config_table(module: str, name: str) -> str:
     """The Markdown table of every key of ``module:name``."""
     schema = getattr(_import(module), name)
-    from common.config import describe_rows
+    from torchrl_csirl.launch.config import describe_rows
 
     rows = ["| key | default | accepts | meaning |", "|---|---|---|---|"]
     for row in describe_rows(schema):
@@ -47,7 +42,7 @@ def config_table(module: str, name: str) -> str:
 
 def scene_table(module: str) -> str:
     """The Markdown table of the scenario defaults under ``module.CONFIG_DIR``."""
-    from common.config import scene_defaults
+    from torchrl_csirl.launch.config import scene_defaults
 
     rows = ["| scenario | its defaults |", "|---|---|"]
     for scenario, values in scene_defaults(_import(module).CONFIG_DIR).items():

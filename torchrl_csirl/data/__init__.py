@@ -8,6 +8,7 @@ from torchrl_csirl.data.expert import FORMAT_VERSION, ExpertDemonstrations
 from torchrl_csirl.data.minari import load_minari_dataset, minari_experience_replay, save_minari_dataset
 from torchrl_csirl.data.mixing import DemonstrationMixer
 from torchrl_csirl.data.published import RestrictedUnpickler, import_published, load_published_dict
+from torchrl_csirl.data.recording import record_demonstrations
 from torchrl_csirl.data.shipped import (
     available_expert_datasets,
     curriculum_trajectory,
@@ -29,5 +30,6 @@ __all__ = [
     "load_minari_dataset",
     "load_published_dict",
     "minari_experience_replay",
+    "record_demonstrations",
     "save_minari_dataset",
 ]

@@ -5,7 +5,9 @@ Importing this package registers the gymnasium ids ``csirl/highway-fast-v0``,
 ``csirl/antmaze-umaze-v0`` and ``csirl/relocate-v0`` (:mod:`torchrl_csirl.envs.robotics`).
 
 * :class:`TaskSpec`: what every task is (observation layout, matching features, finish/goal,
-  episode limit); :data:`TASKS` all of them by name.
+  episode limit); :data:`TASKS` all of them by name; :func:`register_task` adds your own (with the
+  factory of its TorchRL environment), :func:`make_gymnasium_task` any gymnasium id with flat
+  ``Box`` spaces.
 * :data:`SCENARIOS` / :class:`ScenarioSpec`: the driving scenarios (plus the Kinematics feature
   ranges, the highway-env config, the published matching-reward scale).
 * :func:`sample_lane_centres`: a driving scene's lane centre lines (``ScenarioSpec.lane_centres``).
@@ -16,14 +18,17 @@ Importing this package registers the gymnasium ids ``csirl/highway-fast-v0``,
 """
 from __future__ import annotations
 
+from torchrl_csirl.envs.gymnasium_task import make_gymnasium_env, make_gymnasium_task
 from torchrl_csirl.envs.metrics import (
     accomplish_rate,
     accomplish_rate_from_rollout,
     area_under_curve,
+    episode_success,
     normalized_accomplish_rate,
     success_from_rollout,
 )
 from torchrl_csirl.envs.parallel import YieldingParallelEnv
+from torchrl_csirl.envs.registry import env_factory, import_task_module, register_task, task_names
 from torchrl_csirl.envs.scenarios import (
     SCENARIOS,
     TASKS,
@@ -49,15 +54,22 @@ __all__ = [
     "accomplish_rate",
     "accomplish_rate_from_rollout",
     "area_under_curve",
+    "episode_success",
+    "env_factory",
+    "import_task_module",
     "info_spec",
     "make_env",
+    "make_gymnasium_env",
+    "make_gymnasium_task",
     "make_gym_env",
     "make_serial_env",
     "normalized_accomplish_rate",
     "register_scenarios",
+    "register_task",
     "resolve_scenario",
     "sample_lane_centres",
     "scenario_config_overrides",
     "success_from_rollout",
+    "task_names",
     "YieldingParallelEnv",
 ]

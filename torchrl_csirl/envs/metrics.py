@@ -22,6 +22,7 @@ __all__ = [
     "accomplish_rate",
     "accomplish_rate_from_rollout",
     "area_under_curve",
+    "episode_success",
     "normalized_accomplish_rate",
     "success_from_rollout",
 ]
@@ -176,3 +177,27 @@ def area_under_curve(rates: Sequence[float] | torch.Tensor) -> float:
     if r.numel() == 0:
         raise ValueError("area_under_curve needs at least one evaluation.")
     return float(r.mean())
+
+
+def episode_success(rollout: TensorDictBase) -> torch.Tensor:
+    """The first episode's success: the task's ``"success"`` flag, else a termination that is not a
+    truncation (a task of your own without the flag).
+
+    Examples:
+        >>> from tensordict import TensorDict
+        >>> import torch
+        >>> td = TensorDict({"next": {"terminated": torch.tensor([False, True]),
+        ...                           "truncated": torch.tensor([False, False])}}, batch_size=[2])
+        >>> bool(episode_success(td))
+        True
+    """
+    keys = rollout.keys(True)
+    if ("next", "success") in keys:
+        return success_from_rollout(rollout)
+    if ("next", "terminated") not in keys:
+        return torch.zeros(rollout.shape[:-1], dtype=torch.bool)
+    terminated = rollout.get(("next", "terminated")).reshape(rollout.shape).bool()
+    if ("next", "truncated") in keys:
+        terminated = terminated & ~rollout.get(("next", "truncated")).reshape(rollout.shape).bool()
+    return terminated.any(-1)
+

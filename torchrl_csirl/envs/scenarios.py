@@ -15,15 +15,15 @@ from typing import Mapping
 import gymnasium as gym
 import numpy as np
 
-from torchrl_csirl.envs.robotics.ant_goal import ANT_GOAL_SPEC
-from torchrl_csirl.envs.robotics.tasks import ROBOTICS_TASKS
-from torchrl_csirl.envs.spec import TaskSpec
 from torchrl_csirl.envs.driving import (
     CSIRLHighwayEnv,
     CSIRLIntersectionEnv,
     CSIRLMergeEnv,
     CSIRLRoundaboutEnv,
 )
+from torchrl_csirl.envs.robotics.ant_goal import ANT_GOAL_SPEC
+from torchrl_csirl.envs.robotics.tasks import ROBOTICS_TASKS
+from torchrl_csirl.envs.spec import TaskSpec
 
 __all__ = [
     "SCENARIOS",
@@ -216,7 +216,7 @@ TASKS: dict[str, TaskSpec] = {**SCENARIOS, **ROBOTICS_TASKS, ANT_GOAL_SPEC.name:
 def register_scenarios() -> None:
     """Register the ``csirl/<name>-v0`` gymnasium ids of every task (idempotent)."""
     for spec in TASKS.values():
-        if spec.gym_id not in gym.registry:
+        if spec.gym_id and spec.entry_point and spec.gym_id not in gym.registry:
             gym.register(
                 id=spec.gym_id,
                 entry_point=spec.entry_point,

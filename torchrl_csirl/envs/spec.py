@@ -26,9 +26,11 @@ class TaskSpec:
     Attributes:
         name: short name (``"merge"``, ``"antmaze-umaze"``, ...).
         gym_id: registered gymnasium id (``"csirl/<name>-v0"``), registered on
-            ``import torchrl_csirl.envs``.
-        entry_point: ``"module:Class"`` of the environment.
-        family: ``"driving"`` or ``"robotics"``.
+            ``import torchrl_csirl.envs``; empty for a task registered with its own factory
+            (:func:`~torchrl_csirl.envs.register_task`).
+        entry_point: ``"module:Class"`` of the environment (empty: as ``gym_id``).
+        family: ``"driving"``, ``"robotics"``, ``"gymnasium"`` (``env.gym_id=``) or ``"custom"``
+            (the default: a task of your own).
         obs_dim: flat observation size.
         action_dim: action size (actions in ``[-1, 1]``).
         max_steps: episode limit in policy steps; reaching it truncates.
@@ -57,8 +59,8 @@ class TaskSpec:
     """
 
     name: str
-    gym_id: str
-    entry_point: str
+    gym_id: str = ""
+    entry_point: str = ""
     obs_dim: int
     action_dim: int
     max_steps: int
@@ -68,7 +70,7 @@ class TaskSpec:
     matching_scale: float
     episode_ends_at_goal: bool = True
     dt: float = 0.2
-    family: str = "driving"
+    family: str = "custom"
     observation_layout: Mapping[str, tuple[int, int]] = field(
         default_factory=lambda: MappingProxyType({}), compare=False
     )

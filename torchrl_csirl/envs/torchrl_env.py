@@ -1,6 +1,7 @@
 """TorchRL environments for the CSIRL tasks (driving scenarios and robotics tasks)."""
 from __future__ import annotations
 
+from collections.abc import Callable
 from functools import partial
 
 import torch
@@ -9,6 +10,7 @@ from torchrl.envs import EnvBase, SerialEnv
 from torchrl.envs.gym_like import default_info_dict_reader
 from torchrl.envs.libs.gym import GymEnv
 
+from torchrl_csirl.envs.registry import env_factory, registered_factory
 from torchrl_csirl.envs.scenarios import register_scenarios, resolve_scenario
 
 __all__ = ["FAILURE_KEYS", "INFO_KEYS", "ScenarioInfoReader", "info_spec", "make_env", "make_serial_env"]
@@ -104,6 +106,12 @@ def make_env(
         (torch.Size([3, 25]), torch.Size([3]))
     """
     spec = resolve_scenario(name)
+    factory = registered_factory(spec.name)
+    if factory is not None:  # a task of the user's own (register_task)
+        env = factory(**overrides)
+        if seed is not None:
+            env.set_seed(seed)
+        return env
     register_scenarios()
     env = GymEnv(spec.gym_id, device=device, **spec.gym_make_kwargs(**overrides))
     reader = ScenarioInfoReader(list(info_keys), spec=info_spec(info_keys))
@@ -113,7 +121,7 @@ def make_env(
     return env
 
 
-def make_serial_env(name: str, num_envs: int, seed: int | None = None, **kwargs) -> EnvBase:
+def make_serial_env(name: str | Callable[[], EnvBase], num_envs: int, seed: int | None = None, **kwargs) -> EnvBase:
     """``num_envs`` copies of a scenario stepped one after the other in this process.
 
     A :class:`~torchrl.envs.SerialEnv` of :func:`make_env` (batch size ``[num_envs]``); for
@@ -124,7 +132,8 @@ def make_serial_env(name: str, num_envs: int, seed: int | None = None, **kwargs)
     (``benchmarks/bench_collection.py --envs-per-worker``, docs/performance.md).
 
     Args:
-        name: scenario name or gym id.
+        name: task name or gym id, or a zero-argument factory of one environment
+            (:func:`~torchrl_csirl.envs.registry.env_factory`: what a spawned worker receives).
         num_envs: environments in the batch (positive).
         seed: seed applied with ``env.set_seed`` (each copy gets its own seed derived from it).
         **kwargs: as :func:`make_env`.
@@ -138,10 +147,15 @@ def make_serial_env(name: str, num_envs: int, seed: int | None = None, **kwargs)
     """
     if not isinstance(num_envs, int) or num_envs < 1:
         raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}.")
+    if callable(name):
+        factory = partial(name, **kwargs) if kwargs else name
+    else:
+        resolve_scenario(name)  # fail here, not in the sub-environments
+        factory = env_factory(name, **kwargs)
     if num_envs == 1:
-        return make_env(name, seed=seed, **kwargs)
-    resolve_scenario(name)  # fail here, not in the sub-environments
-    env = SerialEnv(num_envs, partial(make_env, name, **kwargs))
+        env = factory()
+    else:
+        env = SerialEnv(num_envs, factory)
     if seed is not None:
         env.set_seed(seed)
     return env

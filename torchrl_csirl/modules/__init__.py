@@ -9,9 +9,9 @@ from torchrl_csirl.modules.actor_critic import (
     make_qvalue,
 )
 from torchrl_csirl.modules.ensemble import FusedCriticEnsemble, fused_critic_ensemble
-from torchrl_csirl.modules.fused_actor import FusedTanhNormalActor, fused_tanh_normal_actor
 from torchrl_csirl.modules.export import load_policy, save_policy
 from torchrl_csirl.modules.features import EgoRelativeFeatures, FeatureChain, make_input_features
+from torchrl_csirl.modules.fused_actor import FusedTanhNormalActor, fused_tanh_normal_actor
 from torchrl_csirl.modules.lane_features import LaneFeatures
 from torchrl_csirl.modules.reward import (
     REWARD_ACTIVATIONS,

@@ -6,7 +6,6 @@ from collections.abc import Sequence
 import torch
 from tensordict.nn import TensorDictModule
 from torch import nn
-
 from torchrl.data import Bounded
 from torchrl.modules import MLP, ProbabilisticActor, TanhNormal
 

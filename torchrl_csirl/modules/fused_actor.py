@@ -20,7 +20,6 @@ from tensordict.nn import TensorDictModule
 from tensordict.utils import NestedKey
 from torch import nn
 from torch.nn import functional as F
-
 from torchrl.modules import ProbabilisticActor, TanhNormal
 
 from torchrl_csirl._compat import safe_tanh as _torchrl_safe_tanh

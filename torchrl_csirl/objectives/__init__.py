@@ -3,15 +3,9 @@ behavioural-cloning term; :func:`make_csirl_learner` builds them all) and of the
 baselines (docs/baselines.md)."""
 from __future__ import annotations
 
-from torchrl_csirl.objectives.behaviour_cloning import ActorBehaviourCloning
-from torchrl_csirl.objectives.ensemble_sac import (
-    EnsembleSACLoss,
-    qvalue_dispersion,
-    reinitialize_module,
-)
-from torchrl_csirl.objectives.meta_reward import MetaRewardLoss
-from torchrl_csirl.objectives.csirl_learner import CSIRLLearner, make_csirl_learner
 from torchrl_csirl.objectives._imitation import SACHyperparameters, make_sac_learner, orthogonal_regularization
+from torchrl_csirl.objectives.behaviour_cloning import ActorBehaviourCloning
+from torchrl_csirl.objectives.csirl_learner import CSIRL_DEFAULTS, CSIRLHyperparameters, CSIRLLearner, make_csirl_learner
 from torchrl_csirl.objectives.dac import (
     AbsorbingLogit,
     DACDiscriminatorLoss,
@@ -19,8 +13,14 @@ from torchrl_csirl.objectives.dac import (
     dac_discriminator_loss,
     make_dac_discriminator,
 )
+from torchrl_csirl.objectives.ensemble_sac import (
+    EnsembleSACLoss,
+    qvalue_dispersion,
+    reinitialize_module,
+)
 from torchrl_csirl.objectives.gail import GAILHyperparameters, gail_discriminator_input, make_gail_discriminator
 from torchrl_csirl.objectives.iq_learn import IQLearnHyperparameters, IQLearnLoss, inverse_soft_q_objective
+from torchrl_csirl.objectives.meta_reward import MetaRewardLoss
 from torchrl_csirl.objectives.sqil import SQILHyperparameters, sqil_batch, sqil_reward_labels
 from torchrl_csirl.objectives.valuedice import (
     ValueDICEHyperparameters,
@@ -32,6 +32,8 @@ from torchrl_csirl.objectives.valuedice import (
 __all__ = [
     "AbsorbingLogit",
     "ActorBehaviourCloning",
+    "CSIRL_DEFAULTS",
+    "CSIRLHyperparameters",
     "CSIRLLearner",
     "DACDiscriminatorLoss",
     "DACHyperparameters",

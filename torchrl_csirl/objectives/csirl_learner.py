@@ -6,6 +6,7 @@ This is what ``recipes/csirl_highway.py`` builds from its configuration (the ``c
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import torch
@@ -17,7 +18,41 @@ from torchrl_csirl.modules import ExpertCenteredReward, make_actor, make_qvalue,
 from torchrl_csirl.objectives.ensemble_sac import EnsembleSACLoss
 from torchrl_csirl.objectives.meta_reward import MetaRewardLoss
 
-__all__ = ["CSIRLLearner", "make_csirl_learner"]
+__all__ = ["CSIRL_DEFAULTS", "CSIRLHyperparameters", "CSIRLLearner", "make_csirl_learner"]
+
+
+@dataclass(frozen=True)
+class CSIRLHyperparameters:
+    """The learner's hyperparameters with their defaults: the one place they are declared.
+
+    :func:`make_csirl_learner`'s keyword defaults and the run layer's ``csirl`` / ``optim`` schema
+    (:class:`torchrl_csirl.launch.csirl.CSIRLConfig`) both read :data:`CSIRL_DEFAULTS`, so a learner
+    built in Python and one built from a configuration start from the same values. Where the
+    building blocks' own defaults differ (the paper's, e.g. :class:`EnsembleSACLoss`'s
+    ``fixed_alpha=True``), docs/recipes.md tabulates them.
+
+    Examples:
+        >>> CSIRL_DEFAULTS.num_qvalue_nets, CSIRL_DEFAULTS.fixed_alpha, CSIRL_DEFAULTS.hidden
+        (5, False, (256, 256))
+    """
+
+    num_qvalue_nets: int = 5
+    alpha_init: float = 0.01
+    fixed_alpha: bool = False
+    gamma: float = 0.99
+    dispersion: str = "variance"
+    tau: float = 0.005
+    reward_activation: str = "relu"
+    reward_scale: float = 1.0
+    lr_inner: float = 0.01
+    meta_scale: float = 100.0
+    reward_l1_coef: float = 1.0
+    gradient_balance: str = "sum"
+    hidden: tuple[int, ...] = (256, 256)
+
+
+#: the defaults of :func:`make_csirl_learner` and of the recipes' schema
+CSIRL_DEFAULTS = CSIRLHyperparameters()
 
 
 @dataclass
@@ -52,27 +87,28 @@ def make_csirl_learner(
     action_dim: int,
     *,
     input_features: nn.Module | None = None,
-    num_qvalue_nets: int = 5,
-    alpha_init: float = 0.01,
-    fixed_alpha: bool = False,
-    gamma: float = 0.99,
-    dispersion: str = "variance",
-    tau: float = 0.005,
+    hidden: Sequence[int] = CSIRL_DEFAULTS.hidden,
+    num_qvalue_nets: int = CSIRL_DEFAULTS.num_qvalue_nets,
+    alpha_init: float = CSIRL_DEFAULTS.alpha_init,
+    fixed_alpha: bool = CSIRL_DEFAULTS.fixed_alpha,
+    gamma: float = CSIRL_DEFAULTS.gamma,
+    dispersion: str = CSIRL_DEFAULTS.dispersion,
+    tau: float = CSIRL_DEFAULTS.tau,
     intrinsic: bool = True,
-    reward_activation: str = "relu",
+    reward_activation: str = CSIRL_DEFAULTS.reward_activation,
     reward_reference: torch.Tensor | None = None,
-    reward_scale: float = 1.0,
-    lr_inner: float = 0.01,
-    meta_scale: float = 100.0,
-    reward_l1_coef: float = 1.0,
-    gradient_balance: str = "sum",
+    reward_scale: float = CSIRL_DEFAULTS.reward_scale,
+    lr_inner: float = CSIRL_DEFAULTS.lr_inner,
+    meta_scale: float = CSIRL_DEFAULTS.meta_scale,
+    reward_l1_coef: float = CSIRL_DEFAULTS.reward_l1_coef,
+    gradient_balance: str = CSIRL_DEFAULTS.gradient_balance,
     device: torch.device | str = "cpu",
 ) -> CSIRLLearner:
     """Builds CSIRL's actor, ensemble-SAC loss, target updater, reward network and meta-gradient loss.
 
-    The defaults are ``recipes/csirl_highway.py``'s default preset (docs/recipes.md; the paper's
-    values where they differ are ``fixed_alpha=True`` and, in the recipe, ``meta_every=1``).
-    The networks are 256 x 256 MLPs (:func:`~torchrl_csirl.modules.make_actor`,
+    The defaults are :data:`CSIRL_DEFAULTS`, the recipes' default preset (docs/recipes.md; the
+    paper's values where they differ are ``fixed_alpha=True`` and, in the recipe, ``meta_every=1``).
+    The networks are MLPs of ``hidden`` units (:func:`~torchrl_csirl.modules.make_actor`,
     :func:`~torchrl_csirl.modules.make_qvalue`, :func:`~torchrl_csirl.modules.make_reward_network`).
 
     Args:
@@ -80,6 +116,8 @@ def make_csirl_learner(
         action_dim (int): action size.
         input_features (nn.Module, optional): an input map every network reads the observation
             through (e.g. :func:`~torchrl_csirl.modules.make_input_features`).
+        hidden (sequence of int): hidden layer sizes of the actor, the critics and ``r_w``.
+            Defaults to ``(256, 256)``.
         num_qvalue_nets (int): critics in the ensemble. Defaults to ``5``.
         alpha_init (float): the entropy coefficient (its initial value unless ``fixed_alpha``).
             Defaults to ``0.01``.
@@ -116,11 +154,14 @@ def make_csirl_learner(
         ['optim_reward', 'optim_sac']
         >>> make_csirl_learner(25, 2, intrinsic=False).meta is None  # CSIRL-B
         True
+        >>> make_csirl_learner(3, 1, hidden=(64, 64)).actor(observation=torch.zeros(3))[0].shape  # a smaller task
+        torch.Size([1])
     """
-    actor = make_actor(obs_dim, action_dim, input_features=input_features)
+    hidden = tuple(hidden)
+    actor = make_actor(obs_dim, action_dim, hidden=hidden, input_features=input_features)
     sac = EnsembleSACLoss(
         actor,
-        make_qvalue(obs_dim, action_dim, input_features=input_features),
+        make_qvalue(obs_dim, action_dim, hidden=hidden, input_features=input_features),
         num_qvalue_nets=num_qvalue_nets,
         alpha_init=alpha_init,
         fixed_alpha=fixed_alpha,
@@ -128,7 +169,8 @@ def make_csirl_learner(
         dispersion=dispersion,
     ).to(device)
     target_updater = SoftUpdate(sac, tau=tau)
-    reward_network = make_reward_network(obs_dim, input_features=input_features, activation=reward_activation)
+    reward_network = make_reward_network(obs_dim, hidden=hidden, input_features=input_features,
+                                         activation=reward_activation)
     if reward_reference is not None:
         reward_network = ExpertCenteredReward(reward_network, reward_reference, scale=reward_scale)
     reward_network = reward_network.to(device)

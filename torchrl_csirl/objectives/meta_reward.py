@@ -7,7 +7,6 @@ import torch
 from tensordict import TensorDict, TensorDictBase
 from tensordict.nn import TensorDictModule
 from tensordict.utils import NestedKey
-
 from torchrl.objectives.common import LossModule
 
 from torchrl_csirl._compat import sac_alpha, sac_reduced_alpha_loss

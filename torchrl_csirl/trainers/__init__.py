@@ -1,12 +1,12 @@
 """Training loop pieces: :class:`CSIRLTrainer`, its CSIRL hooks, evaluation, checkpoints, metrics."""
 from __future__ import annotations
 
+from torchrl_csirl.trainers.checkpoint import CheckpointHook, load_checkpoint
 from torchrl_csirl.trainers.collection import shutdown_collector
 from torchrl_csirl.trainers.evaluation import evaluate_policy
-from torchrl_csirl.trainers.checkpoint import CheckpointHook, load_checkpoint
+from torchrl_csirl.trainers.hooks import EvaluationHook, SubgoalSelectionHook
 from torchrl_csirl.trainers.imitation import IMITATION_METHODS, ImitationMethod, hyperparameters_class, make_imitation_method
 from torchrl_csirl.trainers.imitation_updates import AdversarialImitationUpdate, DiscriminatorStep, ValueDICEUpdate
-from torchrl_csirl.trainers.hooks import EvaluationHook, SubgoalSelectionHook
 from torchrl_csirl.trainers.interrupt import StopOnSignals, ignoring_interrupts
 from torchrl_csirl.trainers.metrics_logger import MetricsLogger
 from torchrl_csirl.trainers.trainer import CSIRLTrainer, TrainingDivergedError, TrainingInterrupted, check_finite_losses

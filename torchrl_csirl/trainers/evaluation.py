@@ -1,11 +1,17 @@
-"""Evaluation of a driving policy with the paper's test accomplish rate."""
+"""Evaluation of a policy with the paper's test accomplish rate, on any task.
+
+The accomplish rate needs the task's ``"distance_to_finish"`` (the driving scenes, AntMaze); a task
+without it (Relocate's own measure aside: any task of your own, a gymnasium id) reports its
+success rate there. Success is the task's ``"success"`` flag, or for a task without one a
+termination that is not a truncation. The return is always reported (``env_return``).
+"""
 from __future__ import annotations
 
 import torch
 from tensordict.nn import TensorDictModuleBase
 from torchrl.envs import EnvBase, ExplorationType, set_exploration_type
 
-from torchrl_csirl.envs.metrics import accomplish_rate_from_rollout, success_from_rollout
+from torchrl_csirl.envs.metrics import accomplish_rate_from_rollout, episode_success
 
 __all__ = ["evaluate_policy"]
 
@@ -26,7 +32,7 @@ def evaluate_policy(
     numbers whatever happened in between.
 
     Args:
-        env: a scenario environment from :func:`~torchrl_csirl.envs.make_env`.
+        env: a task's environment (:func:`~torchrl_csirl.envs.make_env`).
         policy: the actor.
         episodes: number of episodes.
         max_steps: episode limit (the scenario's ``max_steps``).
@@ -35,7 +41,8 @@ def evaluate_policy(
 
     Returns:
         ``accomplish_rate`` (mean), ``accomplish_rate_std``, ``success_rate``, ``crash_rate``,
-        ``episode_length`` and ``env_return`` (highway-env's own reward, for reference only).
+        ``episode_length`` and ``env_return`` (the environment's own reward; driving: for
+        reference only). Without ``"distance_to_finish"`` the accomplish rate is the success rate.
 
     Examples:
         >>> from torchrl_csirl.envs import SCENARIOS, make_env
@@ -55,8 +62,10 @@ def evaluate_policy(
         for i in range(episodes):
             env.set_seed(seed + i)
             rollout = env.rollout(max_steps, policy, break_when_any_done=True)
-            rates.append(float(accomplish_rate_from_rollout(rollout)))
-            successes.append(float(success_from_rollout(rollout)))
+            success = float(episode_success(rollout))
+            has_distance = ("next", "distance_to_finish") in rollout.keys(True)
+            rates.append(float(accomplish_rate_from_rollout(rollout)) if has_distance else success)
+            successes.append(success)
             crashes.append(float(rollout["next", "crashed"].any()) if ("next", "crashed") in rollout.keys(True) else 0.0)
             lengths.append(rollout.shape[-1])
             returns.append(float(rollout["next", "reward"].sum()))

@@ -20,21 +20,19 @@ from tensordict import TensorDict
 from torch import nn
 from torchrl.data import TensorDictReplayBuffer
 from torchrl.envs.transforms import Transform
-from torchrl.objectives import SoftUpdate
+from torchrl.objectives import GAILLoss, SoftUpdate
 
 from torchrl_csirl.data.mixing import DemonstrationMixer
 from torchrl_csirl.objectives._imitation import SACHyperparameters, logit_network, make_sac_learner, sample
-from torchrl.objectives import GAILLoss
-
 from torchrl_csirl.objectives.dac import DACDiscriminatorLoss, DACHyperparameters, make_dac_discriminator
 from torchrl_csirl.objectives.gail import GAILHyperparameters, gail_discriminator_input, make_gail_discriminator
 from torchrl_csirl.objectives.iq_learn import IQLearnHyperparameters, IQLearnLoss
 from torchrl_csirl.objectives.sqil import SQILHyperparameters, sqil_reward_labels
 from torchrl_csirl.objectives.valuedice import ValueDICEHyperparameters, ValueDICELoss, initial_observations
 from torchrl_csirl.trainers.imitation_updates import AdversarialImitationUpdate, DiscriminatorStep, ValueDICEUpdate
-from torchrl_csirl.transforms.discriminator_reward import DiscriminatorReward
 from torchrl_csirl.trainers.trainer import CSIRLTrainer
 from torchrl_csirl.trainers.updates import SACUpdate
+from torchrl_csirl.transforms.discriminator_reward import DiscriminatorReward
 
 __all__ = ["IMITATION_METHODS", "ImitationMethod", "hyperparameters_class", "make_imitation_method"]
 

@@ -23,10 +23,11 @@ def _scalar(value: Any) -> Any:
 class MetricsLogger:
     """Writes every metrics row to ``metrics.jsonl`` and ``metrics.csv`` and to a TorchRL logger.
 
-    ``metrics.jsonl`` gets one JSON object per row as it comes (so a killed run keeps what it
-    logged); ``metrics.csv`` is rewritten from those rows by :meth:`write_csv` (one column per key).
-    The TorchRL logger (:func:`torchrl.record.loggers.get_logger`) is W&B (offline unless
-    ``wandb_mode="online"``), TorchRL's CSV logger, or none.
+    Both files grow row by row as the rows come (a killed run keeps what it logged):
+    ``metrics.jsonl`` one JSON object per row, ``metrics.csv`` one line per row (one column per key;
+    a row bringing a new key rewrites the file with the new column). With ``backend="wandb"`` the
+    rows also go to TorchRL's W&B logger (:func:`torchrl.record.loggers.get_logger`, offline unless
+    ``wandb_mode="online"``); ``"csv"`` and ``"none"`` keep the two files only.
 
     Args:
         run_dir: the run directory.
@@ -44,9 +45,9 @@ class MetricsLogger:
         >>> d = tempfile.mkdtemp()
         >>> log = MetricsLogger(d, backend="none")
         >>> log.log({"frames": 10, "loss_actor": 0.5})
-        >>> log.write_csv()
+        >>> log.log({"frames": 20, "loss_actor": 0.25})
         >>> open(f"{d}/metrics.csv").read().splitlines()
-        ['frames,loss_actor', '10,0.5']
+        ['frames,loss_actor', '10,0.5', '20,0.25']
     """
 
     def __init__(
@@ -76,10 +77,13 @@ class MetricsLogger:
         with open(self.jsonl_path, "w") as f:
             f.writelines(json.dumps(r) + "\n" for r in self.rows)
         self.backend = backend
+        self._csv_columns: list[str] = []
+        if self.rows:  # a resumed run: the rows kept, as metrics.jsonl
+            self.write_csv()
         self.logger = self._make_logger(backend, exp_name, config, wandb_mode, project)
 
     def _make_logger(self, backend: str, exp_name: str, config: dict[str, Any] | None, mode: str, project: str):
-        if backend == "none":
+        if backend != "wandb":  # metrics.csv is the CSV record: no second one
             return None
         from torchrl.record.loggers import get_logger
 
@@ -92,7 +96,6 @@ class MetricsLogger:
                               "config": config or {}, "log_env_packages": False},
             )
             return logger
-        return get_logger("csv", logger_name=os.path.join(self.run_dir, "csv"), experiment_name=exp_name)
 
     def log(self, row: dict[str, Any]) -> None:
         """Appends a row (numbers, tensors of one element) and sends its scalars to the logger."""
@@ -100,6 +103,7 @@ class MetricsLogger:
         self.rows.append(row)
         with open(self.jsonl_path, "a") as f:
             f.write(json.dumps(row) + "\n")
+        self._append_csv(row)
         if self.logger is not None:
             step = int(row.get(self.step_key, len(self.rows)))
             for key, value in row.items():
@@ -118,6 +122,13 @@ class MetricsLogger:
             payload[self.step_key] = step
         self.logger.experiment.log(payload)
 
+    def _append_csv(self, row: dict[str, Any]) -> None:
+        if any(key not in self._csv_columns for key in row):
+            self.write_csv()  # a new column: the header changes
+            return
+        with open(self.csv_path, "a", newline="") as f:
+            csv.DictWriter(f, fieldnames=self._csv_columns, lineterminator="\n").writerow(row)
+
     def write_csv(self) -> None:
         """Rewrites ``metrics.csv`` from the rows (union of keys, in first-seen order)."""
         columns: dict[str, None] = {}
@@ -129,6 +140,7 @@ class MetricsLogger:
             writer.writeheader()
             writer.writerows(self.rows)
         os.replace(tmp, self.csv_path)
+        self._csv_columns = list(columns)
 
     def close(self) -> None:
         """Writes the CSV and finishes the W&B run, if any."""

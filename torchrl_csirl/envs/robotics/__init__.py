@@ -10,7 +10,14 @@
 """
 from __future__ import annotations
 
-from torchrl_csirl.envs.robotics.ant_goal import ANT_GOAL_SPEC, ANT_POLICY_PATH, AntGoalEnv, WaypointAntExpert, next_waypoint, pursuit_waypoint
+from torchrl_csirl.envs.robotics.ant_goal import (
+    ANT_GOAL_SPEC,
+    ANT_POLICY_PATH,
+    AntGoalEnv,
+    WaypointAntExpert,
+    next_waypoint,
+    pursuit_waypoint,
+)
 from torchrl_csirl.envs.robotics.tasks import (
     ANTMAZE_UMAZE_MAP,
     ROBOTICS_TASKS,

@@ -38,9 +38,9 @@ import torch
 
 from torchrl_csirl._paths import EXPERTS_DIR
 from torchrl_csirl.envs.robotics.tasks import (
+    ANT_LAYOUT,
     ANTMAZE_SUCCESS_RADIUS,
     ANTMAZE_UMAZE_MAP,
-    ANT_LAYOUT,
     ROBOTICS_TASKS,
     AntMazeUMazeEnv,
     RoboticsTaskSpec,

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from common.config import (
+from torchrl_csirl.launch.config import (
     DEVICES,
     CheckpointConfig,
     CollectorConfig,

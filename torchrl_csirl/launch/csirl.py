@@ -4,7 +4,7 @@ The pieces every recipe shares (environments, collector, buffers, logging, evalu
 checkpoints, device, run directory, summary) live in ``recipes/common``; this module adds the
 ``csirl`` section of the configuration and builds the ensemble-SAC learner, the reward network,
 the meta-gradient loss, the subgoal curriculum and the matching reward, then hands them to
-:func:`common.builders.assemble_trainer`.
+:func:`torchrl_csirl.launch.builders.assemble_trainer`.
 
 Examples:
     >>> cfg = load_config(["env.scenario=roundabout", "csirl.intrinsic=false"])
@@ -22,8 +22,11 @@ from omegaconf import DictConfig
 from torchrl.data import TensorDictReplayBuffer
 from torchrl.objectives import BCLoss
 
-from common import config as config_lib
-from common.builders import (
+from torchrl_csirl.curriculum import SubgoalCurriculum
+from torchrl_csirl.data import DemonstrationMixer, ExpertDemonstrations
+from torchrl_csirl.envs import FAILURE_KEYS, SCENARIOS, ScenarioSpec, resolve_scenario  # noqa: F401 - SCENARIOS: used by tests
+from torchrl_csirl.launch import config as config_lib
+from torchrl_csirl.launch.builders import (
     Run,
     assemble_trainer,
     check_collector,
@@ -31,7 +34,7 @@ from common.builders import (
     make_online_buffer,
     model_input_features,
 )
-from common.config import (
+from torchrl_csirl.launch.config import (
     DEVICES,
     CheckpointConfig,
     CollectorConfig,
@@ -45,23 +48,19 @@ from common.config import (
     ReplayBufferConfig,
     option,
 )
-from common.registry import register_recipe
-from common.robotics import RoboticsExpertConfig, RoboticsSections
-from common.run import ExpertDataError, resolve_device
-from torchrl_csirl.curriculum import SubgoalCurriculum
-from torchrl_csirl.data import DemonstrationMixer
-from torchrl_csirl.envs import FAILURE_KEYS, SCENARIOS, ScenarioSpec, resolve_scenario  # noqa: F401 - SCENARIOS: used by tests
-from torchrl_csirl.data import ExpertDemonstrations
+from torchrl_csirl.launch.registry import register_recipe
+from torchrl_csirl.launch.robotics import RoboticsExpertConfig, RoboticsSections
+from torchrl_csirl.launch.run import ExpertDataError, resolve_device
 from torchrl_csirl.modules import REWARD_ACTIVATIONS, expert_reference_states
-from torchrl_csirl.objectives import ActorBehaviourCloning, CSIRLLearner, make_csirl_learner
+from torchrl_csirl.objectives import CSIRL_DEFAULTS, ActorBehaviourCloning, CSIRLLearner, make_csirl_learner
 from torchrl_csirl.objectives.meta_reward import GRADIENT_BALANCES
 from torchrl_csirl.trainers import MetaRewardUpdate, SACUpdate, SubgoalSelectionHook
 from torchrl_csirl.transforms import CombineRewards, IntrinsicReward, SubgoalMatchingReward
 
 __all__ = ["ConfigError", "CSIRLConfig", "CSIRLHighwayConfig", "CSIRLRoboticsConfig", "ExpertDataError", "load_config", "make_trainer"]
 
-RECIPES_DIR = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-CONFIG_DIR = os.path.join(RECIPES_DIR, "config", "csirl_highway")  # the preset config group
+#: the preset config group (``preset/<name>.yaml``, ``scene/<scenario>.yaml``), shipped in the package
+CONFIG_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "config", "csirl_highway")
 
 
 # ---------------------------------------------------------------------------------------- config
@@ -72,25 +71,25 @@ class CSIRLConfig:
         False, help="true: no curriculum, the subgoal stays at the curriculum trajectory's last state (ablation)")
     delta: float = option(5.0, above=0.0, help="subgoal threshold on U_i / U_avg")
     sigma: float = option(0.2, above=0.0, help="soft-average factor")
-    dispersion: str = option("variance", choices=("variance", "abs_cv"), help="variance (paper) | abs_cv (code)")
-    num_qvalue_nets: int = option(5, minimum=2, help="critics in the ensemble")
+    dispersion: str = option(CSIRL_DEFAULTS.dispersion, choices=("variance", "abs_cv"), help="variance (paper) | abs_cv (code)")
+    num_qvalue_nets: int = option(CSIRL_DEFAULTS.num_qvalue_nets, minimum=2, help="critics in the ensemble")
     updates_per_round: int = option(2000, above=0, help="updates between two subgoal selections (paper: 20000)")
     meta_every: int = option(2, above=0, help="a meta-gradient step every k updates (paper: 1)")
-    lr_inner: float = option(0.01, above=0.0, help="inner SGD step of the meta-gradient")
-    meta_scale: float = option(100.0, above=0.0, help="multiplies the meta-objective")
-    reward_l1_coef: float = option(1.0, minimum=0.0, help="weight of mean |r_w| in the meta-objective")
+    lr_inner: float = option(CSIRL_DEFAULTS.lr_inner, above=0.0, help="inner SGD step of the meta-gradient")
+    meta_scale: float = option(CSIRL_DEFAULTS.meta_scale, above=0.0, help="multiplies the meta-objective")
+    reward_l1_coef: float = option(CSIRL_DEFAULTS.reward_l1_coef, minimum=0.0, help="weight of mean |r_w| in the meta-objective")
     gradient_balance: str = option(
-        "sum", choices=GRADIENT_BALANCES,
+        CSIRL_DEFAULTS.gradient_balance, choices=GRADIENT_BALANCES,
         help="sum: the gradient of the meta-objective (paper); normalized: its imitation and regulariser parts "
              "each at unit norm, weighted 1 : reward_l1_coef (balanced_meta_gradient)")
     reward_activation: str = option(
-        "relu", choices=tuple(REWARD_ACTIVATIONS),
+        CSIRL_DEFAULTS.reward_activation, choices=tuple(REWARD_ACTIVATIONS),
         help="hidden-layer activation of r_w: relu (paper) or a smooth one whose units cannot die")
     reward_reference: str = option(
         "none", choices=("none", "expert"),
         help="expert: r_w measured against its mean over 256 expert states (no constant shift can be learned; "
              "ExpertCenteredReward); none: the paper")
-    reward_scale: float = option(1.0, above=0.0, help="multiplies the expert-centred r_w (reward_reference=expert)")
+    reward_scale: float = option(CSIRL_DEFAULTS.reward_scale, above=0.0, help="multiplies the expert-centred r_w (reward_reference=expert)")
     matching_scale: Optional[float] = option(
         None, above=0.0, help="multiplies the matching potential (null: the scenario's or task's published value)")
     matching_target: str = option("final", choices=("final", "next", "path"),
@@ -101,17 +100,17 @@ class CSIRLConfig:
     failure_resets_progress: bool = option(
         False, help="true: a crash or leaving the road gives s' the matching potential of the curriculum's start "
                     "(the episode pays back its progress); false: the paper")
-    gamma: float = option(0.99, above=0.0, below=1.0, help="discount")
-    alpha: float = option(0.01, above=0.0, help="entropy coefficient (its initial value unless fixed_alpha)")
+    gamma: float = option(CSIRL_DEFAULTS.gamma, above=0.0, below=1.0, help="discount")
+    alpha: float = option(CSIRL_DEFAULTS.alpha_init, above=0.0, help="entropy coefficient (its initial value unless fixed_alpha)")
     actor_bc_coef: float = option(0.0, minimum=0.0, help="> 0: behavioural cloning on the actor (TD3+BC-style)")
-    fixed_alpha: bool = option(False, help="false: SAC's automatic temperature (paper: true)")
+    fixed_alpha: bool = option(CSIRL_DEFAULTS.fixed_alpha, help="false: SAC's automatic temperature (paper: true)")
 
 
 @dataclass
 class CSIRLHighwayConfig:
     """``recipes/csirl_highway.py``: the default preset ("our cheaper procedure", docs/recipes.md)."""
 
-    preset: str = option("default", help="default | paper (config group recipes/config/csirl_highway/preset)")
+    preset: str = option("default", help="default | paper (config group torchrl_csirl/launch/config/csirl_highway/preset)")
     seed: int = option(0, minimum=0, help="random seed")
     device: str = option("cpu", choices=DEVICES, help="the learner's device (collection stays on the CPU)")
     env: EnvConfig = field(default_factory=EnvConfig)
@@ -267,7 +266,7 @@ def first_subgoal(cfg: DictConfig, length: int) -> int | None:
 def make_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume_frames: int | None = None) -> Run:
     """Builds every piece and the trainer with the CSIRL hooks registered.
 
-    The returned :class:`~common.builders.Run` also holds ``modules``, ``optimizers``,
+    The returned :class:`~torchrl_csirl.launch.builders.Run` also holds ``modules``, ``optimizers``,
     ``curriculum``, ``matching``, ``expert_buffer`` and ``selection`` (in ``run.parts``).
     """
     torch.manual_seed(cfg.seed)

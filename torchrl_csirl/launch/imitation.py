@@ -31,7 +31,7 @@ Examples:
     >>> load_config(["method=gibberish"])  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    common.config.ConfigError: method=gibberish: must be one of sac, bc, ..., random, expert or null
+    torchrl_csirl.launch.config.ConfigError: method=gibberish: must be one of sac, bc, ..., random, expert or null
 """
 from __future__ import annotations
 
@@ -47,19 +47,21 @@ from torchrl.envs import Compose
 from torchrl.envs.utils import RandomPolicy
 from torchrl.objectives import BCLoss, SoftUpdate
 
-from common import config as config_lib
-from common.builders import (
+from torchrl_csirl.data import ExpertDemonstrations
+from torchrl_csirl.envs import ScenarioSpec, TaskSpec, resolve_scenario
+from torchrl_csirl.launch import config as config_lib
+from torchrl_csirl.launch.builders import (
     Run,
     assemble_trainer,
     check_collector,
+    evaluation_summary,
     load_experts,
     make_eval_env,
     make_logger,
     make_online_buffer,
-    evaluation_summary,
     model_input_features,
 )
-from common.config import (
+from torchrl_csirl.launch.config import (
     DEVICES,
     CheckpointConfig,
     CollectorConfig,
@@ -73,11 +75,9 @@ from common.config import (
     UpdateRatioConfig,
     option,
 )
-from common.registry import register_recipe
-from common.robotics import RoboticsSections
-from common.run import ExpertDataError, expert_accomplish_rate, resolve_device
-from torchrl_csirl.data import ExpertDemonstrations
-from torchrl_csirl.envs import ScenarioSpec, TaskSpec, resolve_scenario
+from torchrl_csirl.launch.registry import register_recipe
+from torchrl_csirl.launch.robotics import RoboticsSections
+from torchrl_csirl.launch.run import ExpertDataError, expert_accomplish_rate, resolve_device
 from torchrl_csirl.modules import make_actor, make_qvalue
 from torchrl_csirl.objectives._imitation import SACHyperparameters, make_sac_learner
 from torchrl_csirl.trainers import BCUpdate, SACUpdate, evaluate_policy
@@ -89,8 +89,8 @@ from torchrl_csirl.trainers.imitation import (
 )
 from torchrl_csirl.transforms import CombineRewards, ProgressReward
 
-__all__ = ["ImitationHighwayConfig", "ImitationRoboticsConfig", "METHODS", "REFERENCE_METHODS", "load_config", "load_run_config", "make_trainer",
-           "evaluate_reference"]
+__all__ = ["ImitationHighwayConfig", "ImitationRoboticsConfig", "METHODS", "REFERENCE_METHODS", "load_config",
+           "load_run_config", "make_trainer", "evaluate_reference"]
 
 #: the loss-based baselines of :func:`~torchrl_csirl.trainers.imitation.make_imitation_method`
 LOSS_METHODS = tuple(IMITATION_METHODS)
@@ -230,7 +230,7 @@ for _method in METHODS:
 
 # ---------------------------------------------------------------------------------------- data
 def load_demonstrations(cfg: DictConfig, spec: TaskSpec) -> ExpertDemonstrations:
-    """:func:`common.builders.load_experts`, with an unavailable shipped size as one :class:`ExpertDataError` line."""
+    """:func:`torchrl_csirl.launch.builders.load_experts`, with an unavailable shipped size as one :class:`ExpertDataError` line."""
     try:
         return load_experts(cfg.expert, spec)
     except ValueError as err:

@@ -23,7 +23,7 @@ Examples:
     >>> load_config(Demo, ["seed=abc"])
     Traceback (most recent call last):
     ...
-    common.config.ConfigError: seed=abc: must be an integer >= 0
+    torchrl_csirl.launch.config.ConfigError: seed=abc: must be an integer >= 0
 """
 from __future__ import annotations
 
@@ -77,7 +77,8 @@ def option(default: Any, *, choices: tuple | None = None, minimum: float | None 
 
     Args:
         default: the default value (its type comes from the field's annotation).
-        choices: the allowed values.
+        choices: the allowed values, or a callable returning them when a value is checked (a
+            registry that grows at run time).
         minimum: the smallest allowed value (inclusive).
         above: values must be strictly greater.
         below: values must be strictly smaller.
@@ -110,6 +111,9 @@ class CollectorConfig:
         None, above=0, help="envs stepped by each worker (null: up to 4 that still fit a whole episode per batch)")
     main_threads: Optional[int] = option(None, above=0, help="torch threads of the main process (null: all cores)")
     init_random_frames: int = option(1000, minimum=0, help="uniform random actions first")
+    cut_episodes: bool = option(
+        False, help="true: allow batches whose per-environment share is shorter than the episode limit (every batch "
+                    "restarts the environments, so longer episodes are cut; tiny test budgets only)")
 
 
 @dataclass
@@ -184,7 +188,8 @@ class EvalConfig:
 @dataclass
 class LoggerConfig:
     backend: str = option("wandb", choices=("wandb", "csv", "none"),
-                          help="wandb (offline unless mode=online) | csv | none; metrics.csv/jsonl always")
+                          help="wandb (offline unless mode=online) | csv / none (metrics.csv and .jsonl only, written "
+                               "row by row in every case)")
     mode: str = option("offline", choices=("offline", "online", "disabled"), help="W&B mode")
     project: str = option("torchrl-csirl", help="W&B project")
     output_dir: str = option("runs", help="where run directories go")
@@ -372,8 +377,9 @@ def describe_allowed(annotation: Any, metadata: dict) -> str:
         'one of ego, position'
     """
     tp, nullable = _optional_inner(annotation)
-    if metadata.get("choices"):
-        text = "one of " + ", ".join(map(str, metadata["choices"]))
+    choices = _choices(metadata)
+    if choices:
+        text = "one of " + ", ".join(map(str, choices))
     else:
         text = _TYPE_WORDS.get(tp, getattr(tp, "__name__", str(tp)))
         bounds = [f">= {metadata['minimum']}" if metadata.get("minimum") is not None else None,
@@ -400,11 +406,18 @@ def validate(cfg: DictConfig, schema: type, prefix: str = "") -> None:
             raise ConfigError(f"{key}={_value_text(value)}: must be {describe_allowed(tp, f.metadata)}")
 
 
+def _choices(metadata: Any) -> tuple | None:
+    """A leaf's allowed values: a tuple, or a callable giving them now (e.g. the registered tasks)."""
+    choices = metadata.get("choices")
+    return tuple(choices()) if callable(choices) else choices
+
+
 def _allowed(value: Any, annotation: Any, metadata: Any) -> bool:
     tp, nullable = _optional_inner(annotation)
     if value is None:
         return nullable
-    if metadata.get("choices") and value not in metadata["choices"]:
+    choices = _choices(metadata)
+    if choices and value not in choices:
         return False
     if metadata.get("minimum") is not None and value < metadata["minimum"]:
         return False

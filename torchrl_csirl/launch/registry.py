@@ -22,7 +22,7 @@ from omegaconf import DictConfig
 __all__ = ["RECIPE_MODULES", "known_methods", "load_config_for", "register_recipe"]
 
 #: the glue modules (importable with recipes/ on sys.path) that register their recipes' methods
-RECIPE_MODULES = ("common.csirl", "common.imitation")
+RECIPE_MODULES = ("torchrl_csirl.launch.csirl", "torchrl_csirl.launch.imitation")
 
 _LOADERS: dict[str, Callable[[list[str]], DictConfig]] = {}
 

@@ -20,7 +20,7 @@ from typing import Any
 
 import torch
 
-from common.config import ConfigError
+from torchrl_csirl.launch.config import ConfigError
 
 __all__ = [
     "ExpertDataError",
@@ -64,7 +64,7 @@ def make_run_dir(output_dir: str, exp_name: str | None, default_name: str, overw
         >>> make_run_dir(out, "merge-csirl-s0", "")  # doctest: +ELLIPSIS
         Traceback (most recent call last):
         ...
-        common.config.ConfigError: logger.exp_name=merge-csirl-s0: .../merge-csirl-s0 already holds a run; ...
+        torchrl_csirl.launch.config.ConfigError: logger.exp_name=merge-csirl-s0: .../merge-csirl-s0 already holds a run; ...
     """
     if exp_name:
         run_dir = os.path.abspath(os.path.join(output_dir, exp_name))
@@ -115,7 +115,11 @@ def resume_command(run_dir: str) -> str:
         >>> resume_command("/tmp/runs/merge-csirl-s0").endswith(" checkpoint.resume=/tmp/runs/merge-csirl-s0")
         True
     """
-    script = getattr(sys.modules.get("__main__"), "__file__", None) or "recipes/<recipe>.py"
+    main_module = sys.modules.get("__main__")
+    spec = getattr(main_module, "__spec__", None)
+    if spec is not None and spec.name and spec.name != "__main__":  # python -m torchrl_csirl.scripts.<name>
+        return f"python -m {spec.name} checkpoint.resume={shlex.quote(run_dir)}"
+    script = getattr(main_module, "__file__", None) or "recipes/<recipe>.py"
     relative = os.path.relpath(script)
     script = script if relative.startswith("..") else relative
     return f"python {shlex.quote(script)} checkpoint.resume={shlex.quote(run_dir)}"

@@ -1,7 +1,7 @@
 """Builders every recipe shares: demonstrations, environments, collector, buffers, logging,
 evaluation, checkpoints, the learner device, the plots and the run itself.
 
-Each ``make_*`` takes sections of the typed configuration (:mod:`common.config`) and returns one
+Each ``make_*`` takes sections of the typed configuration (:mod:`torchrl_csirl.launch.config`) and returns one
 TorchRL / torchrl-csirl piece; a method's recipe builds its losses and update step and hands them
 to :func:`assemble_trainer`, which wires the shared hooks. Library code below takes plain arguments
 (configuration stops here).
@@ -26,11 +26,18 @@ from torchrl.collectors import BaseCollector, Collector
 from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
 from torchrl.envs import Compose, EnvBase, Transform
 
-from common.config import ConfigError
-from common.run import ExpertDataError, default_run_name, make_run_dir, resolve_resume, stop_with_checkpoint
-from torchrl_csirl.data import ExpertDemonstrations, FilledRowsCheckpointer, import_published, load_expert_demonstrations
-from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, TaskSpec, make_serial_env, resolve_scenario  # noqa: F401 (doctests)
+from torchrl_csirl.data import (
+    ExpertDemonstrations,
+    FilledRowsCheckpointer,
+    available_expert_datasets,
+    import_published,
+    load_expert_demonstrations,
+    load_minari_dataset,
+)
+from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, TaskSpec, env_factory, make_serial_env, resolve_scenario  # noqa: F401
 from torchrl_csirl.envs import make_env as make_scenario_env
+from torchrl_csirl.launch.config import ConfigError
+from torchrl_csirl.launch.run import ExpertDataError, default_run_name, make_run_dir, resolve_resume, stop_with_checkpoint
 from torchrl_csirl.modules import make_input_features
 from torchrl_csirl.trainers import (
     CheckpointHook,
@@ -76,8 +83,9 @@ def model_input_features(model: DictConfig, spec: TaskSpec) -> nn.Module | None:
 def load_experts(expert: DictConfig, spec: ScenarioSpec) -> ExpertDemonstrations:
     """The demonstrations: the shipped ones, or ``expert.path`` (checked against the scenario).
 
-    ``expert.path`` is an :class:`ExpertDemonstrations` ``.npz`` or a published file (read by
-    :func:`~torchrl_csirl.data.import_published` with ``end_at=expert.end_at``); ``expert.curriculum`` picks
+    ``expert.path`` is an :class:`ExpertDemonstrations` ``.npz``, ``minari:<dataset id>`` (a local Minari
+    dataset) or a published file (read by :func:`~torchrl_csirl.data.import_published` with
+    ``end_at=expert.end_at``); a task without shipped demonstrations needs it. ``expert.curriculum`` picks
     its curriculum trajectory (:func:`curriculum_first`), then the first
     ``expert.num_trajectories`` are kept.
 
@@ -86,7 +94,17 @@ def load_experts(expert: DictConfig, spec: ScenarioSpec) -> ExpertDemonstrations
     """
     n = expert.num_trajectories
     if expert.path is None:
+        if spec.name not in available_expert_datasets():
+            raise ExpertDataError(f"expert.path: required for {spec.name!r}, which ships no demonstrations "
+                                  "(an .npz of ExpertDemonstrations, or minari:<dataset id>)")
         return load_expert_demonstrations(spec.name, n, curriculum=expert.curriculum)
+    if str(expert.path).startswith("minari:"):
+        path = str(expert.path)
+        try:
+            demos = load_minari_dataset(path.removeprefix("minari:"), task=spec)
+        except Exception as err:
+            raise ExpertDataError(f"expert.path={path}: cannot read it ({type(err).__name__}: {err})") from None
+        return _checked_demonstrations(demos, expert, spec, path)
     path = os.path.abspath(os.path.expanduser(str(expert.path)))
     if not os.path.isfile(path):
         raise ExpertDataError(f"expert.path: no such file {path!r}.")
@@ -100,6 +118,13 @@ def load_experts(expert: DictConfig, spec: ScenarioSpec) -> ExpertDemonstrations
             demos = import_published(path, end_at=expert.end_at, scenario=spec.name)
     except Exception as err:
         raise ExpertDataError(f"expert.path: {path!r} is not a valid expert file ({type(err).__name__}: {err}).") from None
+    return _checked_demonstrations(demos, expert, spec, path)
+
+
+def _checked_demonstrations(demos: ExpertDemonstrations, expert: DictConfig, spec: TaskSpec,
+                            path: str) -> ExpertDemonstrations:
+    """A file's demonstrations matched against the task, curriculum first, the first ``num_trajectories``."""
+    n = expert.num_trajectories
     if demos.observation_dim != spec.obs_dim or demos.action_dim != spec.action_dim:
         raise ExpertDataError(
             f"expert.path: {path!r} has observations of size {demos.observation_dim} and actions of size "
@@ -198,9 +223,40 @@ def make_worker_env_fn(scenario: str, collector: DictConfig) -> Callable[[], Env
         >>> make_worker_env_fn("merge", c)().batch_size
         torch.Size([2])
     """
-    # Ctrl-C reaches the workers too: they keep collecting until the main process stops them
-    k = envs_per_worker(collector, resolve_scenario(scenario))
-    return ignoring_interrupts(partial(make_serial_env, scenario, k))
+    spec = resolve_scenario(scenario)
+    k = envs_per_worker(collector, spec)
+    check_whole_episodes(collector, spec, k)
+    # Ctrl-C reaches the workers too: they keep collecting until the main process stops them; a task
+    # of the user's own reaches them as its factory (a spawned worker has no registry)
+    return ignoring_interrupts(partial(make_serial_env, env_factory(spec.name), k))
+
+
+def check_whole_episodes(collector: DictConfig, spec: TaskSpec, k: int) -> None:
+    """Each environment must step at least the task's episode limit per batch: collection restarts
+    every environment at each batch start (exact resume), so a shorter share would cut every longer
+    episode, silently. ``collector.cut_episodes=true`` allows it (tiny test budgets).
+
+    Raises:
+        ConfigError: one line with the share, the limit and the ``frames_per_batch`` that fits.
+
+    Examples:
+        >>> from omegaconf import OmegaConf
+        >>> c = OmegaConf.create({"frames_per_batch": 100, "num_workers": 2, "cut_episodes": False})
+        >>> check_whole_episodes(c, SCENARIOS["merge"], 1)  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        torchrl_csirl.launch.config.ConfigError: collector.frames_per_batch=100: each of the 2 environments steps 50 ...
+        >>> c.frames_per_batch = 120
+        >>> check_whole_episodes(c, SCENARIOS["merge"], 1)
+    """
+    share = collector.frames_per_batch // (collector.num_workers * k)
+    if share >= spec.max_steps or collector.get("cut_episodes", False):
+        return
+    envs = collector.num_workers * k
+    raise ConfigError(
+        f"collector.frames_per_batch={collector.frames_per_batch}: each of the {envs} environments steps {share} frames "
+        f"per batch, fewer than {spec.name}'s episode limit ({spec.max_steps}), so episodes would be cut; use "
+        f"collector.frames_per_batch >= {envs * spec.max_steps} (or collector.cut_episodes=true)")
 
 
 def make_eval_env(scenario: str) -> EnvBase:
@@ -230,12 +286,12 @@ def make_collector(scenario: str, collector: DictConfig, policy: nn.Module, fram
     Examples:
         >>> from omegaconf import OmegaConf
         >>> from torchrl_csirl.modules import make_actor
-        >>> c = OmegaConf.create({"envs_per_worker": None, "frames_per_batch": 20, "num_workers": 1,
+        >>> c = OmegaConf.create({"envs_per_worker": None, "frames_per_batch": 60, "num_workers": 1,
         ...                       "main_threads": None, "init_random_frames": 0})
         >>> spec = SCENARIOS["merge"]
         >>> collector = make_collector("merge", c, make_actor(spec.obs_dim, spec.action_dim))
         >>> next(iter(collector)).numel()
-        20
+        60
         >>> shutdown_collector(collector)
     """
     fpb = collector.frames_per_batch
@@ -508,7 +564,7 @@ def train(run: Run) -> None:
     """``run.trainer.train()``; on any exit the collector is shut down and the logs are kept.
 
     SIGTERM or Ctrl-C stops at the end of the current batch, writes a checkpoint there and exits
-    (130 / 143) with the command that resumes the run (:func:`common.run.stop_with_checkpoint`).
+    (130 / 143) with the command that resumes the run (:func:`torchrl_csirl.launch.run.stop_with_checkpoint`).
 
     Raises:
         TrainingDivergedError: with where the last good checkpoint is and how to resume.
@@ -571,10 +627,9 @@ def evaluation_summary(cfg: DictConfig, spec: ScenarioSpec, method: str, final: 
 def final_summary(run: Run, method: str, title: str) -> dict[str, Any]:
     """Final checkpoint and test evaluation, ``policy.pt``, the learning curve, and the summary
     fields every recipe reports (the method adds its own)."""
+    from torchrl_csirl.launch.run import expert_accomplish_rate
     from torchrl_csirl.modules import save_policy
     from torchrl_csirl.visualization import plot_learning_curve
-
-    from common.run import expert_accomplish_rate
 
     trainer, cfg = run.trainer, run.cfg
     run.checkpoint.save(trainer)
@@ -600,7 +655,7 @@ def final_summary(run: Run, method: str, title: str) -> dict[str, Any]:
     run.logger.log({"frames": trainer.frames, "updates": trainer.updates,
                     **{f"test_{k}": v for k, v in final.items()}})
     if cfg.eval.video:
-        from common.video import film_final_episode
+        from torchrl_csirl.launch.video import film_final_episode
 
         summary["videos"] = film_final_episode(run)
     curve = plot_learning_curve(history, os.path.join(run.run_dir, "learning_curve.png"), title=title)

@@ -1,0 +1,21 @@
+#!/usr/bin/env bash
+# The package as a user installs it from PyPI: a built wheel in a fresh venv outside the checkout,
+# then the package's own entry points on a tiny budget (no file of the checkout is importable).
+set -euo pipefail
+repo="$(cd "$(dirname "$0")/.." && pwd)"
+work="$(mktemp -d)"
+trap 'rm -rf "$work"' EXIT
+"$repo/.venv/bin/pip" wheel --no-deps --quiet -w "$work/dist" "$repo"
+python3 -m venv "$work/venv"
+"$work/venv/bin/pip" install --quiet "$work"/dist/torchrl_csirl-*.whl
+cd "$work"  # away from the checkout: only the installed wheel can be imported
+"$work/venv/bin/python" - <<'PY'
+import torchrl_csirl, sys
+assert "site-packages" in torchrl_csirl.__file__, torchrl_csirl.__file__
+print("installed from the wheel:", torchrl_csirl.__file__, file=sys.stderr)
+PY
+tiny=(collector.frames_per_batch=100 collector.cut_episodes=true collector.init_random_frames=100 replay_buffer.warmup_frames=100
+      replay_buffer.batch_size=64 csirl.updates_per_round=20 optim.utd_ratio=0.5 eval.episodes=2
+      eval.final_episodes=2 logger.progress_bar=false collector.total_frames=300 logger.output_dir="$work/runs")
+WANDB_MODE=offline "$work/venv/bin/python" -m torchrl_csirl.scripts.csirl_highway "${tiny[@]}" | tail -1 \
+  | "$work/venv/bin/python" -c "import json,sys; s=json.loads(sys.stdin.read()); assert s['scenario']=='merge' and s['frames']>=300, s; print('wheel: CSIRL on merge', s['accomplish_rate'])"

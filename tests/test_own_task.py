@@ -1,0 +1,118 @@
+"""A task the project does not ship, trained as the built-in ones are: through the registry
+(``env.module=`` + ``register_task``) and through ``env.gym_id=`` with no code; the one-line errors
+of bad demonstrations, features and collector budgets."""
+from __future__ import annotations
+
+import json
+import os
+
+import pytest
+import torch
+
+from torchrl_csirl.data import record_demonstrations
+from torchrl_csirl.envs import make_gymnasium_task, register_task, resolve_scenario
+from torchrl_csirl.launch import ConfigError, ExpertDataError
+from torchrl_csirl.launch.robotics import prepare_task
+from torchrl_csirl.scripts import csirl_highway, csirl_robotics, imitation_robotics
+
+MOUNTAIN_CAR = "MountainCarContinuous-v0"
+TINY = [
+    "collector.total_frames=400", "collector.frames_per_batch=200", "collector.cut_episodes=true",
+    "collector.num_workers=1", "collector.init_random_frames=200", "collector.main_threads=1",
+    "replay_buffer.warmup_frames=200", "optim.utd_ratio=0.1",
+    "eval.episodes=1", "eval.final_episodes=2", "eval.video=false", "logger.backend=csv", "logger.progress_bar=false",
+    "expert.num_trajectories=3",
+]
+
+
+def pump(td):
+    """MountainCar's scripted expert: push the way the car moves (it swings up to the flag)."""
+    td["action"] = torch.where(td["observation"][..., 1:] >= 0, 1.0, -1.0)
+    return td
+
+
+@pytest.fixture(scope="module")
+def car_demos(tmp_path_factory) -> str:
+    make_gymnasium_task(MOUNTAIN_CAR, features="0")
+    demos = record_demonstrations(MOUNTAIN_CAR, pump, episodes=3, seed=100, only_successful=True)
+    path = str(tmp_path_factory.mktemp("demos") / "car.npz")
+    demos.save(path)
+    return path
+
+
+def test_a_gymnasium_id_trains_csirl_with_no_code(tmp_path, car_demos):
+    summary = csirl_robotics.main([f"env.gym_id={MOUNTAIN_CAR}", "env.features=0", f"expert.path={car_demos}",
+                                   "csirl.updates_per_round=10", "csirl.num_qvalue_nets=2", "replay_buffer.batch_size=32",
+                                   "csirl.matching_target=path", *TINY, f"logger.output_dir={tmp_path}"])
+    assert summary["scenario"] == MOUNTAIN_CAR and summary["frames"] == 400
+    assert summary["accomplish_rate"] == summary["success_rate"]  # no finish: the success rate
+    assert isinstance(summary["return"], float)
+    run_dir = summary["run_dir"]
+    with open(os.path.join(run_dir, "summary.json")) as f:
+        assert json.load(f)["scenario"] == MOUNTAIN_CAR
+    # the task is part of the saved configuration: a resume re-registers it and continues
+    resumed = csirl_robotics.main([f"checkpoint.resume={run_dir}", "collector.total_frames=600"])
+    assert resumed["frames"] == 600 and resumed["run_dir"] == run_dir
+
+
+def test_a_registered_task_trains_a_baseline_by_name(tmp_path):
+    """env.module imports the user's module (its register_task call); collection runs in a worker
+    process, which receives the task's factory, not its name."""
+    import own_task_module
+
+    def swing(td):
+        td["action"] = torch.clamp(-2.0 * td["observation"][..., 2:], -1.0, 1.0)
+        return td
+
+    path = str(tmp_path / "pendulum.npz")
+    record_demonstrations(own_task_module.NAME, swing, episodes=3).save(path)
+    summary = imitation_robotics.main(["method=bc", "env.module=own_task_module", f"env.scenario={own_task_module.NAME}",
+                                       f"expert.path={path}", *TINY, f"logger.output_dir={tmp_path}"])
+    assert summary["scenario"] == own_task_module.NAME and summary["success_rate"] == 0.0
+    assert summary["frames"] == 400 and summary["updates"] > 0
+
+
+def test_register_task_refuses_the_builtin_names_and_twice_the_same():
+    spec = resolve_scenario("merge")
+    with pytest.raises(ValueError, match="'merge' is a built-in task"):
+        register_task(spec, lambda: None)
+    import own_task_module
+
+    with pytest.raises(ValueError, match="already registered"):
+        register_task(own_task_module.SPEC, own_task_module.make_own_pendulum)
+
+
+@pytest.mark.parametrize("overrides, message", [
+    ([f"env.gym_id={MOUNTAIN_CAR}", "env.features=2"],
+     "env.features=2: index 2 is outside the observation (size 2: indices 0-1)"),
+    ([f"env.gym_id={MOUNTAIN_CAR}", "env.features=speed"], "env.features=speed: 'speed' is neither"),
+    (["env.gym_id=CartPole-v1"], "env.gym_id=CartPole-v1: its action space is Discrete(2)"),
+    (["env.gym_id=MountainCar-v9"], "env.gym_id=MountainCar-v9: not a registered gymnasium id"),
+    (["env.module=no_such_module_here"], "env.module=no_such_module_here: cannot import it"),
+    ([f"env.gym_id={MOUNTAIN_CAR}", "env.scenario=relocate"], "env.scenario=relocate and env.gym_id="),
+])
+def test_bad_task_settings_are_one_line(overrides, message):
+    with pytest.raises(ConfigError) as err:
+        csirl_robotics.load_config(overrides)
+    assert message in str(err.value) and "\n" not in str(err.value)
+
+
+def test_demonstrations_must_exist_and_fit_the_task(tmp_path, car_demos):
+    cfg = csirl_robotics.load_config([f"env.gym_id={MOUNTAIN_CAR}", *TINY, f"logger.output_dir={tmp_path}"])
+    with pytest.raises(ExpertDataError, match="expert.path: required for 'MountainCarContinuous-v0'"):
+        csirl_robotics.main([f"env.gym_id={MOUNTAIN_CAR}", *TINY, f"logger.output_dir={tmp_path}"])
+    with pytest.raises(ExpertDataError, match="observations of size 2 and actions of size 1, but 'relocate' has 39 and 30"):
+        csirl_robotics.main(["env.task=relocate", f"expert.path={car_demos}", *TINY, f"logger.output_dir={tmp_path}"])
+    assert cfg.env.scenario == MOUNTAIN_CAR and not os.listdir(tmp_path)  # no run directory left behind
+
+
+def test_a_batch_that_would_cut_episodes_is_refused(tmp_path):
+    with pytest.raises(ConfigError, match=r"each of the 2 environments steps 50 frames per batch, fewer than merge's "
+                                          r"episode limit \(60\)"):
+        csirl_highway.main(["collector.frames_per_batch=100", "collector.total_frames=200", f"logger.output_dir={tmp_path}"])
+
+
+def test_prepare_task_keeps_the_saved_task_on_resume(tmp_path):
+    (tmp_path / "config.yaml").write_text(f"env:\n  gym_id: {MOUNTAIN_CAR}\n  features: '0'\n  success: termination\n")
+    assert prepare_task(["collector.total_frames=10"], str(tmp_path)) == ["collector.total_frames=10"]
+    assert resolve_scenario(MOUNTAIN_CAR).position_feature_indices == (0,)

@@ -1,0 +1,121 @@
+"""Your own task, by name: :func:`register_task` adds a :class:`~torchrl_csirl.envs.TaskSpec` and the
+function that builds its TorchRL environment to :data:`~torchrl_csirl.envs.TASKS`, so that
+:func:`~torchrl_csirl.envs.make_env`, the run layer (:mod:`torchrl_csirl.launch`), every script and
+the benchmark take it by name, as they take ``"merge"``.
+
+Worker processes (collectors, ``ParallelEnv``) are started with the spawn method and do not see
+this process's registry: they receive the environment factory itself (:func:`env_factory`), so the
+factory must be picklable, a top-level function of an importable module or a ``functools.partial``
+of one, as for any TorchRL ``ParallelEnv``. From the command line, ``env.module=<module>`` imports
+a module that registers tasks (:func:`import_task_module`) before the configuration is checked.
+"""
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable
+from functools import partial
+
+from torchrl.envs import EnvBase
+
+from torchrl_csirl.envs.scenarios import TASKS
+from torchrl_csirl.envs.spec import TaskSpec
+
+__all__ = ["env_factory", "import_task_module", "register_task", "registered_factory", "task_names"]
+
+#: the paper's tasks and ``ant-goal``: never replaced by :func:`register_task`
+BUILTIN_TASKS: frozenset[str] = frozenset(TASKS)
+
+_FACTORIES: dict[str, Callable[..., EnvBase]] = {}
+
+
+def register_task(spec: TaskSpec, make_env: Callable[..., EnvBase], *, replace: bool = False) -> TaskSpec:
+    """Makes ``spec.name`` a task every recipe, script and the benchmark can run.
+
+    Args:
+        spec: the task's description: observation and action sizes (actions in ``[-1, 1]``), episode
+            limit, matching features (``position_feature_indices``), nearest-state features
+            (``ego_feature_indices``), matching scale; ``family`` defaults to ``"custom"``.
+        make_env: ``make_env(**overrides) -> EnvBase``, a picklable factory of the task's TorchRL
+            environment (``"observation"`` of size ``obs_dim``, actions of size ``action_dim``,
+            ``"terminated"`` / ``"truncated"``). It may write ``"success"`` (evaluation's success
+            flag; otherwise a termination counts as success) and ``"distance_to_finish"`` (the
+            accomplish rate; otherwise the accomplish rate is the success rate).
+        replace: allow replacing a task registered earlier under the same name.
+
+    Returns:
+        the registered spec.
+
+    Raises:
+        ValueError: a built-in task's name, a name registered before (``replace=False``), or a
+            factory that is not callable.
+
+    Examples:
+        >>> from functools import partial
+        >>> from torchrl.envs import GymEnv
+        >>> spec = TaskSpec(name="doc-pendulum", obs_dim=3, action_dim=1, max_steps=200,
+        ...                 finish_position=None, ego_feature_indices=(0, 1, 2),
+        ...                 position_feature_indices=(0, 1), matching_scale=1.0)
+        >>> _ = register_task(spec, partial(GymEnv, "Pendulum-v1"))
+        >>> from torchrl_csirl.envs import make_env, resolve_scenario
+        >>> resolve_scenario("doc-pendulum").family, make_env("doc-pendulum", seed=0).rollout(3)["observation"].shape
+        ('custom', torch.Size([3, 3]))
+    """
+    if not isinstance(spec, TaskSpec):
+        raise ValueError(f"register_task: spec must be a TaskSpec, got {type(spec).__name__}.")
+    if not callable(make_env):
+        raise ValueError(f"register_task({spec.name!r}): make_env must be callable, got {type(make_env).__name__}.")
+    if spec.name in BUILTIN_TASKS:
+        raise ValueError(f"register_task: {spec.name!r} is a built-in task; give yours another name.")
+    if spec.name in TASKS and not replace:
+        raise ValueError(f"register_task: {spec.name!r} is already registered (replace=True to replace it).")
+    TASKS[spec.name] = spec
+    _FACTORIES[spec.name] = make_env
+    return spec
+
+
+def registered_factory(name: str) -> Callable[..., EnvBase] | None:
+    """The factory :func:`register_task` holds for ``name`` (None for the built-in tasks)."""
+    return _FACTORIES.get(name)
+
+
+def env_factory(name: str | TaskSpec, **overrides) -> Callable[[], EnvBase]:
+    """A picklable zero-argument factory of the task's TorchRL environment, for worker processes.
+
+    Built-in tasks give ``partial(make_env, name, **overrides)`` (resolved by name in the worker);
+    registered ones their own factory, so a spawned worker needs no registry.
+
+    Examples:
+        >>> env_factory("merge")().batch_size
+        torch.Size([])
+    """
+    from torchrl_csirl.envs.torchrl_env import make_env
+
+    name = name.name if isinstance(name, TaskSpec) else name
+    factory = registered_factory(name)
+    if factory is None:
+        return partial(make_env, name, **overrides)
+    return partial(factory, **overrides) if overrides else factory
+
+
+def task_names(*, driving: bool | None = None) -> tuple[str, ...]:
+    """Every task name (``driving``: only the driving scenes / only the others).
+
+    Examples:
+        >>> task_names(driving=True)
+        ('highway-fast', 'intersection', 'merge', 'roundabout')
+    """
+    return tuple(sorted(name for name, spec in TASKS.items()
+                        if driving is None or (spec.family == "driving") == driving))
+
+
+def import_task_module(module: str) -> None:
+    """Imports ``module`` (a dotted name on ``sys.path``) for the tasks it registers.
+
+    Raises:
+        ValueError: one line naming the module when it cannot be imported.
+    """
+    try:
+        importlib.import_module(module)
+    except Exception as err:  # noqa: BLE001 - any import failure is the user's module's
+        raise ValueError(f"env.module={module}: cannot import it ({type(err).__name__}: {err}); "
+                         "it must be importable from the working directory or PYTHONPATH") from None
