@@ -128,8 +128,13 @@ def test_resume_gives_the_uninterrupted_metrics(full_run, tmp_path):
     out = str(tmp_path)
     run_recipe(*TINY, "collector.total_frames=400", f"logger.output_dir={out}", "logger.exp_name=part",
                "logger.backend=csv")
+    with open(os.path.join(out, "part", "summary.json")) as f:
+        part_summary = json.load(f)
     resumed = last_json(run_recipe(f"checkpoint.resume={out}/part", "collector.total_frames=600"))
     assert resumed["run_dir"] == os.path.join(out, "part")
+    # the total wall time counts the first process (up to its checkpoint) as well as this one
+    assert part_summary["wall_s"] <= resumed["earlier_wall_s"] <= part_summary["total_wall_s"]
+    assert resumed["total_wall_s"] > resumed["earlier_wall_s"] and resumed["total_wall_s"] >= resumed["wall_s"]
     assert resumed["accomplish_rate"] == full_run["accomplish_rate"]
     full = {r["frames"]: r for r in read_rows(full_run["run_dir"]) if "loss_qvalue" in r}
     part = {r["frames"]: r for r in read_rows(resumed["run_dir"]) if "loss_qvalue" in r}

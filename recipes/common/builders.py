@@ -595,6 +595,7 @@ def final_summary(run: Run, method: str, title: str) -> dict[str, Any]:
         "collect_fps": throughput["collect_fps"],
         "updates_per_s": throughput["updates_per_s"],
         "wall_s": round(max(trainer.wall_time, 0.0), 1),
+        "earlier_wall_s": round(trainer.elapsed_before, 1),  # a resumed run's earlier processes (total_wall_s)
         "run_dir": run.run_dir,
     }
     run.logger.log({"frames": trainer.frames, "updates": trainer.updates,
