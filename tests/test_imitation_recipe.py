@@ -7,8 +7,10 @@ import json
 import os
 import sys
 
+import numpy as np
 import pytest
 import torch
+from omegaconf import OmegaConf
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RECIPES, TOOLS = os.path.join(ROOT, "recipes"), os.path.join(ROOT, "tools")
@@ -163,6 +165,43 @@ def test_bad_input_is_one_error_line(args, message, tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith(message), err
     assert os.listdir(tmp_path) == []  # no run directory left behind
+
+
+def _one_error_line(capsys, args: list[str]) -> str:
+    with pytest.raises(SystemExit) as exit_info:
+        run_script(lambda: imitation_highway.main(args))
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: "), err
+    return err[0]
+
+
+def test_demonstrations_with_a_nan_stop_at_loading_naming_file_and_field(tmp_path, capsys):
+    from torchrl_csirl.data import load_expert_demonstrations
+
+    path = load_expert_demonstrations("merge", 25).save(tmp_path / "demos.npz")
+    arrays = dict(np.load(path))
+    arrays["action"][10, 0] = np.nan
+    np.savez(path, **arrays)
+    line = _one_error_line(capsys, ["method=bc", f"expert.path={path}", f"logger.output_dir={tmp_path / 'runs'}"])
+    assert path in line and "action holds 1 non-finite value" in line and "transition 10" in line, line
+    assert not os.path.exists(tmp_path / "runs") or os.listdir(tmp_path / "runs") == []
+
+
+def test_a_corrupted_checkpoint_is_one_line_naming_it(tmp_path, capsys):
+    run_dir = tmp_path / "merge-sac-s0"
+    (run_dir / "checkpoints" / "last").mkdir(parents=True)
+    OmegaConf.save(imitation.load_config(["method=sac", *TINY]), run_dir / "config.yaml")
+    torch.save({"counters": {"frames": 100}}, run_dir / "checkpoints" / "last" / "state.pt")
+    state = run_dir / "checkpoints" / "last" / "state.pt"
+    state.write_bytes(state.read_bytes()[:40])  # truncated
+    line = _one_error_line(capsys, [f"checkpoint.resume={run_dir}"])
+    assert line.startswith(f"error: checkpoint {state} cannot be read") and "no previous checkpoint is kept" in line, line
+    # a previous checkpoint left beside it (a run killed while swapping in a new one) is named
+    (run_dir / "checkpoints" / "last.old").mkdir()
+    torch.save({"counters": {"frames": 50}}, run_dir / "checkpoints" / "last.old" / "state.pt")
+    line = _one_error_line(capsys, [f"checkpoint.resume={run_dir}"])
+    assert f"the previous checkpoint is kept at {run_dir / 'checkpoints' / 'last.old'}" in line, line
 
 
 def test_benchmark_sweeps_on_ray_resumes_and_reports(tmp_path):
