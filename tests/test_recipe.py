@@ -150,6 +150,30 @@ def _tiny_cfg(tmp_path, *extra):
                                            f"logger.output_dir={tmp_path}", *extra])
 
 
+def test_a_csirl_run_moves_its_actor_critics_and_reward_network(tmp_path):
+    """Every parameter tensor of the actor, of each critic of the ensemble and of ``r_w`` changes in a tiny
+    CSIRL run (150 updates, a meta-gradient step every 2nd); the target critics follow by Polyak averaging."""
+    cfg = _tiny_cfg(tmp_path, "collector.total_frames=300")
+    run = csirl.make_trainer(cfg, str(tmp_path))
+    try:
+        modules = run.modules
+        groups = {
+            "actor": dict(modules.actor.named_parameters()),
+            "critics": {k: v for k, v in modules.sac.named_parameters() if k.startswith("qvalue_network_params")},
+            "target critics": {k: v for k, v in modules.sac.named_buffers() if k.startswith("target_qvalue_network_params")},
+            "reward network": dict(modules.reward_network.named_parameters()),
+        }
+        assert all(groups.values()), {name: len(p) for name, p in groups.items()}
+        before = {name: {k: v.detach().clone() for k, v in params.items()} for name, params in groups.items()}
+        run.trainer.train()
+        assert run.trainer.updates == 150 and any("loss_meta" in r for r in run.logger.rows)
+        for name, params in groups.items():
+            unchanged = [k for k, v in params.items() if torch.equal(v, before[name][k])]
+            assert not unchanged, f"{name}: {unchanged} did not move"
+    finally:
+        run.close()
+
+
 def test_csirl_b_switch_trains_without_the_reward_network(tmp_path):
     cfg = _tiny_cfg(tmp_path, "csirl.intrinsic=false", "collector.total_frames=300")
     run = csirl.make_trainer(cfg, str(tmp_path))
