@@ -1,6 +1,7 @@
 """The imitation baselines (docs/baselines.md): each loss's defining property on a tiny problem."""
 from __future__ import annotations
 
+import copy
 import math
 from types import SimpleNamespace
 
@@ -105,8 +106,28 @@ def test_every_method_updates_and_checkpoints(name):
     step = method.make_update_step(online, expert)
     losses = run_updates(step, trainer(online), 2)
     assert losses and all(torch.isfinite(v).all() and not v.requires_grad for v in losses.values())
-    for state in method.states.values():
-        state.load_state_dict(state.state_dict())
+    # a fresh method restored from the trained one's states holds the same tensors (the checkpoint's job)
+    fresh = build(name, {"batch_size": 16})
+    assert fresh.states.keys() == method.states.keys()
+    for key, state in method.states.items():
+        fresh.states[key].load_state_dict(copy.deepcopy(state.state_dict()))
+        assert_same_state(fresh.states[key].state_dict(), state.state_dict(), key)
+
+
+def assert_same_state(a, b, where: str = "") -> None:
+    """Two (nested) ``state_dict``s hold equal tensors and values, and differ from nothing."""
+    if isinstance(a, dict):
+        assert isinstance(b, dict) and a.keys() == b.keys(), where
+        for k in a:
+            assert_same_state(a[k], b[k], f"{where}.{k}")
+    elif isinstance(a, (list, tuple)):
+        assert isinstance(b, (list, tuple)) and len(a) == len(b), where
+        for i, (x, y) in enumerate(zip(a, b)):
+            assert_same_state(x, y, f"{where}[{i}]")
+    elif isinstance(a, torch.Tensor):
+        assert torch.equal(a, b), where
+    else:
+        assert a == b, where
 
 
 # ------------------------------------------------------------------------------ SQIL
@@ -410,7 +431,18 @@ def test_method_trains_in_the_csirl_trainer_on_a_mock_env(name):
     finally:
         collector.shutdown()
     assert t.updates == 20 and t.last_losses and all(map(math.isfinite, t.last_losses.values()))
-    t.load_state_dict(t.state_dict())
+    # the trainer's state restored into a fresh method and trainer: the same counters and tensors
+    saved = copy.deepcopy(t.state_dict())
+    fresh = make_imitation_method(name, make_actor(obs_dim, act_dim, hidden=(16, 16)),
+                                  lambda: make_qvalue(obs_dim, act_dim, hidden=(16, 16)), obs_dim=obs_dim,
+                                  action_dim=act_dim, hyperparameters={"batch_size": 8})
+    restored = CSIRLTrainer(collector=collector, online_buffer=online, update_step=lambda trainer: {},
+                            total_frames=40, utd_ratio=0.5, updates_per_round=5, progress_bar=False)
+    for key, state in fresh.states.items():
+        restored.register_state(key, state)
+    restored.load_state_dict(saved)
+    assert restored.updates == 20 and restored.frames == t.frames
+    assert_same_state(restored.state_dict()["states"], saved["states"], name)
 
 
 def test_baselines_page_example_runs():

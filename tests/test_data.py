@@ -169,6 +169,21 @@ class TestNpzFormat:
         with pytest.raises(ValueError, match="format version"):
             ExpertDemonstrations.load(tmp_path / "v99.npz")
 
+    def test_load_rejects_non_finite_values_naming_the_file_and_member(self, demos, tmp_path):
+        arrays = dict(np.load(demos.save(tmp_path / "d.npz")))
+        arrays["action"][6, 1] = np.nan  # one action entry, in the second trajectory
+        np.savez(tmp_path / "nan.npz", **arrays)
+        with pytest.raises(ValueError) as info:
+            ExpertDemonstrations.load(tmp_path / "nan.npz")
+        message = str(info.value)
+        assert len(message.splitlines()) == 1
+        assert message == (f"{tmp_path / 'nan.npz'}: action holds 1 non-finite value (NaN or inf), the first at "
+                           "transition 6 (trajectory 1).")
+        episode = _episode(3)
+        episode["observation"][1, 0] = float("inf")
+        with pytest.raises(ValueError, match=r"observation holds 1 non-finite value .* transition 1 \(trajectory 0\)"):
+            ExpertDemonstrations.from_episodes([episode])
+
 
 def _published_dict(n: int = 3, width: int = 6, obs_dim: int = 5, act_dim: int = 2, seed: int = 0):
     rng = np.random.default_rng(seed)

@@ -6,9 +6,11 @@ import csv
 import json
 import os
 
+import numpy as np
 import pytest
 import termination_probe
 import torch
+from omegaconf import OmegaConf
 
 from torchrl_csirl.launch import imitation
 from torchrl_csirl.launch.run import run_script
@@ -60,7 +62,8 @@ def test_trained_baseline_end_to_end(method, tmp_path):
     rows = read_rows(run_dir)
     losses = [v for r in rows for k, v in r.items() if k.startswith("loss_")]
     assert losses and all(torch.isfinite(torch.tensor(v)) for v in losses)
-    assert any("loss_bc" in r for r in rows) if method == "bc" else any("loss_bc" not in r for r in rows)
+    # BC's rows log its cloning loss; no other baseline's row does
+    assert any("loss_bc" in r for r in rows) if method == "bc" else all("loss_bc" not in r for r in rows)
     assert len([r for r in rows if "eval_accomplish_rate" in r]) == 2
     for name in ("summary.json", "metrics.csv", "config.yaml", "policy.pt", "learning_curve.png",
                  os.path.join("checkpoints", "last", "state.pt")):
@@ -159,6 +162,43 @@ def test_bad_input_is_one_error_line(args, message, tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith(message), err
     assert os.listdir(tmp_path) == []  # no run directory left behind
+
+
+def _one_error_line(capsys, args: list[str]) -> str:
+    with pytest.raises(SystemExit) as exit_info:
+        run_script(lambda: imitation_highway.main(args))
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: "), err
+    return err[0]
+
+
+def test_demonstrations_with_a_nan_stop_at_loading_naming_file_and_field(tmp_path, capsys):
+    from torchrl_csirl.data import load_expert_demonstrations
+
+    path = load_expert_demonstrations("merge", 25).save(tmp_path / "demos.npz")
+    arrays = dict(np.load(path))
+    arrays["action"][10, 0] = np.nan
+    np.savez(path, **arrays)
+    line = _one_error_line(capsys, ["method=bc", f"expert.path={path}", f"logger.output_dir={tmp_path / 'runs'}"])
+    assert path in line and "action holds 1 non-finite value" in line and "transition 10" in line, line
+    assert not os.path.exists(tmp_path / "runs") or os.listdir(tmp_path / "runs") == []
+
+
+def test_a_corrupted_checkpoint_is_one_line_naming_it(tmp_path, capsys):
+    run_dir = tmp_path / "merge-sac-s0"
+    (run_dir / "checkpoints" / "last").mkdir(parents=True)
+    OmegaConf.save(imitation.load_config(["method=sac", *TINY]), run_dir / "config.yaml")
+    torch.save({"counters": {"frames": 100}}, run_dir / "checkpoints" / "last" / "state.pt")
+    state = run_dir / "checkpoints" / "last" / "state.pt"
+    state.write_bytes(state.read_bytes()[:40])  # truncated
+    line = _one_error_line(capsys, [f"checkpoint.resume={run_dir}"])
+    assert line.startswith(f"error: checkpoint {state} cannot be read") and "no previous checkpoint is kept" in line, line
+    # a previous checkpoint left beside it (a run killed while swapping in a new one) is named
+    (run_dir / "checkpoints" / "last.old").mkdir()
+    torch.save({"counters": {"frames": 50}}, run_dir / "checkpoints" / "last.old" / "state.pt")
+    line = _one_error_line(capsys, [f"checkpoint.resume={run_dir}"])
+    assert f"the previous checkpoint is kept at {run_dir / 'checkpoints' / 'last.old'}" in line, line
 
 
 def test_benchmark_sweeps_on_ray_resumes_and_reports(tmp_path):

@@ -129,8 +129,13 @@ def test_resume_gives_the_uninterrupted_metrics(full_run, tmp_path):
     out = str(tmp_path)
     run_recipe(*TINY, "collector.total_frames=400", f"logger.output_dir={out}", "logger.exp_name=part",
                "logger.backend=csv")
+    with open(os.path.join(out, "part", "summary.json")) as f:
+        part_summary = json.load(f)
     resumed = last_json(run_recipe(f"checkpoint.resume={out}/part", "collector.total_frames=600"))
     assert resumed["run_dir"] == os.path.join(out, "part")
+    # the total wall time counts the first process (up to its checkpoint) as well as this one
+    assert part_summary["wall_s"] <= resumed["earlier_wall_s"] <= part_summary["total_wall_s"]
+    assert resumed["total_wall_s"] > resumed["earlier_wall_s"] and resumed["total_wall_s"] >= resumed["wall_s"]
     assert resumed["accomplish_rate"] == full_run["accomplish_rate"]
     full = {r["frames"]: r for r in read_rows(full_run["run_dir"]) if "loss_qvalue" in r}
     part = {r["frames"]: r for r in read_rows(resumed["run_dir"]) if "loss_qvalue" in r}
@@ -144,6 +149,30 @@ def test_resume_gives_the_uninterrupted_metrics(full_run, tmp_path):
 def _tiny_cfg(tmp_path, *extra):
     return csirl.load_config(TINY + ["collector.num_workers=1", "logger.backend=none",
                                            f"logger.output_dir={tmp_path}", *extra])
+
+
+def test_a_csirl_run_moves_its_actor_critics_and_reward_network(tmp_path):
+    """Every parameter tensor of the actor, of each critic of the ensemble and of ``r_w`` changes in a tiny
+    CSIRL run (150 updates, a meta-gradient step every 2nd); the target critics follow by Polyak averaging."""
+    cfg = _tiny_cfg(tmp_path, "collector.total_frames=300")
+    run = csirl.make_trainer(cfg, str(tmp_path))
+    try:
+        modules = run.modules
+        groups = {
+            "actor": dict(modules.actor.named_parameters()),
+            "critics": {k: v for k, v in modules.sac.named_parameters() if k.startswith("qvalue_network_params")},
+            "target critics": {k: v for k, v in modules.sac.named_buffers() if k.startswith("target_qvalue_network_params")},
+            "reward network": dict(modules.reward_network.named_parameters()),
+        }
+        assert all(groups.values()), {name: len(p) for name, p in groups.items()}
+        before = {name: {k: v.detach().clone() for k, v in params.items()} for name, params in groups.items()}
+        run.trainer.train()
+        assert run.trainer.updates == 150 and any("loss_meta" in r for r in run.logger.rows)
+        for name, params in groups.items():
+            unchanged = [k for k, v in params.items() if torch.equal(v, before[name][k])]
+            assert not unchanged, f"{name}: {unchanged} did not move"
+    finally:
+        run.close()
 
 
 def test_csirl_b_switch_trains_without_the_reward_network(tmp_path):

@@ -1,6 +1,8 @@
 """CSIRLTrainer's loop and hook points, on TorchRL's mock env (fast)."""
 from __future__ import annotations
 
+import os
+
 import pytest
 import torch
 from tensordict.nn import TensorDictModule
@@ -127,6 +129,34 @@ def test_throughput_covers_the_resumed_parts_of_a_run(tmp_path):
     assert resumed.updates == 2 * trainer.updates
     assert resumed.throughput["updates_per_s"] == pytest.approx(resumed.updates / resumed._time_update)
     assert resumed._time_update > trainer._time_update  # both parts' seconds
+
+
+def test_elapsed_time_of_a_resumed_run_includes_the_earlier_process(tmp_path):
+    """``elapsed_s`` (a summary's ``total_wall_s``) is carried in the checkpoint, not restarted by a resume."""
+    trainer, _ = make_trainer(total_frames=30)
+    trainer.train()
+    hook = CheckpointHook(tmp_path, trainer.online_buffer)
+    hook.save(trainer)
+    trainer.collector.shutdown()
+    counters = torch.load(os.path.join(hook.path, "state.pt"), weights_only=False)["counters"]
+    assert counters["elapsed_s"] >= counters["wall_s"] > 0
+
+    resumed, _ = make_trainer(total_frames=60)
+    load_checkpoint(resumed, hook.path, resumed.online_buffer)
+    assert resumed.elapsed_before == counters["elapsed_s"]
+    resumed.train()
+    resumed.collector.shutdown()
+    this_process = resumed.wall_time - counters["wall_s"]  # its own training loop
+    assert this_process > 0
+    assert resumed.elapsed_time >= counters["elapsed_s"] + this_process
+    assert resumed.elapsed_time >= resumed.wall_time
+    # a checkpoint from before elapsed_s was saved: its training-loop seconds stand in for it
+    state = resumed.state_dict()
+    del state["counters"]["elapsed_s"]
+    again, _ = make_trainer(total_frames=60)
+    again.load_state_dict(state)
+    again.collector.shutdown()
+    assert again.elapsed_before == state["counters"]["wall_s"]
 
 
 def test_throughput_after_a_checkpoint_without_timing_counts_this_process_only(tmp_path):

@@ -111,3 +111,19 @@ def test_watch_bad_input_is_one_error_line_and_exit_status_2(tmp_path):
                           text=True, env=env, timeout=300)
     assert proc.returncode == 2
     assert proc.stderr.strip().splitlines()[-1] == f"error: {tmp_path}: not a run directory (no config.yaml)"
+
+
+def test_headless_pictures_draw_without_an_sdl_error():
+    """On a machine without a display, a driving picture is drawn and SDL prints nothing (no
+    ``error: XDG_RUNTIME_DIR is invalid``): the package picks SDL's offscreen driver."""
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("DISPLAY", "WAYLAND_DISPLAY", "SDL_VIDEODRIVER", "XDG_RUNTIME_DIR")}
+    code = ("from torchrl_csirl.envs import make_env; "
+            "env = make_env('merge', render_mode='rgb_array'); env.reset(); "
+            "image = env.render(); print(image.shape, float(image.std()))")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=False,
+                          cwd=os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    assert proc.returncode == 0, proc.stderr
+    assert "XDG_RUNTIME_DIR" not in proc.stderr and "error" not in proc.stderr.lower(), proc.stderr
+    _, std = proc.stdout.split(")")
+    assert std and float(std) > 1.0  # a drawn scene, not a blank frame

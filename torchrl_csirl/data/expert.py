@@ -81,6 +81,35 @@ _FLAT_KEYS = {
 }
 
 
+#: the float members a demonstration must hold finite
+_FINITE_KEYS = ("observation", "action", "next_observation", "reward")
+
+
+def non_finite_entries(transitions: TensorDictBase) -> str | None:
+    """Where flat demonstration ``transitions`` hold NaN or infinite values, as one phrase (None: nowhere).
+
+    Examples:
+        >>> td = TensorDict({"observation": torch.zeros(3, 2), "action": torch.tensor([[0.0], [float("nan")], [0.0]]),
+        ...                  "next": {"observation": torch.zeros(3, 2)},
+        ...                  "collector": {"traj_ids": torch.zeros(3, dtype=torch.int64)}}, [3])
+        >>> non_finite_entries(td)
+        'action holds 1 non-finite value (NaN or inf), the first at transition 1 (trajectory 0)'
+    """
+    for name in _FINITE_KEYS:
+        key = _FLAT_KEYS[name]
+        value = transitions.get(key, None)
+        if value is None or not value.is_floating_point():
+            continue
+        bad = ~torch.isfinite(value.reshape(value.shape[0], -1)).all(-1)
+        if bad.any():
+            count = int((~torch.isfinite(value)).sum())
+            first = int(bad.nonzero()[0, 0])
+            trajectory = int(transitions.get(("collector", "traj_ids"))[first])
+            return (f"{name} holds {count} non-finite value{'s' if count > 1 else ''} (NaN or inf), the first at "
+                    f"transition {first} (trajectory {trajectory})")
+    return None
+
+
 def _as_tensor(value: Any, dtype: torch.dtype, name: str) -> torch.Tensor:
     try:
         tensor = torch.as_tensor(np.asarray(value) if not isinstance(value, torch.Tensor) else value)
@@ -237,6 +266,9 @@ class ExpertDemonstrations:
                 "trajectory ids must be contiguous blocks numbered 0..N-1 in order, got "
                 f"{ids.tolist()[:10]}..."
             )
+        non_finite = non_finite_entries(transitions)
+        if non_finite is not None:
+            raise ValueError(f"demonstrations with non-finite values: {non_finite}.")
         self._transitions = transitions
         self._lengths = counts.to(torch.int64)
         self._offsets = torch.cat([torch.zeros(1, dtype=torch.int64), self._lengths.cumsum(0)[:-1]])
@@ -443,7 +475,8 @@ class ExpertDemonstrations:
         """Reads a file written by :meth:`save` (``numpy.load(..., allow_pickle=False)``).
 
         Raises:
-            ValueError: on a missing member, an unknown format version or inconsistent shapes.
+            ValueError: on a missing member, an unknown format version, inconsistent shapes or non-finite
+                values (naming the file and the member).
         """
         path = os.fspath(path)
         with np.load(path, allow_pickle=False) as npz:
@@ -479,6 +512,9 @@ class ExpertDemonstrations:
         )
         if "reward" in arrays:
             td.set(("next", "reward"), torch.from_numpy(arrays["reward"].astype(np.float32)).reshape(-1, 1))
+        non_finite = non_finite_entries(td)
+        if non_finite is not None:
+            raise ValueError(f"{path}: {non_finite}.")
         demos = cls(td, metadata)
         if not np.array_equal(demos._lengths.numpy(), arrays["lengths"]):
             raise ValueError(f"{path}: lengths do not match the trajectory ids.")

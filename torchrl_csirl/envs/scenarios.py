@@ -8,6 +8,7 @@ the accomplish-rate metric and the published matching-reward scale.
 from __future__ import annotations
 
 import copy
+import os
 from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Mapping
@@ -115,15 +116,29 @@ class ScenarioSpec(TaskSpec):
     def gym_make_kwargs(self, render_mode: str | None = None, **config_overrides) -> dict:
         """``config=`` (overrides merged by :func:`scenario_config_overrides`) and ``render_mode``.
 
-        Headless pictures need ``offscreen_rendering=True``, set for ``"rgb_array"``.
+        Headless pictures need ``offscreen_rendering=True``, set for ``"rgb_array"`` (with
+        :func:`quiet_headless_sdl`).
         """
         config = scenario_config_overrides(self, **config_overrides)
         if render_mode == "rgb_array":
             config.setdefault("offscreen_rendering", True)
+            quiet_headless_sdl()
         kwargs: dict = {"config": config}
         if render_mode is not None:
             kwargs["render_mode"] = render_mode
         return kwargs
+
+
+def quiet_headless_sdl() -> None:
+    """On a machine without a display, has SDL (pygame, which draws highway-env's pictures) use its
+    ``offscreen`` video driver unless ``SDL_VIDEODRIVER`` is set.
+
+    Without it SDL probes the display drivers and prints ``error: XDG_RUNTIME_DIR is invalid or not
+    set in the environment.`` before drawing good pictures. Not ``dummy``: highway-env stops drawing
+    under that driver. Call it before pygame's display starts (an environment's first ``render``).
+    """
+    if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        os.environ.setdefault("SDL_VIDEODRIVER", "offscreen")
 
 
 def _spec(

@@ -517,9 +517,9 @@ def start_run(cfg: DictConfig, method: str, build: Callable[[DictConfig, str], A
 def resume_run(cfg: DictConfig, run_dir: str, checkpoint: str, make_trainer: Callable[..., Run]) -> Run:
     """A killed run continued: ``make_trainer(cfg, run_dir, frames_done=, resume_frames=)`` with the
     checkpoint's counters, then the checkpoint (and the online buffer, if saved) restored."""
-    from torchrl_csirl.trainers import load_checkpoint
+    from torchrl_csirl.trainers import load_checkpoint, read_checkpoint_state
 
-    counters = torch.load(os.path.join(checkpoint, "state.pt"), weights_only=False, map_location="cpu")["counters"]
+    counters = read_checkpoint_state(checkpoint)["counters"]  # an unreadable file: one CheckpointError line
     run = make_trainer(cfg, run_dir, frames_done=counters["frames"], resume_frames=counters["frames"])
     try:
         load_checkpoint(run.trainer, checkpoint, run.online_buffer if cfg.checkpoint.save_buffer else None)
@@ -650,6 +650,7 @@ def final_summary(run: Run, method: str, title: str) -> dict[str, Any]:
         "collect_fps": throughput["collect_fps"],
         "updates_per_s": throughput["updates_per_s"],
         "wall_s": round(max(trainer.wall_time, 0.0), 1),
+        "earlier_wall_s": round(trainer.elapsed_before, 1),  # a resumed run's earlier processes (total_wall_s)
         "run_dir": run.run_dir,
     }
     run.logger.log({"frames": trainer.frames, "updates": trainer.updates,

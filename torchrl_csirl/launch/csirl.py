@@ -1,7 +1,8 @@
-"""CSIRL's part of ``recipes/csirl_highway.py``: its configuration schema and its builders.
+"""CSIRL's part of the run layer (``recipes/csirl_highway.py``, ``recipes/csirl_robotics.py``): its
+configuration schema and its builders.
 
-The pieces every recipe shares (environments, collector, buffers, logging, evaluation,
-checkpoints, device, run directory, summary) live in ``recipes/common``; this module adds the
+The pieces every script shares (environments, collector, buffers, logging, evaluation,
+checkpoints, device, run directory, summary) live in :mod:`torchrl_csirl.launch.builders`; this module adds the
 ``csirl`` section of the configuration and builds the ensemble-SAC learner, the reward network,
 the meta-gradient loss, the subgoal curriculum and the matching reward, then hands them to
 :func:`torchrl_csirl.launch.builders.assemble_trainer`.

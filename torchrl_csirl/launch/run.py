@@ -176,10 +176,10 @@ def run_script(main: Callable[[], Any], known_errors: tuple[type[BaseException],
     """Runs a recipe's ``main`` as a script: SIGTERM unwinds like Ctrl-C (workers shut down, logs
     and checkpoints kept); a known error is one ``error:`` line and exit status 2 (3 for a
     diverged training). ``CSIRL_TRACEBACK=1`` shows the traceback too."""
-    from torchrl_csirl.trainers import TrainingDivergedError
+    from torchrl_csirl.trainers import CheckpointError, TrainingDivergedError
 
     signal.signal(signal.SIGTERM, lambda signum, frame: sys.exit(128 + signum))
-    errors = (ConfigError, ExpertDataError, TrainingDivergedError, FileNotFoundError, *known_errors)
+    errors = (ConfigError, ExpertDataError, TrainingDivergedError, CheckpointError, FileNotFoundError, *known_errors)
     try:
         main()
     except errors as error:

@@ -76,6 +76,13 @@ ROBOTICS_ORDER = ("antmaze-umaze", "relocate")
 #: the methods of the paper's robotics comparison (Figure 7: curves, no table; SPEC section 4)
 PAPER_ROBOTICS_METHODS = ("sqil", "dac", "valuedice", "iqlearn", "csirl")
 
+#: every cell's budget (environment frames) per scene: the one place the tables' budget comes from. A sweep
+#: gives each cell ``collector.total_frames=<budget>`` (before the user's overrides, which win) and the
+#: report's captions state it; a row whose records ran another budget is marked in its cells. Every row of a
+#: scene's column is compared at the same budget (the roundabout's own default for CSIRL, 110 000 frames, is
+#: the junction study's: docs/studies/junctions.md#a-longer-budget)
+TABLE_BUDGETS: dict[str, int] = {scene: 60_000 for scene in (*SCENARIO_ORDER, *ROBOTICS_ORDER)}
+
 #: the paper's Table I (accomplish rate, 25 expert trajectories, 5 seeds; the expert at 1.00, so
 #: read as expert-normalised): /work/shared/SPEC.md section 2, paper Table "tab:result"
 PAPER_TABLE: dict[str, dict[str, float]] = {
@@ -191,6 +198,16 @@ def has_checkpoint(run_dir: str) -> bool:
     return os.path.isfile(os.path.join(run_dir, "checkpoints", "last", "state.pt"))
 
 
+def budget_override(scenario: str) -> list[str]:
+    """The override that runs a cell on ``scenario`` at its :data:`TABLE_BUDGETS` budget (none for another scenario).
+
+    Examples:
+        >>> budget_override("roundabout")
+        ['collector.total_frames=60000']
+    """
+    return [f"collector.total_frames={TABLE_BUDGETS[scenario]}"] if scenario in TABLE_BUDGETS else []
+
+
 def make_cell(method: str, scenario: str, seed: int, output_dir: str, overrides: list[str]) -> Cell | None:
     """The cell's command line, or None when its ``summary.json`` exists (done)."""
     run_dir = os.path.join(output_dir, f"{scenario}-{method}-s{seed}")
@@ -198,7 +215,7 @@ def make_cell(method: str, scenario: str, seed: int, output_dir: str, overrides:
         return None
     recipe = f"torchrl_csirl.scripts.{recipe_of(method, scenario)}"
     task = f"env.gym_id={scenario}" if is_gymnasium_id(scenario) else f"env.scenario={scenario}"
-    args = [task, f"seed={seed}", "logger.progress_bar=false", *overrides]
+    args = [task, f"seed={seed}", "logger.progress_bar=false", *budget_override(scenario), *overrides]
     if method not in CSIRL_METHODS:
         args.insert(0, f"method={method}")
     else:
@@ -251,7 +268,7 @@ def run_cell(config: dict[str, Any]) -> None:
     with open(log_path, "a") as log:
         log.write("$ " + " ".join(cell["command"]) + "\n")
         log.flush()
-        proc = subprocess.run(cell["command"], stdout=subprocess.PIPE, stderr=log, text=True, env=env, cwd=cell["cwd"])
+        proc = subprocess.run(cell["command"], check=False, stdout=subprocess.PIPE, stderr=log, text=True, env=env, cwd=cell["cwd"])
         log.write(proc.stdout)
     if proc.returncode != 0:
         with open(log_path) as f:
@@ -369,7 +386,8 @@ def table_rows(runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
     for (method, scenario), group in sorted(groups.items(), key=lambda kv: (rank.get(kv[0][0], 99), kv[0][0],
                                                                               column.get(kv[0][1], 99), kv[0][1])):
         row: dict[str, Any] = {"method": method, "scenario": scenario, "seeds": " ".join(
-            str(s) for s in sorted(int(r["seed"]) for r in group)), "runs": len(group)}
+            str(s) for s in sorted(int(r["seed"]) for r in group)), "runs": len(group),
+            "frames": " ".join(str(f) for f in sorted({int(r.get("frames") or 0) for r in group}))}
         for field in ("normalized_accomplish_rate", "accomplish_rate", "return", "success_rate", "crash_rate",
                       "total_wall_s", "updates_per_s"):
             values = [float(r[field]) for r in group if r.get(field) is not None]
@@ -398,6 +416,36 @@ def add_comparison_to_csirl(rows: list[dict[str, Any]], groups: dict[tuple[str, 
         row["vs_csirl_beyond_noise"] = None if test is None else test["beyond_noise"]
 
 
+def off_budget(row: dict[str, Any]) -> bool:
+    """Whether a table row's training runs ran another budget than its scene's :data:`TABLE_BUDGETS` entry
+    (beyond 1 %: a run ends on its last whole batch); reference rows (no training, 0 frames) never are.
+
+    Examples:
+        >>> off_budget({"scenario": "roundabout", "frames": "110000"}), off_budget({"scenario": "relocate", "frames": "60200"})
+        (True, False)
+        >>> off_budget({"scenario": "merge", "frames": "0"})
+        False
+    """
+    budget = TABLE_BUDGETS.get(row["scenario"])
+    frames = [int(f) for f in str(row.get("frames", "")).split() if int(f) > 0]
+    return budget is not None and any(abs(f - budget) > budget / 100 for f in frames)
+
+
+def budget_caption(scenarios: list[str]) -> str:
+    """The budget of ``scenarios``' columns (:data:`TABLE_BUDGETS`), for a table's caption.
+
+    Examples:
+        >>> budget_caption(["merge", "roundabout"])
+        'every row at 60 000 frames per run (benchmark.py TABLE_BUDGETS; a cell run at another budget says so)'
+    """
+    budgets = {s: f"{TABLE_BUDGETS[s]:,}".replace(",", " ") for s in scenarios if s in TABLE_BUDGETS}
+    if len(set(budgets.values())) == 1:
+        text = f"{next(iter(budgets.values()))} frames per run"
+    else:
+        text = ", ".join(f"{s} {b}" for s, b in budgets.items()) + " frames per run"
+    return f"every row at {text} (benchmark.py TABLE_BUDGETS; a cell run at another budget says so)"
+
+
 def _pm(mean: float | None, std: float | None, fmt: str = ".2f") -> str:
     return "n/a" if mean is None else f"{mean:{fmt}} ± {std:{fmt}}"
 
@@ -406,6 +454,8 @@ def _score(row: dict[str, Any] | None, paper: float | None, field: str = "normal
            fmt: str = ".2f") -> str:
     """``mean ± std (n=runs) [paper]`` of a table row's ``field`` (the expert-normalised accomplish rate)."""
     ours = "—" if row is None else f"{_pm(row[f'{field}_mean'], row[f'{field}_std'], fmt)} (n={row['runs']})"
+    if row is not None and off_budget(row):
+        ours += f" ({row['frames']} frames)"
     return ours + (f" [{paper:.2f}]" if paper is not None else "")
 
 
@@ -464,7 +514,8 @@ def driving_tables(rows: list[dict[str, Any]]) -> list[str]:
     scenarios, methods, cell = _columns(rows, SCENARIO_ORDER)
     if not scenarios:
         return []
-    lines = _method_table("Expert-normalised test accomplish rate, mean ± std over seeds (the paper's Table I in brackets).",
+    lines = _method_table("Expert-normalised test accomplish rate, mean ± std over seeds (the paper's Table I in brackets), "
+                          f"{budget_caption(scenarios)}.",
                           methods, scenarios, lambda m, s: _score(cell.get((m, s)), PAPER_TABLE.get(m, {}).get(s)))
     lines += [""] + _method_table(
         "Success rate / crash rate of the test episodes, mean over seeds (an accomplish rate earned by "
@@ -489,7 +540,8 @@ def robotics_tables(rows: list[dict[str, Any]]) -> list[str]:
         return []
     lines = _method_table(
         "Test return on the robotics tasks, mean ± std over seeds (the paper's metric there; its Figure 7 gives "
-        f"curves for {', '.join(PAPER_ROBOTICS_METHODS)}, no numbers: on Relocate only CSIRL's return is positive).",
+        f"curves for {', '.join(PAPER_ROBOTICS_METHODS)}, no numbers: on Relocate only CSIRL's return is positive), "
+        f"{budget_caption(scenarios)}.",
         methods, scenarios, lambda m, s: _score(cell.get((m, s)), None, "return", _return_format(cell.get((m, s)))))
     lines += [""] + _method_table(
         "Success rate (AntMaze: goal reached; Relocate: ball at the target) / progress (the accomplish rate's "

@@ -75,7 +75,8 @@ def main(argv: list[str] | None = None, *, schema: type = CSIRLHighwayConfig, do
         return {}
     start = time.perf_counter()
     summary = train_and_finish(build_run(argv), finish_run)
-    summary["total_wall_s"] = round(time.perf_counter() - start, 1)  # with start-up, final eval and plots
+    # with start-up, final evaluation and plots, and a resumed run's earlier processes (up to their checkpoint)
+    summary["total_wall_s"] = round(time.perf_counter() - start + summary.get("earlier_wall_s", 0.0), 1)
     print(
         f"{summary['scenario']}: accomplish rate {summary['accomplish_rate']:.3f} "
         f"(success {summary['success_rate']:.2f}) after {summary['frames']} frames / {summary['updates']} updates; "

@@ -55,7 +55,8 @@ def main(argv: list[str] | None = None, *, schema: type = ImitationHighwayConfig
     else:
         run = open_configured_run(cfg, lambda cfg: cfg.method, make_trainer)
         summary = train_and_finish(run, summarize)
-    summary["total_wall_s"] = round(time.perf_counter() - start, 1)
+    # a resumed run's earlier processes count too (up to their checkpoint)
+    summary["total_wall_s"] = round(time.perf_counter() - start + summary.get("earlier_wall_s", 0.0), 1)
     print(f"{summary['scenario']} / {summary['method']}: accomplish rate {summary['accomplish_rate']:.3f} "
           f"(success {summary['success_rate']:.2f}) after {summary['frames']} frames / {summary['updates']} updates",
           file=sys.stderr)

@@ -141,7 +141,7 @@ def main(argv: list[str] | None = None) -> dict[str, object]:
     start = time.perf_counter()
     run = open_run(argv, lambda cfg: "sac", make_trainer, load_config, load_run_config)
     summary = train_and_finish(run, finish)
-    summary["total_wall_s"] = round(time.perf_counter() - start, 1)
+    summary["total_wall_s"] = round(time.perf_counter() - start + summary.get("earlier_wall_s", 0.0), 1)
     maze = summary.get("antmaze_success_rate")
     print(f"ant-goal: 4-goal chain success {summary['hop_success_rate']:.2f}"
           + (f", AntMaze with waypoints {maze:.2f}" if maze is not None else "")

@@ -10,7 +10,11 @@ import torch
 
 from torchrl_csirl.trainers.trainer import CSIRLTrainer
 
-__all__ = ["CheckpointHook", "load_checkpoint"]
+__all__ = ["CheckpointError", "CheckpointHook", "load_checkpoint", "read_checkpoint_state"]
+
+
+class CheckpointError(RuntimeError):
+    """A checkpoint that cannot be read (truncated or corrupted file): one line naming it."""
 
 
 class CheckpointHook:
@@ -60,18 +64,51 @@ class CheckpointHook:
             self.save(trainer)
 
 
-def load_checkpoint(trainer: CSIRLTrainer, path: str | os.PathLike, online_buffer: Any = None) -> None:
-    """Restores a :class:`CheckpointHook` checkpoint into a trainer built like the saved one.
+def _unreadable(what: str, path: str, err: BaseException) -> CheckpointError:
+    """The one-line error of an unreadable checkpoint part, naming the previous checkpoint if one is kept
+    (``last.old`` beside it survives only a run killed while swapping a new checkpoint in)."""
+    reason = (str(err).strip().splitlines() or [type(err).__name__])[0]
+    previous = os.path.join(os.path.dirname(os.path.normpath(path)), "last.old")
+    kept = (f"the previous checkpoint is kept at {previous} (resume with checkpoint.resume={previous})"
+            if os.path.isfile(os.path.join(previous, "state.pt")) else "no previous checkpoint is kept")
+    return CheckpointError(f"{what} cannot be read ({type(err).__name__}: {reason}); the file is truncated or "
+                           f"corrupted; {kept}.")
+
+
+def read_checkpoint_state(path: str | os.PathLike) -> dict[str, Any]:
+    """The trainer state of the checkpoint directory ``path`` (its ``state.pt``), on the CPU.
 
     Raises:
         FileNotFoundError: when ``path`` holds no ``state.pt``.
+        CheckpointError: when ``state.pt`` cannot be read, naming it (and the previous checkpoint, if kept).
     """
     path = os.fspath(path)
     state_file = os.path.join(path, "state.pt")
     if not os.path.isfile(state_file):
         raise FileNotFoundError(f"No checkpoint at {path!r} (expected {state_file}).")
+    try:
+        state = torch.load(state_file, weights_only=False, map_location="cpu")
+        if not isinstance(state, dict) or "counters" not in state:
+            raise ValueError("not a trainer state (no counters)")
+    except Exception as err:  # noqa: BLE001 - torch.load / unpickling raise many kinds; re-raised as one line
+        raise _unreadable(f"checkpoint {state_file}", path, err) from None
+    return state
+
+
+def load_checkpoint(trainer: CSIRLTrainer, path: str | os.PathLike, online_buffer: Any = None) -> None:
+    """Restores a :class:`CheckpointHook` checkpoint into a trainer built like the saved one.
+
+    Raises:
+        FileNotFoundError: when ``path`` holds no ``state.pt``.
+        CheckpointError: when the state or the online buffer cannot be read, naming the file.
+    """
+    path = os.fspath(path)
+    state = read_checkpoint_state(path)
     buffer_dir = os.path.join(path, "online_buffer")
     if online_buffer is not None and os.path.isdir(buffer_dir):
-        online_buffer.loads(buffer_dir)
+        try:
+            online_buffer.loads(buffer_dir)
+        except Exception as err:  # noqa: BLE001 - re-raised as one line naming the directory
+            raise _unreadable(f"checkpoint buffer {buffer_dir}", path, err) from None
     # saved tensors come back on the CPU; load_state_dict copies them to the modules' devices
-    trainer.load_state_dict(torch.load(state_file, weights_only=False, map_location="cpu"))
+    trainer.load_state_dict(state)

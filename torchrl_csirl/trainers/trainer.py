@@ -156,6 +156,10 @@ class CSIRLTrainer:
         self.last_losses: dict[str, float] = {}
         self.postfix: dict[str, Any] = {}
         self._wall = 0.0
+        # wall seconds of the processes before this one (checkpointed as ``elapsed_s``), and when this
+        # one's part began: the trainer's construction, close to the process start (recipes build it first)
+        self.elapsed_before = 0.0
+        self._created = time.perf_counter()
         self._time_collect = 0.0
         self._time_update = 0.0
         self._throughput_base = (0, 0)  # (frames, updates) not covered by the two times above
@@ -204,6 +208,7 @@ class CSIRLTrainer:
             "updates_in_round": self.updates_in_round,
             "update_credit": self._update_credit,
             "wall_s": self.wall_time,
+            "elapsed_s": self.elapsed_time,
             "collect_s": self._time_collect,
             "update_s": self._time_update,
             "untimed_frames": self._throughput_base[0],
@@ -228,6 +233,8 @@ class CSIRLTrainer:
         self.updates_in_round = int(counters["updates_in_round"])
         self._update_credit = float(counters["update_credit"])
         self._wall = float(counters["wall_s"])
+        # an older checkpoint kept no process time: its training loop's seconds are the best lower bound
+        self.elapsed_before = float(counters.get("elapsed_s", counters["wall_s"]))
         self._restore_timing(counters)
         missing = set(self._stateful) - set(state["states"])
         if missing:
@@ -251,6 +258,13 @@ class CSIRLTrainer:
     def wall_time(self) -> float:
         """Seconds spent in :meth:`train` (summed over resumed runs)."""
         return self._wall + (time.perf_counter() - self._t0 if getattr(self, "_t0", None) else 0.0)
+
+    @property
+    def elapsed_time(self) -> float:
+        """Wall seconds of the whole run so far: the earlier processes' (up to their last checkpoint) and
+        this one's since the trainer was built; unlike :attr:`wall_time`, start-up, evaluations outside
+        :meth:`train` and checkpointing count too."""
+        return self.elapsed_before + time.perf_counter() - self._created
 
     # ------------------------------------------------------------------ loop
     def _batches(self) -> Iterator[TensorDictBase]:

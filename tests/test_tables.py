@@ -1,0 +1,157 @@
+"""The results tables of docs/benchmark.md and README.md against their records in docs/runs.
+
+Every cell is recomputed with the benchmark's own report code (``torchrl_csirl.scripts.benchmark``:
+``read_runs``, ``table_rows``, Welch's t of ``torchrl_csirl.launch.summaries``) and compared at the precision the page prints, so a
+figure cannot drift from the records it quotes.
+"""
+from __future__ import annotations
+
+import os
+import re
+
+import pytest
+
+from torchrl_csirl.scripts import benchmark
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+#: the record groups of the benchmark page's tables (its report commands)
+DRIVING_GROUPS = ("reference", "bc", "sac", "sqil", "gail", "dac", "iqlearn", "valuedice", "csirl-b", "csirl")
+LEARNERS_NOT_BASELINES = ("expert", "random", "csirl", "csirl-b")
+NUMBER = re.compile(r"[−-]?\d[\d ]*(?:\.\d+)?")
+
+
+def numbers(text: str) -> list[tuple[float, float]]:
+    """``(value, half a unit of its last printed digit)`` of every number in a table cell ("3 640", "−0.2")."""
+    out = []
+    for match in NUMBER.finditer(text.replace("**", "")):
+        token = match.group().strip().replace(" ", "").replace("−", "-")
+        decimals = len(token.partition(".")[2])
+        out.append((float(token), 0.5 * 10.0**-decimals + 1e-9))
+    return out
+
+
+def agrees(shown: tuple[float, float], value: float | None) -> bool:
+    return value is not None and abs(shown[0] - value) <= shown[1]
+
+
+def markdown_table(path: str, header: str, occurrence: int = 0) -> dict[str, dict[str, str]]:
+    """``row label -> column -> cell`` of the ``occurrence``-th table in ``path`` whose header line starts with ``header``;
+    a row's label is its first cell's first word without emphasis (``**csirl** (default preset)`` -> csirl)."""
+    with open(os.path.join(ROOT, path)) as f:
+        lines = f.read().splitlines()
+    start = [i for i, line in enumerate(lines) if line.startswith(header)][occurrence]
+    columns = [c.strip() for c in lines[start].strip("|").split("|")]
+    rows = {}
+    for line in lines[start + 2:]:
+        if not line.startswith("|"):
+            break
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        rows[cells[0].replace("**", "").split()[0]] = dict(zip(columns[1:], cells[1:]))
+    assert rows, f"{path}: no rows under {header!r}"
+    return rows
+
+
+@pytest.fixture(scope="module")
+def driving() -> dict[tuple[str, str], dict]:
+    runs = benchmark.read_runs([os.path.join(ROOT, "docs", "runs", g) for g in DRIVING_GROUPS])
+    return {(r["method"], r["scenario"]): r for r in benchmark.table_rows(runs)}
+
+
+@pytest.fixture(scope="module")
+def robotics() -> dict[tuple[str, str], dict]:
+    runs = benchmark.read_runs([os.path.join(ROOT, "docs", "runs", "robotics")])
+    return {(r["method"], r["scenario"]): r for r in benchmark.table_rows(runs)}
+
+
+def test_table_one_is_its_records_at_one_budget_per_scene(driving):
+    table = markdown_table("docs/benchmark.md", "| method | highway-fast |")
+    assert set(table) == set(benchmark.METHOD_ORDER)
+    for method, columns in table.items():
+        for scenario, cell in columns.items():
+            row = driving[(method, scenario)]
+            assert not benchmark.off_budget(row), (method, scenario, row["frames"])
+            ours, _, paper = cell.partition("[")
+            shown = numbers(ours)
+            expected = [row["normalized_accomplish_rate_mean"], row["normalized_accomplish_rate_std"]]
+            assert len(shown) in (1, 2) and all(agrees(s, e) for s, e in zip(shown, expected)), (method, scenario, cell)
+            assert len(shown) == 2 or row["runs"] == 1 or row["normalized_accomplish_rate_std"] < 0.005, cell
+            if paper:
+                assert agrees(numbers(paper)[0], benchmark.PAPER_TABLE[method][scenario]), (method, scenario, cell)
+    # bold: the best learner of each column
+    for scenario in benchmark.SCENARIO_ORDER:
+        learners = [m for m in table if m not in benchmark.REFERENCE_METHODS]
+        best = max(learners, key=lambda m: driving[(m, scenario)]["normalized_accomplish_rate_mean"])
+        bold = [m for m in learners if table[m][scenario].startswith("**")]
+        assert bold == [best], (scenario, bold, best)
+
+
+def test_outcome_and_difference_tables_are_their_records(driving):
+    outcomes = markdown_table("docs/benchmark.md", "| method | highway-fast |", occurrence=1)
+    assert set(outcomes) == set(benchmark.METHOD_ORDER) - {"random"}
+    for method, columns in outcomes.items():
+        for scenario, cell in columns.items():
+            row = driving[(method, scenario)]
+            success, crash = numbers(cell)
+            assert agrees(success, row["success_rate_mean"]) and agrees(crash, row["crash_rate_mean"]), (method, cell)
+    differences = markdown_table("docs/benchmark.md", "| − csirl |")
+    for method, columns in differences.items():
+        for scenario, cell in columns.items():
+            row = driving[(method, scenario)]
+            difference, t = numbers(cell)
+            assert agrees(difference, row["vs_csirl"]) and agrees(t, row["vs_csirl_t"]), (method, scenario, cell)
+            assert cell.startswith("**") == row["vs_csirl_beyond_noise"], (method, scenario, cell)
+
+
+def test_robotics_table_is_its_records(robotics):
+    table = markdown_table("docs/benchmark.md", "| method | AntMaze return")
+    for method, columns in table.items():
+        for column, cell in columns.items():
+            scenario = "antmaze-umaze" if column.startswith("AntMaze") else "relocate"
+            row = robotics[(method, scenario)]
+            if "return" in column:
+                shown, expected = numbers(cell), [row["return_mean"], row["return_std"]]
+            else:
+                shown, expected = numbers(cell), [row["success_rate_mean"], row["accomplish_rate_mean"]]
+            assert all(agrees(s, e) for s, e in zip(shown, expected)), (method, column, cell)
+
+
+def test_readme_results_follow_table_one(driving, robotics):
+    table = markdown_table("README.md", "| task |")
+    for scenario in benchmark.SCENARIO_ORDER:
+        cells = table[scenario]
+        csirl = driving[("csirl", scenario)]
+        mean, std = numbers(cells["CSIRL, ours"])
+        assert agrees(mean, csirl["normalized_accomplish_rate_mean"]) and agrees(std, csirl["normalized_accomplish_rate_std"])
+        assert agrees(numbers(cells["CSIRL, paper"])[0], benchmark.PAPER_TABLE["csirl"][scenario])
+        baselines = [m for m in benchmark.METHOD_ORDER if m not in LEARNERS_NOT_BASELINES]
+        best = max(baselines, key=lambda m: driving[(m, scenario)]["normalized_accomplish_rate_mean"])
+        named = cells["best baseline, ours"].split()[0].lower()
+        assert named == best, (scenario, named, best)
+        mean, std = numbers(cells["best baseline, ours"])
+        row = driving[(best, scenario)]
+        assert agrees(mean, row["normalized_accomplish_rate_mean"]) and agrees(std, row["normalized_accomplish_rate_std"])
+    # the robotics rows: success rates (AntMaze's return is its success), CSIRL, CSIRL with cloning, BC
+    for label, scenario in (("AntMaze", "antmaze-umaze"), ("Adroit", "relocate")):
+        cells = table[label]
+        csirl, cloned = numbers(cells["CSIRL, ours"])[0], numbers(cells["CSIRL, ours"])[1:]
+        assert agrees(csirl, robotics[("csirl", scenario)]["success_rate_mean"])
+        row = robotics[("csirl-bc", scenario)]
+        assert all(agrees(s, e) for s, e in zip(cloned, [row["success_rate_mean"], row["success_rate_std"]]))
+        assert cells["best baseline, ours"].startswith("BC")
+        row = robotics[("bc", scenario)]
+        shown = numbers(cells["best baseline, ours"])
+        assert all(agrees(s, e) for s, e in zip(shown, [row["success_rate_mean"], row["success_rate_std"]]))
+
+
+def test_the_sweep_runs_every_cell_at_its_scenes_budget(tmp_path):
+    todo, _ = benchmark.plan_cells(["csirl", "sac"], ["roundabout", "relocate"], [0], str(tmp_path), [])
+    for cell in todo:
+        assert f"collector.total_frames={benchmark.TABLE_BUDGETS[cell.scenario]}" in cell.command, cell.name
+    # a user's budget goes after it, so it wins; the report then marks the row as off budget
+    (cell,), _ = benchmark.plan_cells(["csirl"], ["roundabout"], [0], str(tmp_path), ["collector.total_frames=110000"])
+    assert cell.command.index("collector.total_frames=110000") > cell.command.index("collector.total_frames=60000")
+    runs = benchmark.read_runs([os.path.join(ROOT, "docs", "runs", "budget")])
+    rows = benchmark.table_rows([r for r in runs if r["scenario"] == "roundabout"])
+    assert rows and all(benchmark.off_budget(r) == (r["frames"] == "110000") for r in rows)
+    assert "(110000 frames)" in benchmark.markdown_table(rows)
