@@ -116,3 +116,58 @@ def test_prepare_task_keeps_the_saved_task_on_resume(tmp_path):
     (tmp_path / "config.yaml").write_text(f"env:\n  gym_id: {MOUNTAIN_CAR}\n  features: '0'\n  success: termination\n")
     assert prepare_task(["collector.total_frames=10"], str(tmp_path)) == ["collector.total_frames=10"]
     assert resolve_scenario(MOUNTAIN_CAR).position_feature_indices == (0,)
+
+
+def test_the_own_task_page_runs_as_written(tmp_path, monkeypatch):
+    """docs/own-task.md's Python blocks, in order, on a tiny budget (its ``budget`` line replaced)."""
+    from markdown_examples import python_blocks
+
+    from torchrl_csirl.envs import TASKS
+    from torchrl_csirl.envs import registry as task_registry
+
+    blocks = python_blocks("docs/own-task.md")
+    assert len(blocks) == 2 and 'budget = ["collector.total_frames=25000"' in blocks[1]
+    tiny = [t for t in TINY if not t.startswith("expert.")] + [f"logger.output_dir={tmp_path / 'runs'}"]
+    blocks[1] = "\n".join(f"budget = {tiny!r}" if line.startswith("budget = ") else line
+                          for line in blocks[1].splitlines())
+    monkeypatch.chdir(tmp_path)
+    namespace: dict = {}
+    try:
+        for block in blocks:
+            exec(compile(block, "docs/own-task.md", "exec"), namespace)  # noqa: S102 - our own docs
+    finally:
+        TASKS.pop("my-car", None)
+        task_registry._FACTORIES.pop("my-car", None)
+    assert namespace["demos"].num_trajectories == 20 and os.path.isfile(tmp_path / "mountain_car_20.npz")
+    assert namespace["summary"]["scenario"] == "my-car" and namespace["summary"]["frames"] == 400
+
+
+def test_the_benchmark_sweeps_a_gymnasium_id_with_the_non_driving_scripts(tmp_path):
+    from torchrl_csirl.scripts import benchmark
+
+    todo, _ = benchmark.plan_cells(["csirl", "sac"], [MOUNTAIN_CAR], [0, 1], str(tmp_path),
+                                   ["env.features=0", "csirl_robotics:csirl.matching_target=path"])
+    commands = {c.name: c.command[2:] for c in todo}
+    assert set(commands) == {f"{MOUNTAIN_CAR}-{m}-s{s}" for m in ("csirl", "sac") for s in (0, 1)}
+    csirl = commands[f"{MOUNTAIN_CAR}-csirl-s0"]
+    assert csirl[0] == "torchrl_csirl.scripts.csirl_robotics" and f"env.gym_id={MOUNTAIN_CAR}" in csirl
+    assert "csirl.matching_target=path" in csirl
+    sac = commands[f"{MOUNTAIN_CAR}-sac-s1"]
+    assert sac[0] == "torchrl_csirl.scripts.imitation_robotics" and "method=sac" in sac
+    assert not any(a.startswith("csirl.") for a in sac)
+
+
+def test_train_expert_trains_sac_on_a_gymnasium_id_and_writes_its_demonstrations(tmp_path):
+    from torchrl_csirl.data import ExpertDemonstrations
+    from torchrl_csirl.scripts import train_expert
+
+    summary = train_expert.main([
+        f"env.gym_id={MOUNTAIN_CAR}", "collector.total_frames=400", "collector.frames_per_batch=200",
+        "collector.cut_episodes=true", "collector.num_workers=1", "collector.init_random_frames=200",
+        "replay_buffer.warmup_frames=200", "optim.utd_ratio=0.1", "updates_per_round=10", "sac.batch_size=32",
+        "eval.episodes=1", "eval.final_episodes=1", "demos.episodes=2", "logger.backend=none",
+        "logger.progress_bar=false", "device=cpu", f"logger.output_dir={tmp_path}"])
+    assert summary["scenario"] == MOUNTAIN_CAR and summary["frames"] == 400 and summary["demos_episodes"] == 2
+    demos = ExpertDemonstrations.load(summary["demos_path"])
+    assert demos.num_trajectories == 2 and (demos.observation_dim, demos.action_dim) == (2, 1)
+    assert [e["seed"] for e in demos.metadata["episodes"]] == [20_000, 20_001]

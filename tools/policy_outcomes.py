@@ -26,8 +26,7 @@ import torch
 from policy_cli import format_cell, load_test_policy, mean_or_none, roll_test_episodes
 from torchrl.envs import EnvBase
 
-from torchrl_csirl._compat import gym_env_of
-from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, accomplish_rate_from_rollout, success_from_rollout
+from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, accomplish_rate_from_rollout, gym_env_of, success_from_rollout
 
 OUTCOMES = ("success", "crash", "offroad", "timeout")
 

@@ -28,8 +28,7 @@ from collections import Counter, defaultdict
 import numpy as np
 from policy_cli import format_cell, load_test_policy, mean_or_none, roll_test_episodes
 
-from torchrl_csirl._compat import gym_env_of
-from torchrl_csirl.envs import accomplish_rate_from_rollout
+from torchrl_csirl.envs import accomplish_rate_from_rollout, gym_env_of
 from torchrl_csirl.envs.robotics import ROBOTICS_TASKS
 
 OUTCOMES = {"antmaze-umaze": ("goal", "flipped", "short"), "relocate": ("at_target", "lost", "never")}

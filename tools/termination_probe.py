@@ -39,7 +39,6 @@ from torchrl_csirl.launch.builders import resume_run
 from torchrl_csirl.launch.config import ConfigError
 from torchrl_csirl.launch.imitation import load_run_config, make_trainer
 from torchrl_csirl.launch.run import run_script
-from torchrl_csirl.objectives._imitation import sample
 from torchrl_csirl.transforms import absorbing_self_loops
 
 PROBED_METHODS = ("sac", "sqil", "gail", "dac", "iqlearn", "valuedice")
@@ -101,7 +100,7 @@ def probe(run, samples: int) -> dict[str, object]:
             if len(buffer) == 0:
                 raise ConfigError(f"termination_probe: the run's {side} buffer is empty "
                                   f"(was it saved? checkpoint.save_buffer)")
-            transitions = sample(buffer, samples)
+            transitions = buffer.sample(samples)
             if method.name == "valuedice":
                 out[side] = valuedice_residuals(loss, transitions)
                 continue

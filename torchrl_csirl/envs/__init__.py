@@ -18,6 +18,7 @@ Importing this package registers the gymnasium ids ``csirl/highway-fast-v0``,
 """
 from __future__ import annotations
 
+from torchrl_csirl._compat import gym_env_of
 from torchrl_csirl.envs.gymnasium_task import make_gymnasium_env, make_gymnasium_task
 from torchrl_csirl.envs.metrics import (
     accomplish_rate,
@@ -55,6 +56,7 @@ __all__ = [
     "accomplish_rate_from_rollout",
     "area_under_curve",
     "episode_success",
+    "gym_env_of",
     "env_factory",
     "import_task_module",
     "info_spec",

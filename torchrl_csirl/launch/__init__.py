@@ -21,7 +21,8 @@ an installed wheel) are thin calls into this layer. Its modules:
 * :mod:`torchrl_csirl.launch.csirl` / :mod:`torchrl_csirl.launch.imitation`: CSIRL's and the
   baselines' schemas (driving and robotics) and builders.
 * :mod:`torchrl_csirl.launch.robotics`: the robotics tasks' schema sections and checks.
-* :mod:`torchrl_csirl.launch.ant_expert`: the schema of the AntMaze expert's training.
+* :mod:`torchrl_csirl.launch.ant_expert` / :mod:`torchrl_csirl.launch.expert_training`: the schemas of
+  the AntMaze expert's training and of an expert for any task (SAC, then its demonstrations).
 * :mod:`torchrl_csirl.launch.video`: the final evaluation's video.
 
 :data:`RECIPE_SCHEMAS` names each script's schema as ``module:class`` (the configuration
@@ -62,4 +63,5 @@ RECIPE_SCHEMAS = {
     "imitation_highway": "torchrl_csirl.launch.imitation:ImitationHighwayConfig",
     "imitation_robotics": "torchrl_csirl.launch.imitation:ImitationRoboticsConfig",
     "train_ant_expert": "torchrl_csirl.launch.ant_expert:AntExpertConfig",
+    "train_expert": "torchrl_csirl.launch.expert_training:ExpertTrainingConfig",
 }

@@ -6,7 +6,8 @@ Each is what ``recipes/<name>.py`` in a checkout runs (the recipes are thin call
 * ``imitation_highway`` / ``imitation_robotics``: one baseline (``method=<name>``);
 * ``benchmark``: the methods x tasks x seeds sweep on Ray, and its report (tables, t-tests, curves);
 * ``watch``: videos of a trained agent; ``generate_experts``: expert demonstrations;
-* ``train_ant_expert``: the AntMaze expert's goal-reaching ant.
+* ``train_ant_expert``: the AntMaze expert's goal-reaching ant; ``train_expert``: SAC on any task's
+  own reward, then demonstrations of it.
 
 Every training script takes ``key=value`` overrides of its typed schema (``--help`` lists them,
 docs/configuration.md is generated from them), writes a run directory and ends with a JSON line.

@@ -122,10 +122,13 @@ def return_task_order(scenarios: list[str]) -> tuple[str, ...]:
 
 
 def is_gymnasium_id(scenario: str) -> bool:
-    """A gymnasium id that is not one of our task names (its cells set ``env.gym_id``)."""
+    """A gymnasium id run as a task by configuration (its cells set ``env.gym_id``): not one of our task
+    names, or registered by ``make_gymnasium_task`` in this process."""
     import gymnasium as gym
 
-    return scenario not in TASKS and scenario in gym.registry
+    if scenario in TASKS:
+        return TASKS[scenario].family == "gymnasium"
+    return scenario in gym.registry
 
 
 def recipe_of(method: str, scenario: str = "merge") -> str:

@@ -27,26 +27,13 @@ from __future__ import annotations
 import sys
 import time
 
-import torch
-from omegaconf import DictConfig, OmegaConf
-from torchrl.objectives import SoftUpdate
+from omegaconf import DictConfig
 
-from torchrl_csirl.envs import resolve_scenario
 from torchrl_csirl.launch import config as config_lib
 from torchrl_csirl.launch.ant_expert import AntExpertConfig
-from torchrl_csirl.launch.builders import (
-    Run,
-    assemble_trainer,
-    check_collector,
-    final_summary,
-    make_online_buffer,
-    open_run,
-    train_and_finish,
-)
+from torchrl_csirl.launch.builders import Run, check_collector, final_summary, open_run, train_and_finish
+from torchrl_csirl.launch.expert_training import make_sac_trainer
 from torchrl_csirl.launch.run import resolve_device, run_script, write_summary
-from torchrl_csirl.modules import make_actor, make_qvalue
-from torchrl_csirl.objectives._imitation import SACHyperparameters, make_sac_learner
-from torchrl_csirl.trainers import SACUpdate
 
 __all__ = ["AntExpertConfig", "evaluate_waypoint_expert", "load_config", "main", "make_trainer"]
 
@@ -75,22 +62,8 @@ def load_run_config(run_dir: str, overrides: list[str] | None = None) -> DictCon
 
 
 # ---------------------------------------------------------------------------------------- assembly
-def make_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume_frames: int | None = None) -> Run:
-    """SAC on the environment's own reward, with the shared hooks (evaluation, checkpoints, logging)."""
-    torch.manual_seed(cfg.seed)
-    device = resolve_device(cfg.device)
-    spec = resolve_scenario(cfg.env.scenario)
-    hp = SACHyperparameters(**OmegaConf.to_container(cfg.sac))
-    actor = make_actor(spec.obs_dim, spec.action_dim)
-    loss = make_sac_learner(actor, make_qvalue(spec.obs_dim, spec.action_dim), hp).to(device)
-    optimizer = torch.optim.Adam([p for p in loss.parameters() if p.requires_grad], lr=hp.lr)
-    online = make_online_buffer(cfg.replay_buffer.size, hp.batch_size, [], device)
-    return assemble_trainer(
-        cfg, spec, run_dir, device=device, demos=None, policy=actor, online_buffer=online,
-        update_step=SACUpdate(loss, optimizer, SoftUpdate(loss, tau=hp.tau), hp.max_grad_norm),
-        total_frames=cfg.collector.total_frames, updates_per_round=cfg.updates_per_round,
-        states={"loss": loss, "optim_sac": optimizer}, frames_done=frames_done, resume_frames=resume_frames,
-    )
+#: SAC on the environment's own reward (the generic expert run, ``recipes/train_expert.py``)
+make_trainer = make_sac_trainer
 
 
 def evaluate_waypoint_expert(policy, episodes: int, seed: int) -> dict[str, float]:

@@ -1,0 +1,91 @@
+"""The schema and builder of ``recipes/train_expert.py``: SAC on a task's own reward, then demonstrations
+of the trained policy written to a file, for any non-driving task (a robotics task, ``ant-goal``, a
+task of your own, a gymnasium id). ``recipes/train_ant_expert.py`` is the same run on ``ant-goal`` with
+the AntMaze waypoint test at the end.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Optional
+
+import torch
+from omegaconf import DictConfig, OmegaConf
+from torchrl.objectives import SoftUpdate
+
+from torchrl_csirl.envs import resolve_scenario, task_names
+from torchrl_csirl.launch.ant_expert import (
+    TASK,
+    AntCheckpointConfig,
+    AntCollectorConfig,
+    AntEvalConfig,
+    AntReplayBufferConfig,
+)
+from torchrl_csirl.launch.builders import Run, assemble_trainer, make_online_buffer
+from torchrl_csirl.launch.config import DEVICES, LoggerConfig, UpdateRatioConfig, option
+from torchrl_csirl.launch.robotics import RoboticsEnvConfig
+from torchrl_csirl.launch.run import resolve_device
+from torchrl_csirl.modules import make_actor, make_qvalue
+from torchrl_csirl.objectives import SACHyperparameters, make_sac_learner
+from torchrl_csirl.trainers import SACUpdate
+
+__all__ = ["DemosConfig", "ExpertEnvConfig", "ExpertTrainingConfig", "make_sac_trainer"]
+
+
+def expert_task_choices() -> tuple[str, ...]:
+    """Every task but the driving scenes (which have their scripted drivers): ``ant-goal`` included."""
+    return task_names(driving=False)
+
+
+@dataclass
+class ExpertEnvConfig(RoboticsEnvConfig):
+    scenario: str = option(TASK, choices=expert_task_choices,
+                           help="the task: a robotics task, ant-goal, one of your own (env.module), or env.gym_id's")
+    task: Optional[str] = option(None, choices=expert_task_choices,
+                                 help="the same as env.scenario (set either; null: env.scenario decides)")
+
+
+@dataclass
+class DemosConfig:
+    episodes: int = option(25, minimum=0, help="demonstrations of the trained policy written at the end (0: none)")
+    seed: int = option(20_000, minimum=0, help="demonstration i is seeded with seed + i (apart from the test seeds)")
+    only_successful: bool = option(False, help="keep only episodes that succeed (up to 10 x episodes tries)")
+    path: Optional[str] = option(None, help="the .npz written (null: <run dir>/demos_<episodes>.npz)")
+    minari_id: Optional[str] = option(None, help="also write a local Minari dataset with this id (null: none)")
+
+
+@dataclass
+class ExpertTrainingConfig:
+    """``recipes/train_expert.py``: SAC on a task's own reward, then its demonstrations."""
+
+    preset: str = option("default", help="default (no other preset)")
+    seed: int = option(0, minimum=0, help="random seed")
+    device: str = option("auto", choices=DEVICES, help="the learner's device (auto: a GPU when there is one)")
+    updates_per_round: int = option(10_000, above=0, help="updates between two evaluations (a round)")
+    env: ExpertEnvConfig = field(default_factory=ExpertEnvConfig)
+    collector: AntCollectorConfig = field(default_factory=AntCollectorConfig)
+    replay_buffer: AntReplayBufferConfig = field(default_factory=AntReplayBufferConfig)
+    optim: UpdateRatioConfig = field(default_factory=UpdateRatioConfig)
+    sac: SACHyperparameters = field(default_factory=SACHyperparameters)
+    eval: AntEvalConfig = field(default_factory=AntEvalConfig)
+    demos: DemosConfig = field(default_factory=DemosConfig)
+    logger: LoggerConfig = field(default_factory=LoggerConfig)
+    checkpoint: AntCheckpointConfig = field(default_factory=AntCheckpointConfig)
+
+
+def make_sac_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume_frames: int | None = None) -> Run:
+    """SAC on the environment's own reward (``cfg.env.scenario``), with the shared hooks (evaluation,
+    checkpoints, logging): the run of ``train_expert.py`` and ``train_ant_expert.py``."""
+    torch.manual_seed(cfg.seed)
+    device = resolve_device(cfg.device)
+    spec = resolve_scenario(cfg.env.scenario)
+    hp = SACHyperparameters(**OmegaConf.to_container(cfg.sac))
+    actor = make_actor(spec.obs_dim, spec.action_dim)
+    loss = make_sac_learner(actor, make_qvalue(spec.obs_dim, spec.action_dim), hp).to(device)
+    optimizer = torch.optim.Adam([p for p in loss.parameters() if p.requires_grad], lr=hp.lr)
+    online = make_online_buffer(cfg.replay_buffer.size, hp.batch_size, [], device)
+    return assemble_trainer(
+        cfg, spec, run_dir, device=device, demos=None, policy=actor, online_buffer=online,
+        update_step=SACUpdate(loss, optimizer, SoftUpdate(loss, tau=hp.tau), hp.max_grad_norm),
+        total_frames=cfg.collector.total_frames, updates_per_round=cfg.updates_per_round,
+        states={"loss": loss, "optim_sac": optimizer}, frames_done=frames_done, resume_frames=resume_frames,
+    )
