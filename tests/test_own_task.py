@@ -171,3 +171,16 @@ def test_train_expert_trains_sac_on_a_gymnasium_id_and_writes_its_demonstrations
     demos = ExpertDemonstrations.load(summary["demos_path"])
     assert demos.num_trajectories == 2 and (demos.observation_dim, demos.action_dim) == (2, 1)
     assert [e["seed"] for e in demos.metadata["episodes"]] == [20_000, 20_001]
+
+
+@pytest.mark.parametrize("overrides, message", [
+    ([f"env.gym_id={MOUNTAIN_CAR}"], "env.gym_id=MountainCarContinuous-v0: the driving scripts take env.scenario only; "
+                                     "recipes/csirl_robotics.py runs any other task"),
+    (["env.scenario=relocate"], "env.scenario=relocate: not a driving scene; recipes/csirl_robotics.py runs it"),
+])
+def test_a_driving_script_names_the_script_for_another_task(overrides, message):
+    from torchrl_csirl.launch import csirl
+
+    with pytest.raises(ConfigError) as err:
+        csirl.load_config(overrides)
+    assert str(err.value) == message

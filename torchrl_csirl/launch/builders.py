@@ -13,6 +13,7 @@ import copy
 import os
 import shutil
 import sys
+import time
 import weakref
 from dataclasses import dataclass, field
 from functools import partial
@@ -600,6 +601,18 @@ def train_and_finish(run: Run, finish: Callable[[Run], dict[str, Any]]) -> dict[
     finally:
         run.logger.close()
         run.eval_env.close()
+
+
+def open_train_and_finish(argv: list[str], method: Callable[[DictConfig], str], make_trainer: Callable[..., Run],
+                          load: Callable[[list[str]], DictConfig], load_run: Callable[[str, list[str]], DictConfig],
+                          finish: Callable[[Run], dict[str, Any]]) -> dict[str, Any]:
+    """A whole run from a command line: :func:`open_run`, :func:`train_and_finish`, and the summary's
+    ``total_wall_s`` (this process's wall time with start-up, final evaluation and plots, plus the
+    earlier processes' of a resumed run)."""
+    start = time.perf_counter()
+    summary = train_and_finish(open_run(argv, method, make_trainer, load, load_run), finish)
+    summary["total_wall_s"] = round(time.perf_counter() - start + summary.get("earlier_wall_s", 0.0), 1)
+    return summary
 
 
 def evaluation_summary(cfg: DictConfig, spec: ScenarioSpec, method: str, final: dict[str, float],

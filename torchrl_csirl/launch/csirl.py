@@ -50,7 +50,7 @@ from torchrl_csirl.launch.config import (
     option,
 )
 from torchrl_csirl.launch.registry import register_recipe
-from torchrl_csirl.launch.robotics import RoboticsExpertConfig, RoboticsSections
+from torchrl_csirl.launch.robotics import RoboticsExpertConfig, RoboticsSections, check_driving_task
 from torchrl_csirl.launch.run import ExpertDataError, resolve_device
 from torchrl_csirl.modules import REWARD_ACTIVATIONS, expert_reference_states
 from torchrl_csirl.objectives import CSIRL_DEFAULTS, ActorBehaviourCloning, CSIRLLearner, make_csirl_learner
@@ -137,8 +137,9 @@ def load_config(overrides: list[str] | None = None) -> DictConfig:
     """The default configuration, the preset (``preset=paper``) and ``key=value`` overrides.
 
     Raises:
-        ConfigError: one line naming the bad key or value.
+        ConfigError: one line naming the bad key or value (a non-driving task: the script that runs it).
     """
+    check_driving_task(overrides, "recipes/csirl_robotics.py")
     cfg = config_lib.load_config(CSIRLHighwayConfig, overrides, CONFIG_DIR)
     check_collector(cfg.collector)
     resolve_device(cfg.device)

@@ -76,7 +76,7 @@ from torchrl_csirl.launch.config import (
     option,
 )
 from torchrl_csirl.launch.registry import register_recipe
-from torchrl_csirl.launch.robotics import RoboticsSections
+from torchrl_csirl.launch.robotics import RoboticsSections, check_driving_task
 from torchrl_csirl.launch.run import ExpertDataError, expert_accomplish_rate, resolve_device
 from torchrl_csirl.modules import make_actor, make_qvalue
 from torchrl_csirl.objectives._imitation import SACHyperparameters, make_sac_learner
@@ -209,6 +209,7 @@ def load_config(overrides: list[str] | None = None) -> DictConfig:
     Raises:
         ConfigError: one line naming the bad key or value.
     """
+    check_driving_task(overrides, "recipes/imitation_robotics.py")
     return load_baseline_config(ImitationHighwayConfig, overrides)
 
 

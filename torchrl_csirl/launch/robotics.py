@@ -20,7 +20,7 @@ from torchrl_csirl.launch import config as config_lib  # noqa: F401 - doctests
 from torchrl_csirl.launch.config import CollectorConfig, ConfigError, ExpertConfig, ModelConfig, option
 
 __all__ = ["RoboticsCollectorConfig", "RoboticsEnvConfig", "RoboticsExpertConfig", "RoboticsModelConfig",
-           "RoboticsSections", "check_robotics_config", "prepare_task", "resolve_task", "task_choices"]
+           "RoboticsSections", "check_driving_task", "check_robotics_config", "prepare_task", "resolve_task", "task_choices"]
 
 
 def task_choices() -> tuple[str, ...]:
@@ -114,6 +114,24 @@ def prepare_task(overrides: list[str] | None, run_dir: str | None = None) -> lis
     if run_dir is None and "env.scenario" not in named:
         overrides.append(f"env.scenario={gym_id}")
     return overrides
+
+
+def check_driving_task(overrides: list[str] | None, script: str) -> None:
+    """A driving script asked for another task: one line naming the script that runs it.
+
+    Examples:
+        >>> check_driving_task(["env.scenario=relocate"], "recipes/csirl_robotics.py")
+        Traceback (most recent call last):
+        ...
+        torchrl_csirl.launch.config.ConfigError: env.scenario=relocate: not a driving scene; recipes/csirl_robotics.py runs it
+    """
+    given = _given(overrides)
+    for key in ("env.gym_id", "env.module", "env.task"):
+        if given.get(key, "null") != "null":
+            raise ConfigError(f"{key}={given[key]}: the driving scripts take env.scenario only; {script} runs any other task")
+    scenario = given.get("env.scenario")
+    if scenario is not None and scenario in task_choices():
+        raise ConfigError(f"env.scenario={scenario}: not a driving scene; {script} runs it")
 
 
 def resolve_task(cfg: DictConfig, overrides: list[str] | None) -> None:

@@ -25,13 +25,12 @@ Examples::
 from __future__ import annotations
 
 import sys
-import time
 
 from omegaconf import DictConfig
 
 from torchrl_csirl.launch import config as config_lib
 from torchrl_csirl.launch.ant_expert import AntExpertConfig
-from torchrl_csirl.launch.builders import Run, check_collector, final_summary, open_run, train_and_finish
+from torchrl_csirl.launch.builders import Run, check_collector, final_summary, open_train_and_finish
 from torchrl_csirl.launch.expert_training import make_sac_trainer
 from torchrl_csirl.launch.run import resolve_device, run_script, write_summary
 
@@ -111,15 +110,12 @@ def main(argv: list[str] | None = None) -> dict[str, object]:
     argv = sys.argv[1:] if argv is None else list(argv)
     if config_lib.help_requested(argv, __doc__, AntExpertConfig):
         return {}
-    start = time.perf_counter()
-    run = open_run(argv, lambda cfg: "sac", make_trainer, load_config, load_run_config)
-    summary = train_and_finish(run, finish)
-    summary["total_wall_s"] = round(time.perf_counter() - start + summary.get("earlier_wall_s", 0.0), 1)
+    summary = open_train_and_finish(argv, lambda cfg: "sac", make_trainer, load_config, load_run_config, finish)
     maze = summary.get("antmaze_success_rate")
     print(f"ant-goal: 4-goal chain success {summary['hop_success_rate']:.2f}"
           + (f", AntMaze with waypoints {maze:.2f}" if maze is not None else "")
           + f" after {summary['frames']} frames / {summary['updates']} updates", file=sys.stderr)
-    return write_summary(summary, run.run_dir)
+    return write_summary(summary, summary["run_dir"])
 
 
 if __name__ == "__main__":

@@ -22,13 +22,12 @@ from __future__ import annotations
 
 import os
 import sys
-import time
 
 from omegaconf import DictConfig
 from torchrl.envs import ExplorationType, set_exploration_type
 
 from torchrl_csirl.launch import config as config_lib
-from torchrl_csirl.launch.builders import Run, check_collector, final_summary, open_run, train_and_finish
+from torchrl_csirl.launch.builders import Run, check_collector, final_summary, open_train_and_finish
 from torchrl_csirl.launch.expert_training import ExpertTrainingConfig, make_sac_trainer
 from torchrl_csirl.launch.robotics import prepare_task, resolve_task
 from torchrl_csirl.launch.run import resolve_device, run_script, write_summary
@@ -94,14 +93,11 @@ def main(argv: list[str] | None = None) -> dict[str, object]:
     argv = sys.argv[1:] if argv is None else list(argv)
     if config_lib.help_requested(argv, __doc__, ExpertTrainingConfig):
         return {}
-    start = time.perf_counter()
-    run = open_run(argv, lambda cfg: "sac", make_sac_trainer, load_config, load_run_config)
-    summary = train_and_finish(run, finish)
-    summary["total_wall_s"] = round(time.perf_counter() - start + summary.get("earlier_wall_s", 0.0), 1)
+    summary = open_train_and_finish(argv, lambda cfg: "sac", make_sac_trainer, load_config, load_run_config, finish)
     demos = f"; {summary['demos_episodes']} demonstrations in {summary['demos_path']}" if "demos_path" in summary else ""
     print(f"{summary['scenario']}: test return {summary['return']:.1f} (success {summary['success_rate']:.2f}) after "
           f"{summary['frames']} frames / {summary['updates']} updates{demos}", file=sys.stderr)
-    return write_summary(summary, run.run_dir)
+    return write_summary(summary, summary["run_dir"])
 
 
 if __name__ == "__main__":

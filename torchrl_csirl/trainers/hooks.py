@@ -61,7 +61,8 @@ class EvaluationHook:
 
     Args:
         evaluate: ``callable() -> dict`` of metrics (e.g. a partial of
-            :func:`~torchrl_csirl.trainers.evaluate_policy`), holding ``accomplish_rate``.
+            :func:`~torchrl_csirl.trainers.evaluate_policy`, which works on any task); the progress
+            line shows its ``accomplish_rate`` (or ``env_return``).
         every_rounds: evaluation cadence in rounds.
     """
 
@@ -77,7 +78,9 @@ class EvaluationHook:
         metrics = self.evaluate()
         self.history.append({"frames": trainer.frames, "updates": trainer.updates, **metrics})
         trainer.record(**{f"eval_{key}": value for key, value in metrics.items()})
-        trainer.postfix["eval"] = f"{metrics['accomplish_rate']:.2f}"
+        shown = metrics.get("accomplish_rate", metrics.get("env_return"))  # an evaluator of one's own may have neither
+        if isinstance(shown, (int, float)):
+            trainer.postfix["eval"] = f"{shown:.2f}"
         return metrics
 
     def __call__(self, trainer: CSIRLTrainer) -> None:
