@@ -108,6 +108,56 @@ class FusedCriticEnsemble:
                 h = self.activations[index](h)
         return h.reshape(h.shape[0], *batch_shape, h.shape[-1])
 
+    def jvp(
+        self, x: torch.Tensor, params: TensorDictBase, tangents: TensorDictBase
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Forward-mode derivative of :meth:`values` along a direction in parameter space.
+
+        Computes ``Q_k(x; phi_k)`` and ``J_phi Q_k(x; phi_k) . t_k`` for every critic ``k``
+        in one forward pass, the linear layers by hand (``dz = h dW^T + dh W^T + db``), the
+        activations' derivatives by their masks (ReLU) or :func:`torch.func.jvp`. No graph
+        is recorded for the tangent's dependence on ``tangents`` beyond what autograd
+        does with its inputs; call it under ``torch.no_grad()`` for values only.
+
+        Args:
+            x (Tensor): shared input ``[*B, D]``.
+            params (TensorDictBase): stacked parameters, batch ``[N]``.
+            tangents (TensorDictBase): the direction, with the entries of ``params``.
+
+        Returns:
+            the ``[N, *B, out]`` values and their ``[N, *B, out]`` directional derivatives.
+
+        Examples:
+            >>> import torch
+            >>> from tensordict import TensorDict
+            >>> from torchrl_csirl.modules import make_qvalue
+            >>> fused = fused_critic_ensemble(make_qvalue(4, 2, hidden=(8,)))
+            >>> params = TensorDict.from_module(make_qvalue(4, 2, hidden=(8,))).expand(3).clone()
+            >>> value, tangent = fused.jvp(torch.randn(5, 6), params, params.apply(torch.ones_like))
+            >>> value.shape, tangent.shape
+            (torch.Size([3, 5, 1]), torch.Size([3, 5, 1]))
+        """
+        batch_shape = x.shape[:-1]
+        x = x.reshape(-1, x.shape[-1])
+        h = dh = None
+        for index, (weight_key, bias_key) in enumerate(self.linear_keys):
+            weight, dweight = params.get(weight_key), tangents.get(weight_key)
+            if index == 0:
+                z, dz = _first_layer(x, weight), _first_layer(x, dweight)
+            else:
+                z = torch.bmm(h, weight.transpose(1, 2))
+                dz = torch.baddbmm(torch.bmm(h, dweight.transpose(1, 2)), dh, weight.transpose(1, 2))
+            if bias_key is not None:
+                z = z + params.get(bias_key).unsqueeze(1)
+                dz = dz + tangents.get(bias_key).unsqueeze(1)
+            if index < len(self.activations):
+                z, dz = _activation_jvp(self.activations[index], z, dz)
+            h, dh = z, dz
+        return (
+            h.reshape(h.shape[0], *batch_shape, h.shape[-1]),
+            dh.reshape(dh.shape[0], *batch_shape, dh.shape[-1]),
+        )
+
     def __call__(self, tensordict: TensorDictBase, params: TensorDictBase) -> TensorDictBase:
         if params.ndim != 1:
             raise ValueError(f"Expected critic parameters of batch size [N], got {params.batch_size}.")
@@ -122,6 +172,16 @@ def _first_layer(x: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:
     also do, but for small batches it sums in a different order (values would differ in the last bit).
     """
     return torch.matmul(x, weight.transpose(1, 2))
+
+
+def _activation_jvp(activation: nn.Module, z: torch.Tensor, dz: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """``activation(z)`` and its derivative along ``dz`` (element-wise activations)."""
+    if isinstance(activation, nn.Identity):
+        return z, dz
+    if isinstance(activation, (MaskedReLU, nn.ReLU)):
+        out = torch.relu(z)
+        return out, dz * (out > 0)  # the mask of ReLU's backward (``threshold_backward``)
+    return torch.func.jvp(activation, (z,), (dz,))
 
 
 def fused_critic_ensemble(qvalue_network: nn.Module) -> FusedCriticEnsemble | None:
