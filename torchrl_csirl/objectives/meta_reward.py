@@ -2,12 +2,12 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import torch
 from tensordict import TensorDict, TensorDictBase
 from tensordict.nn import TensorDictModule
 from tensordict.utils import NestedKey
-
 from torchrl.objectives.common import LossModule
 from torchrl.objectives.value import TD0Estimator
 
@@ -291,7 +291,7 @@ class MetaRewardLoss(LossModule):
 
     default_keys = _AcceptedKeys
     tensor_keys: _AcceptedKeys
-    out_keys = [
+    out_keys: ClassVar[list[str]] = [
         "loss_meta",
         "loss_imitation",
         "loss_reward_l1",
