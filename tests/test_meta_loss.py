@@ -1,5 +1,7 @@
 from __future__ import annotations
 
+import copy
+
 import pytest
 import torch
 from devices import DEVICES
@@ -453,3 +455,37 @@ def test_jvp_meta_gradient_matches_finite_differences(device):
     numeric = torch.cat([g.flatten() for g in _finite_difference(meta, reward, online, expert, regularizer)])
     assert analytic.abs().max() > 1e-6
     torch.testing.assert_close(analytic, numeric, rtol=1e-4, atol=1e-4 * analytic.abs().max().item())
+
+
+@pytest.mark.parametrize("activation", [None, nn.Tanh(), nn.ELU()])
+def test_fused_critic_jvp_matches_central_differences(activation):
+    """FusedCriticEnsemble.jvp along a parameter direction, with and without the recorded activations."""
+    from torchrl_csirl.modules.ensemble import fused_critic_ensemble
+
+    torch.manual_seed(0)
+    critic = make_qvalue(OBS, ACT, hidden=(6, 5)).to(torch.float64)
+    if activation is not None:
+        critic.module.mlp[1] = activation
+        critic.module.mlp[3] = copy.deepcopy(activation)
+    fused = fused_critic_ensemble(critic)
+    params = TensorDict.from_module(critic).expand(3).clone().apply(lambda p: p + 0.1 * torch.randn_like(p))
+    tangents = params.apply(torch.randn_like)
+    x = torch.randn(7, OBS + ACT, dtype=torch.float64)
+    eps = 1e-6
+    numeric = (fused.values(x, params + eps * tangents) - fused.values(x, params - eps * tangents)) / (2 * eps)
+    cache = []
+    fused.values(x, params, cache)
+    for recorded in (None, cache):
+        torch.testing.assert_close(fused.jvp(x, params, tangents, recorded), numeric, rtol=1e-6, atol=1e-8)
+
+
+def test_jvp_meta_gradient_on_sacloss_own_path():
+    """fused=False (SACLoss's losses, fused critics): the forward-mode pass runs the critics again."""
+    torch.manual_seed(0)
+    sac = EnsembleSACLoss(make_actor(OBS, ACT, hidden=(6,)).to(torch.float64),
+                          make_qvalue(OBS, ACT, hidden=(6,)).to(torch.float64), num_qvalue_nets=3,
+                          fused=False).to(torch.float64)
+    _, reward, _, online, expert, regularizer = _setup()
+    _, ref = _meta_gradient(MetaRewardLoss(sac, reward), reward, online, expert, regularizer, seed=2)
+    _, new = _meta_gradient(MetaRewardLoss(sac, reward, meta_gradient="jvp"), reward, online, expert, regularizer, seed=2)
+    torch.testing.assert_close(new, ref, rtol=1e-6, atol=1e-6 * ref.abs().max().item())

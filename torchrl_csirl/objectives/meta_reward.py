@@ -515,8 +515,9 @@ class MetaRewardLoss(LossModule):
         keys = list(phi.keys(True, True))
         phi_list = [phi.get(k) for k in keys]
         # Eq. 12 without a graph: phi' are fresh leaves, reached by the outer gradient only
+        activations = []  # the critics' hidden activations on the batch, for the forward-mode pass
         with sac.using_params(theta, phi):
-            loss_q, _ = sac.qvalue_v2_loss(td)
+            loss_q, _ = sac.qvalue_v2_loss(td, activations=activations)
         grads_phi = _grads_or_zeros(loss_q, phi_list)
         phi_new = phi.empty()
         for key, tensor, grad in zip(keys, phi_list, grads_phi):
@@ -530,7 +531,7 @@ class MetaRewardLoss(LossModule):
             tangents = phi.empty()
             for key, tangent in zip(keys, g):
                 tangents.set(key, tangent)
-            _, dq = fused.jvp(fused.critic_input(td), phi.detach(), tangents)  # [N, B, 1]
+            dq = fused.jvp(fused.critic_input(td), phi, tangents, activations or None)  # [N, B, 1]
             per_sample = dq.squeeze(-1).sum(0)  # sum_k grad_phi_k Q_k(s_i, a_i) . g_k
             rho = _reduction_weights(sac, per_sample, td)
             cotangent = (2 * self.lr_inner * self.scale) * rho * per_sample
