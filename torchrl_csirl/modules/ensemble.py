@@ -198,7 +198,7 @@ def _activation_jvp(activation: nn.Module, z: torch.Tensor, h: torch.Tensor, dz:
     if isinstance(activation, nn.Identity):
         return dz
     if isinstance(activation, (MaskedReLU, nn.ReLU)):
-        return dz * (h > 0)  # the mask of ReLU's backward (``threshold_backward`` of the output)
+        return torch.ops.aten.threshold_backward(dz, h, 0)  # ``dz`` where ``h > 0``: ReLU's own mask
     return torch.func.jvp(activation, (z,), (dz,))[1]
 
 
