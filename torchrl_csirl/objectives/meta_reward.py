@@ -201,9 +201,9 @@ class MetaRewardLoss(LossModule):
     closed form of the inner critic step: with ``L_Q = reduce_i sum_k (Q_k(s_i, a_i) - y_i)^2``
     and ``y_i`` linear in ``r_w(s_i)`` (``dy_i / dr_i = 1`` for TD(0)),
 
-    ``dL/dw = 2 lr_in sum_i rho_i (sum_k grad_phi_k Q_k(s_i, a_i) . g_k) dr_w(s_i)/dw``
-    with ``g = dL/dphi'`` (``rho_i`` the weight of sample ``i`` in the reduction, ``1 / B`` for a mean): the critic
-    step is taken without a graph, ``g`` comes from a backward through the inner actor step
+    ``dL/dw = 2 lr_in sum_i rho_i (sum_k grad_phi_k Q_k(s_i, a_i) . g_k) dr_w(s_i)/dw`` with
+    ``g = dL/dphi'`` (``rho_i`` the weight of sample ``i`` in the reduction, ``1 / B`` for a
+    mean): the critic step is taken without a graph, ``g`` comes from a backward through the inner actor step
     alone (still a double backward: the actor step's gradient depends on ``phi'``), the
     bracket is one forward-mode pass of the critic ensemble along ``g``
     (:meth:`~torchrl_csirl.modules.FusedCriticEnsemble.jvp`) and the last factor a backward
@@ -467,7 +467,9 @@ class MetaRewardLoss(LossModule):
         grads_l1 = None
         if jvp:  # the imitation part: a backward through r_w alone; then the regulariser's
             retain = self.reward_l1_coef > 0 and regularizer is None
-            grads_imitation = _grads_or_zeros(r_w, w_params, grad_outputs=cotangent.reshape(r_w.shape), retain_graph=retain)
+            grads_imitation = _grads_or_zeros(
+                r_w, w_params, grad_outputs=cotangent.reshape(r_w.shape), retain_graph=retain
+            )
             grads = grads_imitation
             if self.reward_l1_coef > 0:
                 grads_l1 = _grads_or_zeros(self.scale * self.reward_l1_coef * loss_l1, w_params)
