@@ -1,6 +1,7 @@
 from __future__ import annotations
 
 import copy
+import itertools
 
 import pytest
 import torch
@@ -351,8 +352,8 @@ def test_expert_centred_reward_has_no_constant_shift_direction():
     torch.testing.assert_close(centred(expert.select("observation").clone())["intrinsic_reward"].mean(),
                                torch.zeros((), dtype=torch.float64), atol=1e-12, rtol=0)
 
-    for l1 in (0.0, 1.0):
-        meta = MetaRewardLoss(sac, centred, reward_l1_coef=l1)
+    for l1, meta_gradient in itertools.product((0.0, 1.0), ("double_backward", "jvp")):
+        meta = MetaRewardLoss(sac, centred, reward_l1_coef=l1, meta_gradient=meta_gradient)
         centred.zero_grad()
         meta(online, expert, regularizer)["loss_meta"].backward()
         assert abs(shifted.module.offset.grad.item()) < 1e-10
