@@ -15,8 +15,9 @@ evaluated by SACLoss's ``torch.vmap`` and the losses on SACLoss's own path (``re
 and the ``*_speedup`` ratios). ``--stock-losses`` times the SACLoss path of the losses
 (``EnsembleSACLoss(fused=False)``) with the fused critics. ``--meta-gradient jvp`` computes the
 meta-gradient with ``MetaRewardLoss(meta_gradient="jvp")`` and also times, interleaved, the
-CSIRL iteration of the same learner on the double backward (``double_backward_*`` keys and
-``jvp_over_double_backward``, the median of the per-round ratios).
+CSIRL iteration of the same learner on the double backward (``against_*`` keys and
+``jvp_over_double_backward``, the median of the per-round ratios); ``--against M`` sets the
+compared path (``--meta-gradient double_backward --against double_backward``: the noise).
 
 Usage::
 
@@ -180,6 +181,11 @@ def main() -> None:
         "--meta-gradient", default="double_backward", choices=("double_backward", "jvp"),
         help="MetaRewardLoss(meta_gradient=...); jvp also times the double backward's CSIRL iteration, interleaved",
     )
+    parser.add_argument(
+        "--against", default=None, choices=("double_backward", "jvp"),
+        help="time the CSIRL iteration of this meta-gradient path too, interleaved (default: double_backward "
+             "when --meta-gradient is jvp)",
+    )
     parser.add_argument("--device", default="cpu", help="where the learner runs (cpu, cuda, cuda:1...)")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
@@ -190,9 +196,10 @@ def main() -> None:
     if args.reference:
         learners["reference_"] = _Learner(False, args.fused_adam, args.batch, device, meta_gradient=args.meta_gradient)
         steps["reference_"] = steps[""]
-    if args.meta_gradient != "double_backward":  # the same learner (same seed) on the double backward
-        learners["double_backward_"] = _Learner(args.fused_qvalue, args.fused_adam, args.batch, device, args.fused)
-        steps["double_backward_"] = ("csirl",)
+    against = args.against or ("double_backward" if args.meta_gradient != "double_backward" else None)
+    if against is not None:  # the same learner (same seed) on the other path
+        learners["against_"] = _Learner(args.fused_qvalue, args.fused_adam, args.batch, device, args.fused, against)
+        steps["against_"] = ("csirl",)
     for _ in range(args.warmup):
         for prefix, learner in learners.items():
             for step in steps[prefix]:
@@ -218,9 +225,9 @@ def main() -> None:
         for name, step in (("sac_update", "plain"), ("csirl_iteration", "csirl")):
             pairs = zip(times[""][step], times["reference_"][step])
             result[f"{name}_speedup"] = round(statistics.median(ref / new for new, ref in pairs), 3)
-    if "double_backward_" in learners:
-        pairs = zip(times[""]["csirl"], times["double_backward_"]["csirl"])
-        result[f"{args.meta_gradient}_over_double_backward"] = round(statistics.median(new / old for new, old in pairs), 3)
+    if against is not None:
+        pairs = zip(times[""]["csirl"], times["against_"]["csirl"])
+        result[f"{args.meta_gradient}_over_{against}"] = round(statistics.median(new / old for new, old in pairs), 3)
     print(json.dumps(result))
 
 
