@@ -13,12 +13,17 @@ The measurements are interleaved so that their ratios are robust to machine load
 ``--reference`` also times, interleaved in the same process, the same learner with the critics
 evaluated by SACLoss's ``torch.vmap`` and the losses on SACLoss's own path (``reference_*`` keys
 and the ``*_speedup`` ratios). ``--stock-losses`` times the SACLoss path of the losses
-(``EnsembleSACLoss(fused=False)``) with the fused critics.
+(``EnsembleSACLoss(fused=False)``) with the fused critics. ``--meta-gradient jvp`` computes the
+meta-gradient with ``MetaRewardLoss(meta_gradient="jvp")`` and also times, interleaved, the
+CSIRL iteration of the same learner on the double backward (``against_*`` keys and
+``jvp_over_double_backward``, the median of the per-round ratios); ``--against M`` sets the
+compared path (``--meta-gradient double_backward --against double_backward``: the noise).
 
 Usage::
 
     python benchmarks/bench_update.py [--batch 256] [--iters 30] [--warmup 5] [--reference]
     python benchmarks/bench_update.py --device cuda     # the learner on a GPU
+    python benchmarks/bench_update.py --meta-gradient jvp --iters 60   # jvp against the double backward
 
 Prints one final JSON line.
 """
@@ -59,7 +64,13 @@ class _Learner:
     """One learner (ensemble SAC, reward net, optimisers) and its three timed steps."""
 
     def __init__(
-        self, fused_qvalue: bool, fused_adam: bool, batch: int, device: torch.device, fused: bool | None = None
+        self,
+        fused_qvalue: bool,
+        fused_adam: bool,
+        batch: int,
+        device: torch.device,
+        fused: bool | None = None,
+        meta_gradient: str = "double_backward",
     ) -> None:
         torch.manual_seed(0)
         self.sac = sac = EnsembleSACLoss(
@@ -67,9 +78,9 @@ class _Learner:
         ).to(device)
         self.updater = SoftUpdate(sac, tau=0.005)
         self.reward_net = make_reward_network(OBS_DIM).to(device)
-        self.meta = MetaRewardLoss(sac, self.reward_net)
-        self.joint = MetaRewardLoss(sac, self.reward_net, joint_sac_update=True)
-        adam = dict(fused=True) if fused_adam else {}
+        self.meta = MetaRewardLoss(sac, self.reward_net, meta_gradient=meta_gradient)
+        self.joint = MetaRewardLoss(sac, self.reward_net, joint_sac_update=True, meta_gradient=meta_gradient)
+        adam = {"fused": True} if fused_adam else {}
         self.optim_q = torch.optim.Adam(list(sac.qvalue_network_params.values(True, True)), lr=3e-4, **adam)
         self.optim_pi = torch.optim.Adam(list(sac.actor_network_params.values(True, True)), lr=3e-4, **adam)
         self.optim_w = torch.optim.Adam(self.reward_net.parameters(), lr=1e-3, **adam)
@@ -129,6 +140,8 @@ def _timed(fn, device: torch.device) -> float:
 
 
 def _summary(prefix: str, times: dict[str, list[float]]) -> dict[str, float]:
+    if set(times) == {"csirl"}:
+        return {f"{prefix}csirl_iteration_ms": round(statistics.median(times["csirl"]), 2)}
     sac_ms, csirl_ms, seq_ms = times["plain"], times["csirl"], times["sequential"]
     return {
         f"{prefix}sac_update_ms": round(statistics.median(sac_ms), 2),
@@ -164,23 +177,37 @@ def main() -> None:
         "--reference", action="store_true",
         help="also time the vmapped-critic learner (reference_* keys), interleaved in this process",
     )
+    parser.add_argument(
+        "--meta-gradient", default="double_backward", choices=("double_backward", "jvp"),
+        help="MetaRewardLoss(meta_gradient=...); jvp also times the double backward's CSIRL iteration, interleaved",
+    )
+    parser.add_argument(
+        "--against", default=None, choices=("double_backward", "jvp"),
+        help="time the CSIRL iteration of this meta-gradient path too, interleaved (default: double_backward "
+             "when --meta-gradient is jvp)",
+    )
     parser.add_argument("--device", default="cpu", help="where the learner runs (cpu, cuda, cuda:1...)")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     device = torch.device(args.device)
 
-    learners = {"": _Learner(args.fused_qvalue, args.fused_adam, args.batch, device, args.fused)}
+    learners = {"": _Learner(args.fused_qvalue, args.fused_adam, args.batch, device, args.fused, args.meta_gradient)}
+    steps = {"": ("plain", "csirl", "sequential")}
     if args.reference:
-        learners["reference_"] = _Learner(False, args.fused_adam, args.batch, device)
-    steps = ("plain", "csirl", "sequential")
+        learners["reference_"] = _Learner(False, args.fused_adam, args.batch, device, meta_gradient=args.meta_gradient)
+        steps["reference_"] = steps[""]
+    against = args.against or ("double_backward" if args.meta_gradient != "double_backward" else None)
+    if against is not None:  # the same learner (same seed) on the other path
+        learners["against_"] = _Learner(args.fused_qvalue, args.fused_adam, args.batch, device, args.fused, against)
+        steps["against_"] = ("csirl",)
     for _ in range(args.warmup):
-        for learner in learners.values():
-            for step in steps:
+        for prefix, learner in learners.items():
+            for step in steps[prefix]:
                 getattr(learner, f"{step}_step")()
-    times = {prefix: {step: [] for step in steps} for prefix in learners}
+    times = {prefix: {step: [] for step in steps[prefix]} for prefix in learners}
     for _ in range(args.iters):
         for prefix, learner in learners.items():
-            for step in steps:
+            for step in steps[prefix]:
                 times[prefix][step].append(_timed(getattr(learner, f"{step}_step"), device))
     result = {
         "batch": args.batch,
@@ -190,6 +217,7 @@ def main() -> None:
         "fused_adam": args.fused_adam,
         "fused_qvalue": learners[""].sac.fused_qvalue,
         "fused_losses": learners[""].sac.fused,
+        "meta_gradient": args.meta_gradient,
     }
     for prefix in learners:
         result.update(_summary(prefix, times[prefix]))
@@ -197,6 +225,9 @@ def main() -> None:
         for name, step in (("sac_update", "plain"), ("csirl_iteration", "csirl")):
             pairs = zip(times[""][step], times["reference_"][step])
             result[f"{name}_speedup"] = round(statistics.median(ref / new for new, ref in pairs), 3)
+    if against is not None:
+        pairs = zip(times[""]["csirl"], times["against_"]["csirl"])
+        result[f"{args.meta_gradient}_over_{against}"] = round(statistics.median(new / old for new, old in pairs), 3)
     print(json.dumps(result))
 
 

@@ -1,5 +1,8 @@
 from __future__ import annotations
 
+import copy
+import itertools
+
 import pytest
 import torch
 from devices import DEVICES
@@ -69,13 +72,18 @@ def _finite_difference(meta, reward, online, expert, regularizer, eps=1e-6):
 @pytest.mark.parametrize(
     "kwargs",
     [
-        dict(reward_l1_coef=0.0),  # the chain w -> phi' -> theta' -> L_meta alone
-        dict(reward_l1_coef=1.0),
-        dict(reward_l1_coef=0.0, deterministic_expert_action=True),
+        {"reward_l1_coef": 0.0},  # the chain w -> phi' -> theta' -> L_meta alone
+        {"reward_l1_coef": 1.0},
+        {"reward_l1_coef": 0.0, "deterministic_expert_action": True},
     ],
 )
+
+def flat(grads) -> torch.Tensor:
+    """The gradients of a parameter list as one vector."""
+    return torch.cat([g.flatten() for g in grads])
+
 def test_meta_gradient_matches_finite_differences(kwargs, device):
-    sac, reward, meta, online, expert, regularizer = _setup(device=device, **kwargs)
+    _sac, reward, meta, online, expert, regularizer = _setup(device=device, **kwargs)
     torch.manual_seed(123)
     out = meta(online, expert, regularizer)
     out["loss_meta"].backward()
@@ -101,7 +109,6 @@ def test_meta_gradient_split_into_imitation_and_regulariser_parts():
     l1 = meta.scale * 0.5 * reward(regularizer.select("observation"))["intrinsic_reward"].abs().mean()
     l1.backward()
     reg = [p.grad.clone() for p in reward.parameters()]
-    flat = lambda grads: torch.cat([g.flatten() for g in grads])  # noqa: E731
     torch.testing.assert_close(out["meta_grad_norm_l1"], flat(reg).norm())
     torch.testing.assert_close(out["meta_grad_norm_imitation"], (flat(total) - flat(reg)).norm())
     assert out["meta_grad_norm_imitation"] > 0
@@ -114,7 +121,6 @@ def test_meta_gradient_split_into_imitation_and_regulariser_parts():
 
 def test_normalized_balance_weighs_the_two_parts_by_the_l1_coefficient():
     """``gradient_balance="normalized"``: scale * (unit imitation part + coef * unit regulariser part)."""
-    flat = lambda grads: torch.cat([g.flatten() for g in grads])  # noqa: E731
     _, reward, meta, online, expert, regularizer = _setup(reward_l1_coef=0.5)
     torch.manual_seed(123)
     out = meta(online, expert, regularizer)
@@ -150,7 +156,7 @@ def test_normalized_balance_weighs_the_two_parts_by_the_l1_coefficient():
 
 def test_meta_gradient_matches_unrolled_reference():
     """Independent re-derivation with explicit per-critic loops (no vmap, no SACLoss)."""
-    sac, reward, meta, online, expert, regularizer = _setup(reward_l1_coef=0.0, num_critics=2)
+    sac, reward, meta, online, expert, _regularizer = _setup(reward_l1_coef=0.0, num_critics=2)
     lr, gamma, alpha = meta.lr_inner, 0.99, 0.01
     actor = sac.actor_network
     critic = make_qvalue(OBS, ACT, hidden=(6,)).to(torch.float64)
@@ -226,7 +232,7 @@ def test_actor_and_critic_untouched():
 
 
 def test_reward_keys():
-    sac, reward, meta, online, expert, regularizer = _setup(dtype=torch.float32)
+    sac, reward, meta, online, expert, _regularizer = _setup(dtype=torch.float32)
     td = online.exclude(("next", "matching_reward"))
     with pytest.raises(KeyError, match="matching_reward"):
         meta(td, expert)
@@ -241,7 +247,7 @@ def test_reward_keys():
 
 
 def test_matching_reward_enters_the_critic_target():
-    sac, reward, meta, online, expert, _ = _setup(reward_l1_coef=0.0)
+    _sac, _reward, meta, online, expert, _ = _setup(reward_l1_coef=0.0)
     torch.manual_seed(5)
     base = meta(online, expert)["loss_inner_qvalue"]
     shifted = online.clone()
@@ -349,8 +355,8 @@ def test_expert_centred_reward_has_no_constant_shift_direction():
     torch.testing.assert_close(centred(expert.select("observation").clone())["intrinsic_reward"].mean(),
                                torch.zeros((), dtype=torch.float64), atol=1e-12, rtol=0)
 
-    for l1 in (0.0, 1.0):
-        meta = MetaRewardLoss(sac, centred, reward_l1_coef=l1)
+    for l1, meta_gradient in itertools.product((0.0, 1.0), ("double_backward", "jvp")):
+        meta = MetaRewardLoss(sac, centred, reward_l1_coef=l1, meta_gradient=meta_gradient)
         centred.zero_grad()
         meta(online, expert, regularizer)["loss_meta"].backward()
         assert abs(shifted.module.offset.grad.item()) < 1e-10
@@ -360,3 +366,130 @@ def test_expert_centred_reward_has_no_constant_shift_direction():
         ExpertCenteredReward(make_reward_network(OBS, action_dim=ACT), expert["observation"])
     with pytest.raises(ValueError, match="non-empty"):
         ExpertCenteredReward(shifted, torch.zeros(0, OBS))
+
+
+# ---------------------------------------------------------------------- meta_gradient="jvp"
+def _meta_gradient(meta, reward, online, expert, regularizer, seed):
+    reward.zero_grad()
+    torch.manual_seed(seed)
+    out = meta(online, expert, regularizer)
+    loss = out["loss_meta"]
+    if meta.joint_sac_update:
+        loss = loss + out["loss_qvalue"] + out["loss_actor"]
+    loss.backward()
+    return out, torch.cat([p.grad.flatten() for p in reward.parameters()])
+
+
+@pytest.mark.parametrize("joint_sac_update", [False, True])
+@pytest.mark.parametrize("gradient_balance", ["sum", "normalized"])
+@pytest.mark.parametrize("use_matching_reward", [True, False])
+@pytest.mark.parametrize("reward_l1_coef", [0.0, 1.0])
+def test_jvp_meta_gradient_matches_double_backward(joint_sac_update, gradient_balance, use_matching_reward,
+                                                    reward_l1_coef):
+    """float64 parity of the closed-form critic step with the double backward, on random batches."""
+    options = {"joint_sac_update": joint_sac_update, "gradient_balance": gradient_balance,
+                   "use_matching_reward": use_matching_reward, "reward_l1_coef": reward_l1_coef}
+    sac, reward, reference, _, _, _ = _setup(**options)
+    jvp = MetaRewardLoss(sac, reward, meta_gradient="jvp", **options)
+    for draw in range(3):
+        g = torch.Generator().manual_seed(100 + draw)
+        n = 7
+        online = random_transitions(n, OBS, ACT, dtype=torch.float64, generator=g, reward_key="matching_reward")
+        online["next", "terminated"][draw] = True
+        expert = TensorDict({"observation": torch.randn(4, OBS, generator=g, dtype=torch.float64),
+                             "action": torch.rand(4, ACT, generator=g, dtype=torch.float64) * 1.6 - 0.8}, [4])
+        regularizer = None if draw == 2 else online.apply(lambda x: x.clone())
+        if regularizer is not None:
+            regularizer["observation"] = torch.randn(n, OBS, generator=g, dtype=torch.float64)
+        sac.zero_grad(set_to_none=True)
+        out_ref, grad_ref = _meta_gradient(reference, reward, online, expert, regularizer, seed=draw)
+        sac_grads_ref = [p.grad for p in sac.parameters()]
+        sac.zero_grad(set_to_none=True)
+        out_jvp, grad_jvp = _meta_gradient(jvp, reward, online, expert, regularizer, seed=draw)
+        assert grad_ref.abs().max() > 0
+        torch.testing.assert_close(grad_jvp, grad_ref, rtol=1e-6, atol=1e-6 * grad_ref.abs().max().item())
+        for key in sorted(out_ref.keys()):
+            if key.startswith("meta_grad_norm"):
+                torch.testing.assert_close(out_jvp[key], out_ref[key], rtol=1e-6, atol=0)
+            else:  # the losses and the SAC step: the same operations, bit for bit
+                torch.testing.assert_close(out_jvp[key], out_ref[key], rtol=0, atol=0)
+        for a, b in zip(sac_grads_ref, (p.grad for p in sac.parameters())):
+            assert (a is None and b is None) or torch.equal(a, b)
+
+
+def test_jvp_meta_gradient_options():
+    """Deterministic expert actions, a smooth critic activation, priority weights; and what the path refuses."""
+    sac, reward, reference, online, expert, regularizer = _setup(deterministic_expert_action=True)
+    jvp = MetaRewardLoss(sac, reward, deterministic_expert_action=True, meta_gradient="jvp")
+    _, ref = _meta_gradient(reference, reward, online, expert, regularizer, seed=0)
+    _, new = _meta_gradient(jvp, reward, online, expert, regularizer, seed=0)
+    torch.testing.assert_close(new, ref, rtol=1e-6, atol=1e-6 * ref.abs().max().item())
+
+    # tanh critics (the activation's derivative through torch.func.jvp), priority-weighted critic loss
+    torch.manual_seed(0)
+    critic = make_qvalue(OBS, ACT, hidden=(6,)).to(torch.float64)
+    critic.module.mlp[1] = nn.Tanh()
+    sac = EnsembleSACLoss(make_actor(OBS, ACT, hidden=(6,)).to(torch.float64), critic, num_qvalue_nets=3).to(
+        torch.float64)
+    assert sac.fused_qvalue
+    weighted = online.clone()
+    weighted["priority_weight"] = torch.rand(weighted.shape[0], dtype=torch.float64)
+    sac.set_keys(priority_weight="priority_weight")
+    for batch in (online, weighted):
+        reference = MetaRewardLoss(sac, reward)
+        jvp = MetaRewardLoss(sac, reward, meta_gradient="jvp")
+        _, ref = _meta_gradient(reference, reward, batch, expert, regularizer, seed=1)
+        _, new = _meta_gradient(jvp, reward, batch, expert, regularizer, seed=1)
+        torch.testing.assert_close(new, ref, rtol=1e-6, atol=1e-6 * ref.abs().max().item())
+
+    with pytest.raises(ValueError, match="meta_gradient"):
+        MetaRewardLoss(sac, reward, meta_gradient="forward")
+    vmapped = EnsembleSACLoss(make_actor(OBS, ACT, hidden=(6,)), make_qvalue(OBS, ACT, hidden=(6,)), fused_qvalue=False)
+    with pytest.raises(ValueError, match="fused critic ensemble"):
+        MetaRewardLoss(vmapped, reward, meta_gradient="jvp")
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_jvp_meta_gradient_matches_finite_differences(device):
+    sac, reward, _, online, expert, regularizer = _setup(device=device, reward_l1_coef=0.0)
+    meta = MetaRewardLoss(sac, reward, reward_l1_coef=0.0, meta_gradient="jvp")
+    torch.manual_seed(123)
+    meta(online, expert, regularizer)["loss_meta"].backward()
+    analytic = torch.cat([p.grad.flatten() for p in reward.parameters()])
+    numeric = torch.cat([g.flatten() for g in _finite_difference(meta, reward, online, expert, regularizer)])
+    assert analytic.abs().max() > 1e-6
+    torch.testing.assert_close(analytic, numeric, rtol=1e-4, atol=1e-4 * analytic.abs().max().item())
+
+
+@pytest.mark.parametrize("activation", [None, nn.Tanh(), nn.ELU()])
+def test_fused_critic_jvp_matches_central_differences(activation):
+    """FusedCriticEnsemble.jvp along a parameter direction, with and without the recorded activations."""
+    from torchrl_csirl.modules.ensemble import fused_critic_ensemble
+
+    torch.manual_seed(0)
+    critic = make_qvalue(OBS, ACT, hidden=(6, 5)).to(torch.float64)
+    if activation is not None:
+        critic.module.mlp[1] = activation
+        critic.module.mlp[3] = copy.deepcopy(activation)
+    fused = fused_critic_ensemble(critic)
+    params = TensorDict.from_module(critic).expand(3).clone().apply(lambda p: p + 0.1 * torch.randn_like(p))
+    tangents = params.apply(torch.randn_like)
+    x = torch.randn(7, OBS + ACT, dtype=torch.float64)
+    eps = 1e-6
+    numeric = (fused.values(x, params + eps * tangents) - fused.values(x, params - eps * tangents)) / (2 * eps)
+    cache = []
+    fused.values(x, params, cache)
+    for recorded in (None, cache):
+        torch.testing.assert_close(fused.jvp(x, params, tangents, recorded), numeric, rtol=1e-6, atol=1e-8)
+
+
+def test_jvp_meta_gradient_on_sacloss_own_path():
+    """fused=False (SACLoss's losses, fused critics): the forward-mode pass runs the critics again."""
+    torch.manual_seed(0)
+    sac = EnsembleSACLoss(make_actor(OBS, ACT, hidden=(6,)).to(torch.float64),
+                          make_qvalue(OBS, ACT, hidden=(6,)).to(torch.float64), num_qvalue_nets=3,
+                          fused=False).to(torch.float64)
+    _, reward, _, online, expert, regularizer = _setup()
+    _, ref = _meta_gradient(MetaRewardLoss(sac, reward), reward, online, expert, regularizer, seed=2)
+    _, new = _meta_gradient(MetaRewardLoss(sac, reward, meta_gradient="jvp"), reward, online, expert, regularizer, seed=2)
+    torch.testing.assert_close(new, ref, rtol=1e-6, atol=1e-6 * ref.abs().max().item())

@@ -451,6 +451,15 @@ def test_reward_reference_switch_wraps_the_reward_network_around_expert_states()
         csirl.make_loss_modules(cfg, spec)
 
 
+def test_meta_gradient_switch_reaches_the_meta_loss():
+    spec = csirl.SCENARIOS["merge"]
+    assert csirl.make_loss_modules(csirl.load_config([]), spec).meta.meta_gradient == "double_backward"
+    cfg = csirl.load_config(["csirl.meta_gradient=jvp"])
+    assert csirl.make_loss_modules(cfg, spec).meta.meta_gradient == "jvp"
+    with pytest.raises(config.ConfigError, match="meta_gradient"):
+        csirl.load_config(["csirl.meta_gradient=forward"])
+
+
 @pytest.mark.parametrize(
     "scenario, overrides, expected",
     [

@@ -26,9 +26,9 @@ def make_trainer(tmp_path=None, **kwargs) -> tuple[CSIRLTrainer, list]:
         calls.append(("update", trainer.updates))
         return {"loss_fake": sample["observation"].sum() * 0 + trainer.updates}
 
-    options = dict(total_frames=50, utd_ratio=0.3, updates_per_round=4)
+    options = {"total_frames": 50, "utd_ratio": 0.3, "updates_per_round": 4, "progress_bar": False}
     options.update(kwargs)
-    trainer = CSIRLTrainer(collector=collector, online_buffer=buffer, update_step=update, progress_bar=False, **options)
+    trainer = CSIRLTrainer(collector=collector, online_buffer=buffer, update_step=update, **options)
     return trainer, calls
 
 
@@ -43,6 +43,28 @@ def test_updates_follow_the_update_to_data_ratio_and_rounds_end_on_time():
     assert [u for _, u in calls] == list(range(15))
     assert ends == [(6, 20), (12, 40)]  # a round ends at the batch where it reaches 4 updates
     assert [r["loss_fake"] for r in rows] == [1.0, 4.0, 7.0, 10.0, 13.0]  # batch means
+
+
+@pytest.mark.parametrize("progress_bar", [False, True])
+def test_one_line_per_round_on_stderr(capsys, progress_bar):
+    """A run whose output is a file (no bar) still shows its progress: one line per round, as it happens."""
+    trainer, _ = make_trainer(progress_bar=progress_bar)
+    seen = []
+    trainer.register_op("round_end", lambda t: t.postfix.update(subgoal=f"{t.rounds + 3}/9"))
+    trainer.register_op("post_round", lambda t: seen.append(capsys.readouterr().err))
+    trainer.train()
+    trainer.collector.shutdown()
+    err = "".join(seen) + capsys.readouterr().err
+    lines = [line for line in err.replace("\r", "\n").splitlines() if line.startswith("round ")]
+    assert len(lines) == trainer.rounds == 2
+    assert lines[0].startswith("round 1: 20/50 frames, 6 updates (") and lines[0].endswith("| subgoal 3/9")
+    assert lines[1].startswith("round 2: 40/50 frames, 12 updates (") and lines[1].endswith("| subgoal 4/9")
+    assert "round " not in seen[0]  # printed after the round's ops (its eval, its subgoal), not before
+
+    quiet, _ = make_trainer(round_lines=False)
+    quiet.train()
+    quiet.collector.shutdown()
+    assert "round " not in capsys.readouterr().err
 
 
 def test_ops_run_in_stage_order_and_batch_process_transforms_the_batch():

@@ -54,7 +54,7 @@ from torchrl_csirl.launch.robotics import RoboticsExpertConfig, RoboticsSections
 from torchrl_csirl.launch.run import ExpertDataError, resolve_device
 from torchrl_csirl.modules import REWARD_ACTIVATIONS, expert_reference_states
 from torchrl_csirl.objectives import CSIRL_DEFAULTS, ActorBehaviourCloning, CSIRLLearner, make_csirl_learner
-from torchrl_csirl.objectives.meta_reward import GRADIENT_BALANCES
+from torchrl_csirl.objectives.meta_reward import GRADIENT_BALANCES, META_GRADIENTS
 from torchrl_csirl.trainers import MetaRewardUpdate, SACUpdate, SubgoalSelectionHook
 from torchrl_csirl.transforms import CombineRewards, IntrinsicReward, SubgoalMatchingReward
 
@@ -83,6 +83,10 @@ class CSIRLConfig:
         CSIRL_DEFAULTS.gradient_balance, choices=GRADIENT_BALANCES,
         help="sum: the gradient of the meta-objective (paper); normalized: its imitation and regulariser parts "
              "each at unit norm, weighted 1 : reward_l1_coef (balanced_meta_gradient)")
+    meta_gradient: str = option(
+        CSIRL_DEFAULTS.meta_gradient, choices=META_GRADIENTS,
+        help="double_backward: through both inner steps; jvp: the inner critic step in closed form (a forward-mode "
+             "pass of the critics; the same gradient up to float rounding)")
     reward_activation: str = option(
         CSIRL_DEFAULTS.reward_activation, choices=tuple(REWARD_ACTIVATIONS),
         help="hidden-layer activation of r_w: relu (paper) or a smooth one whose units cannot die")
@@ -193,7 +197,8 @@ def make_loss_modules(cfg: DictConfig, spec: ScenarioSpec, device: torch.device 
         num_qvalue_nets=c.num_qvalue_nets, alpha_init=c.alpha, fixed_alpha=c.fixed_alpha, gamma=c.gamma,
         dispersion=c.dispersion, tau=cfg.optim.tau, intrinsic=c.intrinsic, reward_activation=c.reward_activation,
         reward_reference=reference, reward_scale=c.reward_scale, lr_inner=c.lr_inner, meta_scale=c.meta_scale,
-        reward_l1_coef=c.reward_l1_coef, gradient_balance=c.gradient_balance, device=device)
+        reward_l1_coef=c.reward_l1_coef, gradient_balance=c.gradient_balance, meta_gradient=c.meta_gradient,
+        device=device)
 
 
 def make_optimizers(cfg: DictConfig, modules: CSIRLLearner) -> dict[str, torch.optim.Optimizer]:

@@ -93,8 +93,14 @@ class FusedCriticEnsemble:
             inputs[0] = self.input_features(inputs[0])
         return torch.cat(inputs, dim=-1)
 
-    def values(self, x: torch.Tensor, params: TensorDictBase) -> torch.Tensor:
-        """``[N, *B, out]`` outputs of the ``N`` critics on a shared input ``x`` of shape ``[*B, D]``."""
+    def values(
+        self, x: torch.Tensor, params: TensorDictBase, activations: list[tuple[torch.Tensor, torch.Tensor]] | None = None
+    ) -> torch.Tensor:
+        """``[N, *B, out]`` outputs of the ``N`` critics on a shared input ``x`` of shape ``[*B, D]``.
+
+        ``activations``, if given, receives the detached ``(pre-activation, output)`` pair of every
+        hidden layer, which :meth:`jvp` can reuse instead of running the forward pass again.
+        """
         batch_shape = x.shape[:-1]
         x = x.reshape(-1, x.shape[-1])
         h = None
@@ -105,8 +111,71 @@ class FusedCriticEnsemble:
             if bias is not None:
                 h = h + bias.unsqueeze(1)
             if index < len(self.activations):
+                z = h
                 h = self.activations[index](h)
+                if activations is not None:
+                    activations.append((z.detach(), h.detach()))
         return h.reshape(h.shape[0], *batch_shape, h.shape[-1])
+
+    def jvp(
+        self,
+        x: torch.Tensor,
+        params: TensorDictBase,
+        tangents: TensorDictBase,
+        activations: list[tuple[torch.Tensor, torch.Tensor]] | None = None,
+    ) -> torch.Tensor:
+        """Forward-mode derivative of :meth:`values` along a direction in parameter space.
+
+        ``J_phi Q_k(x; phi_k) . t_k`` for every critic ``k``: the linear layers by hand
+        (``dz = h dW^T + dh W^T + db``), the activations' derivatives by their masks (ReLU) or
+        :func:`torch.func.jvp`. Nothing is differentiable: the result is computed without a graph.
+
+        Args:
+            x (Tensor): shared input ``[*B, D]``.
+            params (TensorDictBase): stacked parameters, batch ``[N]``.
+            tangents (TensorDictBase): the direction ``t``, with the entries of ``params``.
+            activations (list, optional): the hidden layers' ``(pre-activation, output)`` pairs
+                recorded by :meth:`values` for the same ``x`` and ``params``; without them the
+                forward pass runs again.
+
+        Returns:
+            the ``[N, *B, out]`` directional derivatives of the values.
+
+        Examples:
+            >>> import torch
+            >>> from tensordict import TensorDict
+            >>> from torchrl_csirl.modules import make_qvalue
+            >>> fused = fused_critic_ensemble(make_qvalue(4, 2, hidden=(8,)))
+            >>> params = TensorDict.from_module(make_qvalue(4, 2, hidden=(8,))).expand(3).clone()
+            >>> x, cache = torch.randn(5, 6), []
+            >>> q = fused.values(x, params, cache)
+            >>> t = fused.jvp(x, params, params.apply(torch.ones_like), cache)
+            >>> q.shape == t.shape == (3, 5, 1)
+            True
+        """
+        with torch.no_grad():
+            batch_shape = x.shape[:-1]
+            x = x.reshape(-1, x.shape[-1])
+            h = dh = None
+            for index, (weight_key, bias_key) in enumerate(self.linear_keys):
+                weight, dweight = params.get(weight_key), tangents.get(weight_key)
+                if index == 0:
+                    dz = _first_layer(x, dweight)
+                else:
+                    dz = torch.baddbmm(torch.bmm(h, dweight.transpose(1, 2)), dh, weight.transpose(1, 2))
+                if bias_key is not None:
+                    dz = dz + tangents.get(bias_key).unsqueeze(1)
+                if index == len(self.activations):
+                    break
+                if activations is not None:
+                    z, h = activations[index]
+                else:  # the primal pass again
+                    z = _first_layer(x, weight) if index == 0 else torch.bmm(h, weight.transpose(1, 2))
+                    if bias_key is not None:
+                        z = z + params.get(bias_key).unsqueeze(1)
+                    h = self.activations[index](z)
+                dh = _activation_jvp(self.activations[index], z, h, dz)
+        return dz.reshape(dz.shape[0], *batch_shape, dz.shape[-1])
 
     def __call__(self, tensordict: TensorDictBase, params: TensorDictBase) -> TensorDictBase:
         if params.ndim != 1:
@@ -122,6 +191,15 @@ def _first_layer(x: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:
     also do, but for small batches it sums in a different order (values would differ in the last bit).
     """
     return torch.matmul(x, weight.transpose(1, 2))
+
+
+def _activation_jvp(activation: nn.Module, z: torch.Tensor, h: torch.Tensor, dz: torch.Tensor) -> torch.Tensor:
+    """The derivative of ``h = activation(z)`` along ``dz`` (element-wise activations)."""
+    if isinstance(activation, nn.Identity):
+        return dz
+    if isinstance(activation, (MaskedReLU, nn.ReLU)):
+        return torch.ops.aten.threshold_backward(dz, h, 0)  # ``dz`` where ``h > 0``: ReLU's own mask
+    return torch.func.jvp(activation, (z,), (dz,))[1]
 
 
 def fused_critic_ensemble(qvalue_network: nn.Module) -> FusedCriticEnsemble | None:

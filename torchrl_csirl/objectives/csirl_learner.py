@@ -14,7 +14,12 @@ from torch import nn
 from torchrl.modules import ProbabilisticActor
 from torchrl.objectives import SoftUpdate
 
-from torchrl_csirl.modules import ExpertCenteredReward, make_actor, make_qvalue, make_reward_network
+from torchrl_csirl.modules import (
+    ExpertCenteredReward,
+    make_actor,
+    make_qvalue,
+    make_reward_network,
+)
 from torchrl_csirl.objectives.ensemble_sac import EnsembleSACLoss
 from torchrl_csirl.objectives.meta_reward import MetaRewardLoss
 
@@ -48,6 +53,7 @@ class CSIRLHyperparameters:
     meta_scale: float = 100.0
     reward_l1_coef: float = 1.0
     gradient_balance: str = "sum"
+    meta_gradient: str = "double_backward"
     hidden: tuple[int, ...] = (256, 256)
 
 
@@ -102,6 +108,7 @@ def make_csirl_learner(
     meta_scale: float = CSIRL_DEFAULTS.meta_scale,
     reward_l1_coef: float = CSIRL_DEFAULTS.reward_l1_coef,
     gradient_balance: str = CSIRL_DEFAULTS.gradient_balance,
+    meta_gradient: str = CSIRL_DEFAULTS.meta_gradient,
     device: torch.device | str = "cpu",
 ) -> CSIRLLearner:
     """Builds CSIRL's actor, ensemble-SAC loss, target updater, reward network and meta-gradient loss.
@@ -141,6 +148,8 @@ def make_csirl_learner(
         reward_l1_coef (float): weight of ``mean |r_w|`` in the meta-objective. Defaults to ``1.0``.
         gradient_balance (str): ``"sum"`` (paper) or ``"normalized"``
             (:class:`~torchrl_csirl.objectives.MetaRewardLoss`). Defaults to ``"sum"``.
+        meta_gradient (str): ``"double_backward"`` or ``"jvp"`` (the inner critic step in closed
+            form; :class:`~torchrl_csirl.objectives.MetaRewardLoss`). Defaults to ``"double_backward"``.
         device: where the losses and networks live. Defaults to ``"cpu"``.
 
     Returns:
@@ -177,5 +186,5 @@ def make_csirl_learner(
     meta = None
     if intrinsic:
         meta = MetaRewardLoss(sac, reward_network, lr_inner=lr_inner, scale=meta_scale, reward_l1_coef=reward_l1_coef,
-                              gradient_balance=gradient_balance, joint_sac_update=True)
+                              gradient_balance=gradient_balance, joint_sac_update=True, meta_gradient=meta_gradient)
     return CSIRLLearner(actor, sac, target_updater, reward_network, meta)

@@ -401,12 +401,19 @@ class EnsembleSACLoss(SACLoss):
         }
         return TensorDict(out, batch_size=[])
 
-    def qvalue_v2_loss(self, tensordict: TensorDictBase) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
-        """SACLoss's critic loss (``sum_k`` of the per-critic regression losses, reduced over the batch)."""
+    def qvalue_v2_loss(
+        self, tensordict: TensorDictBase, *, activations: list | None = None
+    ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+        """SACLoss's critic loss (``sum_k`` of the per-critic regression losses, reduced over the batch).
+
+        On the fused path, ``activations`` (a list) receives the critics' hidden activations on the
+        batch (:meth:`FusedCriticEnsemble.values <torchrl_csirl.modules.FusedCriticEnsemble.values>`);
+        it stays empty otherwise.
+        """
         if not self.fused_applies():
             return super().qvalue_v2_loss(tensordict)
         target = self._compute_target_v2(tensordict)
-        pred = self._critic_values(tensordict, self.qvalue_network_params).squeeze(-1)
+        pred = self._critic_values(tensordict, self.qvalue_network_params, activations=activations).squeeze(-1)
         td_error = abs(pred - target)
         loss = distance_loss(pred, target.expand_as(pred), loss_function=self.loss_function).sum(0)
         return sac_reduce_loss(self, loss, tensordict), {"td_error": td_error.detach().max(0)[0]}
@@ -458,7 +465,11 @@ class EnsembleSACLoss(SACLoss):
             return dist.deterministic_sample if deterministic else dist.rsample()
 
     def _critic_values(
-        self, tensordict: TensorDictBase, params: TensorDictBase, action: torch.Tensor | None = None
+        self,
+        tensordict: TensorDictBase,
+        params: TensorDictBase,
+        action: torch.Tensor | None = None,
+        activations: list | None = None,
     ) -> torch.Tensor:
         """``[N, *B, 1]`` values of the critics on ``tensordict``'s entries (``action`` replacing its action)."""
         fused_qvalue = self.__dict__["_fused_qvalue"]
@@ -467,7 +478,7 @@ class EnsembleSACLoss(SACLoss):
             action if action is not None and key == action_key else tensordict.get(key)
             for key in fused_qvalue.in_keys
         ]
-        return fused_qvalue.values(fused_qvalue.concat_inputs(inputs), params)
+        return fused_qvalue.values(fused_qvalue.concat_inputs(inputs), params, activations)
 
     def _fused_target(self, tensordict: TensorDictBase) -> torch.Tensor:
         """SACLoss's TD(0) target ``r + gamma (1 - terminated) min_k (Q'_k(s', a') - alpha log pi(a'|s'))``."""

@@ -2,19 +2,22 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import torch
 from tensordict import TensorDict, TensorDictBase
 from tensordict.nn import TensorDictModule
 from tensordict.utils import NestedKey
 from torchrl.objectives.common import LossModule
+from torchrl.objectives.value import TD0Estimator
 
-from torchrl_csirl._compat import sac_alpha, sac_reduced_alpha_loss
+from torchrl_csirl._compat import sac_alpha, sac_reduce_loss, sac_reduced_alpha_loss
 from torchrl_csirl.objectives.ensemble_sac import EnsembleSACLoss
 
 __all__ = ["MetaRewardLoss", "balanced_meta_gradient"]
 
 GRADIENT_BALANCES = ("sum", "normalized")
+META_GRADIENTS = ("double_backward", "jvp")
 
 
 def _leaves_like(params: TensorDictBase) -> TensorDict:
@@ -44,11 +47,30 @@ def sgd_lookahead(
 
 
 def _grads_or_zeros(
-    loss: torch.Tensor, params: list[torch.Tensor], *, create_graph: bool = False, retain_graph: bool | None = None
+    loss: torch.Tensor,
+    params: list[torch.Tensor],
+    *,
+    grad_outputs: torch.Tensor | None = None,
+    create_graph: bool = False,
+    retain_graph: bool | None = None,
 ) -> list[torch.Tensor]:
-    """``d loss / d params``, zeros for the parameters ``loss`` does not depend on."""
-    grads = torch.autograd.grad(loss, params, create_graph=create_graph, retain_graph=retain_graph, allow_unused=True)
+    """``d loss / d params`` (a vector-Jacobian product with ``grad_outputs``), zeros where ``loss`` does not depend."""
+    grads = torch.autograd.grad(
+        loss, params, grad_outputs=grad_outputs, create_graph=create_graph, retain_graph=retain_graph, allow_unused=True
+    )
     return [torch.zeros_like(p) if g is None else g for p, g in zip(params, grads)]
+
+
+def _reduction_weights(loss: LossModule, per_sample: torch.Tensor, tensordict: TensorDictBase) -> torch.Tensor:
+    """``rho_i = d reduce(l) / d l_i``: the weight of each sample in the SAC loss's reduction (``1 / B`` for a mean).
+
+    The reduction (mean or sum, priority weights, masks) is linear in the per-sample losses, so
+    its derivative at zero is the weight of each sample.
+    """
+    with torch.enable_grad():
+        probe = torch.zeros_like(per_sample, requires_grad=True)
+        (rho,) = torch.autograd.grad(sac_reduce_loss(loss, probe, tensordict), probe)
+    return rho
 
 
 def _sgd_lookahead_and_grads(
@@ -174,6 +196,21 @@ class MetaRewardLoss(LossModule):
     weighs their directions ``1 : reward_l1_coef`` whatever their sizes. ``"loss_meta"`` keeps the
     value of ``L_meta`` either way; ``"meta_grad_norm"`` is the norm of what is applied.
 
+    **Two ways to the same meta-gradient.** ``meta_gradient="double_backward"`` (the default)
+    keeps the graph of both inner steps and differentiates through them. ``"jvp"`` uses the
+    closed form of the inner critic step: with ``L_Q = reduce_i sum_k (Q_k(s_i, a_i) - y_i)^2``
+    and ``y_i`` linear in ``r_w(s_i)`` (``dy_i / dr_i = 1`` for TD(0)),
+
+    ``dL/dw = 2 lr_in sum_i rho_i (sum_k grad_phi_k Q_k(s_i, a_i) . g_k) dr_w(s_i)/dw`` with
+    ``g = dL/dphi'`` (``rho_i`` the weight of sample ``i`` in the reduction, ``1 / B`` for a
+    mean): the critic step is taken without a graph, ``g`` comes from a backward through the inner actor step
+    alone (still a double backward: the actor step's gradient depends on ``phi'``), the
+    bracket is one forward-mode pass of the critic ensemble along ``g``
+    (:meth:`~torchrl_csirl.modules.FusedCriticEnsemble.jvp`) and the last factor a backward
+    through the reward network alone. The same gradient up to rounding (float64 parity in
+    ``tests/test_meta_loss.py``); the SAC losses of ``joint_sac_update`` are bit-identical.
+    It needs the fused critic ensemble, the ``"l2"`` critic loss and a TD(0) target.
+
     Hyper-parameter notes: ``lr_in = 0.01`` (plain SGD) and the reward Adam learning rate
     ``1e-3`` follow the published code; the paper states the two swapped (0.001 / 0.01).
     ``scale = 100`` and the ``|r_w|`` regulariser also come from the code.
@@ -205,6 +242,9 @@ class MetaRewardLoss(LossModule):
             actor/critic, as in the published code (which loads its inner copies before
             the real steps); the real actor loss also sees the pre-update critics.
             Defaults to ``False``.
+        meta_gradient (str): ``"double_backward"`` (differentiate through both inner steps)
+            or ``"jvp"`` (the closed form of the critic step, see above). Defaults to
+            ``"double_backward"``.
 
     Examples:
         >>> import torch
@@ -251,7 +291,7 @@ class MetaRewardLoss(LossModule):
 
     default_keys = _AcceptedKeys
     tensor_keys: _AcceptedKeys
-    out_keys = [
+    out_keys: ClassVar[list[str]] = [
         "loss_meta",
         "loss_imitation",
         "loss_reward_l1",
@@ -275,6 +315,7 @@ class MetaRewardLoss(LossModule):
         use_matching_reward: bool = True,
         gradient_balance: str = "sum",
         joint_sac_update: bool = False,
+        meta_gradient: str = "double_backward",
     ) -> None:
         if not isinstance(sac_loss, EnsembleSACLoss):
             raise TypeError(f"sac_loss must be an EnsembleSACLoss, got {type(sac_loss).__name__}.")
@@ -289,6 +330,14 @@ class MetaRewardLoss(LossModule):
             )
         if gradient_balance not in GRADIENT_BALANCES:
             raise ValueError(f"gradient_balance must be one of {GRADIENT_BALANCES}, got {gradient_balance!r}.")
+        if meta_gradient not in META_GRADIENTS:
+            raise ValueError(f"meta_gradient must be one of {META_GRADIENTS}, got {meta_gradient!r}.")
+        if meta_gradient == "jvp" and not (sac_loss.fused_qvalue and sac_loss.loss_function == "l2"):
+            raise ValueError(
+                "meta_gradient='jvp' needs the fused critic ensemble (critics built by make_qvalue, "
+                f"fused_qvalue not False) and loss_function='l2'; got fused_qvalue={sac_loss.fused_qvalue}, "
+                f"loss_function={sac_loss.loss_function!r}."
+            )
         super().__init__()
         # not registered as a submodule: meta_loss.parameters() are the reward's only.
         self.__dict__["sac_loss"] = sac_loss
@@ -300,6 +349,7 @@ class MetaRewardLoss(LossModule):
         self.use_matching_reward = bool(use_matching_reward)
         self.gradient_balance = gradient_balance
         self.joint_sac_update = bool(joint_sac_update)
+        self.meta_gradient = meta_gradient
         out_keys = list(getattr(reward_network, "out_keys", []))
         if out_keys and out_keys[0] != self.tensor_keys.intrinsic_reward:
             self.set_keys(intrinsic_reward=out_keys[0])
@@ -392,14 +442,19 @@ class MetaRewardLoss(LossModule):
         theta = _leaves_like(sac.actor_network_params)
         phi = _leaves_like(sac.qvalue_network_params)
 
+        jvp = self.meta_gradient == "jvp"
         r_w = self.intrinsic_reward(tensordict)
         td = tensordict.copy()
         td.set("next", tensordict.get("next").copy())
-        td.set(("next", sac.tensor_keys.reward), self.local_reward(tensordict, r_w))
+        # the jvp path differentiates the critic step by hand: its target needs no graph
+        td.set(("next", sac.tensor_keys.reward), self.local_reward(tensordict, r_w.detach() if jvp else r_w))
 
-        phi_new, loss_q, grads_phi = self.inner_critic_step(td, theta, phi)
-        theta_new, loss_pi = self.inner_actor_step(td, theta, phi_new)
-        loss_imitation = self.imitation_loss(expert, theta_new)
+        if jvp:
+            loss_q, grads_phi, loss_pi, loss_imitation, cotangent = self._jvp_chain(td, expert, theta, phi)
+        else:
+            phi_new, loss_q, grads_phi = self.inner_critic_step(td, theta, phi)
+            theta_new, loss_pi = self.inner_actor_step(td, theta, phi_new)
+            loss_imitation = self.imitation_loss(expert, theta_new)
 
         if self.reward_l1_coef > 0:
             r_reg = r_w if regularizer is None else self.intrinsic_reward(regularizer)
@@ -410,10 +465,20 @@ class MetaRewardLoss(LossModule):
             loss = self.scale * loss_imitation
 
         grads_l1 = None
-        if self.reward_l1_coef > 0:  # the regulariser's share of the meta-gradient (a cheap diagnostic)
-            grads_l1 = _grads_or_zeros(self.scale * self.reward_l1_coef * loss_l1, w_params, retain_graph=True)
-        grads = _grads_or_zeros(loss, w_params)
-        grads_imitation = grads if grads_l1 is None else torch._foreach_sub(grads, grads_l1)
+        if jvp:  # the imitation part: a backward through r_w alone; then the regulariser's
+            retain = self.reward_l1_coef > 0 and regularizer is None
+            grads_imitation = _grads_or_zeros(
+                r_w, w_params, grad_outputs=cotangent.reshape(r_w.shape), retain_graph=retain
+            )
+            grads = grads_imitation
+            if self.reward_l1_coef > 0:
+                grads_l1 = _grads_or_zeros(self.scale * self.reward_l1_coef * loss_l1, w_params)
+                grads = torch._foreach_add(grads_imitation, grads_l1)
+        else:
+            if self.reward_l1_coef > 0:  # the regulariser's share of the meta-gradient (a cheap diagnostic)
+                grads_l1 = _grads_or_zeros(self.scale * self.reward_l1_coef * loss_l1, w_params, retain_graph=True)
+            grads = _grads_or_zeros(loss, w_params)
+            grads_imitation = grads if grads_l1 is None else torch._foreach_sub(grads, grads_l1)
         if self.gradient_balance == "normalized":
             grads = balanced_meta_gradient(grads_imitation, grads_l1, l1_weight=self.reward_l1_coef, scale=self.scale)
         # same value as ``loss``, gradient w.r.t. w exactly ``grads`` (balanced or not), nothing else.
@@ -431,6 +496,48 @@ class MetaRewardLoss(LossModule):
         if self.joint_sac_update:
             out.update(self._sac_losses(td, loss_q, grads_phi))
         return TensorDict(out, batch_size=[])
+
+    def _jvp_chain(
+        self, td: TensorDictBase, expert: TensorDictBase, theta: TensorDictBase, phi: TensorDictBase
+    ) -> tuple[torch.Tensor, list[torch.Tensor], torch.Tensor, torch.Tensor, torch.Tensor]:
+        """The two inner steps and the imitation loss, the critic step differentiated in closed form.
+
+        Returns ``L_Q``, ``grad_phi L_Q``, ``L_pi``, the imitation loss and the cotangent
+        ``scale * 2 lr_in rho_i sum_k grad_phi_k Q_k(s_i, a_i) . g_k`` of ``r_w`` (shaped like
+        ``r_w``'s output), whose backward through the reward network is the imitation part
+        of the meta-gradient.
+        """
+        sac = self.sac_loss
+        estimator = sac.value_estimator
+        if not isinstance(estimator, TD0Estimator) or estimator.average_rewards:
+            raise ValueError(
+                "meta_gradient='jvp' requires the TD(0) value estimator without reward averaging "
+                f"(got {type(estimator).__name__})."
+            )
+        keys = list(phi.keys(True, True))
+        phi_list = [phi.get(k) for k in keys]
+        # Eq. 12 without a graph: phi' are fresh leaves, reached by the outer gradient only
+        activations = []  # the critics' hidden activations on the batch, for the forward-mode pass
+        with sac.using_params(theta, phi):
+            loss_q, _ = sac.qvalue_v2_loss(td, activations=activations)
+        grads_phi = _grads_or_zeros(loss_q, phi_list)
+        phi_new = phi.empty()
+        for key, tensor, grad in zip(keys, phi_list, grads_phi):
+            phi_new.set(key, torch.add(tensor.detach(), grad, alpha=-self.lr_inner).requires_grad_(True))
+        # Eq. 13 and 11 as before; g = dL_imitation / dphi' (a double backward through the actor step)
+        theta_new, loss_pi = self.inner_actor_step(td, theta, phi_new)
+        loss_imitation = self.imitation_loss(expert, theta_new)
+        g = _grads_or_zeros(loss_imitation, [phi_new.get(k) for k in keys])
+        with torch.no_grad():
+            fused = sac.__dict__["_fused_qvalue"]
+            tangents = phi.empty()
+            for key, tangent in zip(keys, g):
+                tangents.set(key, tangent)
+            dq = fused.jvp(fused.critic_input(td), phi, tangents, activations or None)  # [N, B, 1]
+            per_sample = dq.squeeze(-1).sum(0)  # sum_k grad_phi_k Q_k(s_i, a_i) . g_k
+            rho = _reduction_weights(sac, per_sample, td)
+            cotangent = (2 * self.lr_inner * self.scale) * rho * per_sample
+        return loss_q, grads_phi, loss_pi, loss_imitation, cotangent
 
     def _sac_losses(
         self, td: TensorDictBase, loss_q: torch.Tensor, grads_phi: list[torch.Tensor]

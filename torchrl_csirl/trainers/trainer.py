@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import random
+import sys
 import time
 from collections import defaultdict
 from collections.abc import Callable, Iterator
@@ -87,7 +88,9 @@ class CSIRLTrainer:
        :class:`~torchrl_csirl.trainers.SubgoalSelectionHook`,
        :class:`~torchrl_csirl.trainers.EvaluationHook`), then the ``post_round`` ops (e.g.
        :class:`~torchrl_csirl.trainers.CheckpointHook`);
-    4. a metrics row is passed to the ``log`` ops.
+    4. a metrics row is passed to the ``log`` ops;
+    5. at a round end, one line (:meth:`round_line`) on stderr, flushed: above the progress bar
+       on a terminal, alone in a log file or a cluster job's output (where the bar is off).
 
     Collection is reproducible per batch: before each batch the collector's environments are
     re-seeded with ``seed + 7919 * batch index`` and reset, so a resumed run collects the same data as an
@@ -104,6 +107,7 @@ class CSIRLTrainer:
         clear_buffer_each_round: empty the online buffer at every round start (the paper's code).
         seed: base seed of the collection.
         progress_bar: show a tqdm bar over frames.
+        round_lines: print one line per round to stderr. Defaults to ``True``.
 
     Examples:
         >>> # see recipes/csirl_highway.py and tests/test_trainer.py for complete set-ups
@@ -126,6 +130,7 @@ class CSIRLTrainer:
         clear_buffer_each_round: bool = False,
         seed: int = 0,
         progress_bar: bool = True,
+        round_lines: bool = True,
     ) -> None:
         if total_frames <= 0:
             raise ValueError(f"total_frames must be positive, got {total_frames}.")
@@ -143,6 +148,7 @@ class CSIRLTrainer:
         self.clear_buffer_each_round = bool(clear_buffer_each_round)
         self.seed = int(seed)
         self.progress_bar = bool(progress_bar)
+        self.round_lines = bool(round_lines)
         self._ops: dict[str, list[tuple[str, Callable]]] = {stage: [] for stage in STAGES}
         self._recorded: dict[str, Any] = {}
         self._stateful: dict[str, Any] = {}
@@ -266,6 +272,30 @@ class CSIRLTrainer:
         :meth:`train` and checkpointing count too."""
         return self.elapsed_before + time.perf_counter() - self._created
 
+    def round_line(self) -> str:
+        """The line printed at a round end: counters, speed, elapsed time and the bar's postfix.
+
+        Examples:
+            >>> # after the third round of a 60 000-frame run:
+            >>> # round 3: 6000/60000 frames, 2980 updates (25.1/s), 4.1 min | subgoal 12/59, eval 0.42
+        """
+        speed = self.throughput["updates_per_s"]
+        line = (
+            f"round {self.rounds}: {self.frames}/{self.total_frames} frames, {self.updates} updates "
+            f"({speed:.1f}/s), {self.wall_time / 60:.1f} min"
+        )
+        if self.postfix:
+            line += " | " + ", ".join(f"{key} {value}" for key, value in self.postfix.items())
+        return line
+
+    def _print_round_line(self, bar: Any) -> None:
+        line = self.round_line()
+        if not bar.disable:
+            bar.write(line, file=sys.stderr)  # above the bar, which is redrawn below it
+            return
+        sys.stderr.write(line + "\n")
+        sys.stderr.flush()
+
     # ------------------------------------------------------------------ loop
     def _batches(self) -> Iterator[TensorDictBase]:
         iterator = iter(self.collector)
@@ -283,7 +313,7 @@ class CSIRLTrainer:
         if len(self.online_buffer) < max(self.warmup_frames, 1):
             return 0
         self._update_credit += self.utd_ratio * frames
-        n = int(math.floor(self._update_credit + 1e-9))
+        n = math.floor(self._update_credit + 1e-9)
         self._update_credit -= n
         return n
 
@@ -344,7 +374,8 @@ class CSIRLTrainer:
                     "updates_per_s": n_updates / t_update if n_updates else 0.0,
                     **losses,
                 }
-                if self.updates_in_round >= self.updates_per_round:
+                round_ended = self.updates_in_round >= self.updates_per_round
+                if round_ended:
                     self._end_round()
                 row.update(self._recorded)
                 self._recorded = {}
@@ -353,6 +384,8 @@ class CSIRLTrainer:
                 bar.update(frames)
                 if self.postfix:
                     bar.set_postfix(self.postfix, refresh=False)
+                if round_ended and self.round_lines:
+                    self._print_round_line(bar)
                 if self.stop_reason is not None:
                     raise TrainingInterrupted(self.stop_reason)
         finally:
