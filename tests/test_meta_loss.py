@@ -68,6 +68,11 @@ def _finite_difference(meta, reward, online, expert, regularizer, eps=1e-6):
     return grads
 
 
+def flat_grads(grads) -> torch.Tensor:
+    """The gradients of a parameter list as one vector."""
+    return torch.cat([g.flatten() for g in grads])
+
+
 @pytest.mark.parametrize("device", DEVICES)
 @pytest.mark.parametrize(
     "kwargs",
@@ -77,11 +82,6 @@ def _finite_difference(meta, reward, online, expert, regularizer, eps=1e-6):
         {"reward_l1_coef": 0.0, "deterministic_expert_action": True},
     ],
 )
-
-def flat(grads) -> torch.Tensor:
-    """The gradients of a parameter list as one vector."""
-    return torch.cat([g.flatten() for g in grads])
-
 def test_meta_gradient_matches_finite_differences(kwargs, device):
     _sac, reward, meta, online, expert, regularizer = _setup(device=device, **kwargs)
     torch.manual_seed(123)
@@ -109,8 +109,8 @@ def test_meta_gradient_split_into_imitation_and_regulariser_parts():
     l1 = meta.scale * 0.5 * reward(regularizer.select("observation"))["intrinsic_reward"].abs().mean()
     l1.backward()
     reg = [p.grad.clone() for p in reward.parameters()]
-    torch.testing.assert_close(out["meta_grad_norm_l1"], flat(reg).norm())
-    torch.testing.assert_close(out["meta_grad_norm_imitation"], (flat(total) - flat(reg)).norm())
+    torch.testing.assert_close(out["meta_grad_norm_l1"], flat_grads(reg).norm())
+    torch.testing.assert_close(out["meta_grad_norm_imitation"], (flat_grads(total) - flat_grads(reg)).norm())
     assert out["meta_grad_norm_imitation"] > 0
 
     _, _, meta0, online, expert, regularizer = _setup(reward_l1_coef=0.0)
@@ -125,11 +125,11 @@ def test_normalized_balance_weighs_the_two_parts_by_the_l1_coefficient():
     torch.manual_seed(123)
     out = meta(online, expert, regularizer)
     out["loss_meta"].backward()
-    total = flat([p.grad for p in reward.parameters()])
+    total = flat_grads([p.grad for p in reward.parameters()])
     reward.zero_grad()
     l1 = meta.scale * 0.5 * reward(regularizer.select("observation"))["intrinsic_reward"].abs().mean()
     l1.backward()
-    g_r = flat([p.grad for p in reward.parameters()])
+    g_r = flat_grads([p.grad for p in reward.parameters()])
     g_i = total - g_r
     reward.zero_grad()
 
@@ -137,7 +137,7 @@ def test_normalized_balance_weighs_the_two_parts_by_the_l1_coefficient():
     torch.manual_seed(123)
     out_n = meta_n(online, expert, regularizer)
     out_n["loss_meta"].backward()
-    balanced = flat([p.grad for p in reward_n.parameters()])
+    balanced = flat_grads([p.grad for p in reward_n.parameters()])
     expected = meta.scale * (g_i / g_i.norm() + 0.5 * g_r / g_r.norm())
     torch.testing.assert_close(balanced, expected)
     torch.testing.assert_close(out_n["loss_meta"], out["loss_meta"])  # the value is still L_meta
@@ -148,7 +148,7 @@ def test_normalized_balance_weighs_the_two_parts_by_the_l1_coefficient():
     _, reward_0, meta_0, *_ = _setup(reward_l1_coef=0.0, gradient_balance="normalized")
     torch.manual_seed(123)
     meta_0(online, expert, regularizer)["loss_meta"].backward()
-    alone = flat([p.grad for p in reward_0.parameters()])
+    alone = flat_grads([p.grad for p in reward_0.parameters()])
     torch.testing.assert_close(alone.norm(), torch.tensor(meta.scale, dtype=alone.dtype))
     with pytest.raises(ValueError, match="gradient_balance"):
         _setup(gradient_balance="mean")
