@@ -442,6 +442,8 @@ def budget_caption(scenarios: list[str]) -> str:
         'every row at 60 000 frames per run (benchmark.py TABLE_BUDGETS; a cell run at another budget says so)'
     """
     budgets = {s: f"{TABLE_BUDGETS[s]:,}".replace(",", " ") for s in scenarios if s in TABLE_BUDGETS}
+    if not budgets:  # tasks outside the paper's tables: the sweep's own collector.total_frames
+        return "every row at the budget its runs record (their summaries' frames)"
     if len(set(budgets.values())) == 1:
         text = f"{next(iter(budgets.values()))} frames per run"
     else:
@@ -541,15 +543,19 @@ def robotics_tables(rows: list[dict[str, Any]]) -> list[str]:
     scenarios, methods, cell = _columns(rows, return_task_order([r["scenario"] for r in rows]))
     if not scenarios:
         return []
-    lines = _method_table(
-        "Test return on the robotics tasks, mean ± std over seeds (the paper's metric there; its Figure 7 gives "
-        f"curves for {', '.join(PAPER_ROBOTICS_METHODS)}, no numbers: on Relocate only CSIRL's return is positive), "
-        f"{budget_caption(scenarios)}.",
-        methods, scenarios, lambda m, s: _score(cell.get((m, s)), None, "return", _return_format(cell.get((m, s)))))
-    lines += [""] + _method_table(
-        "Success rate (AntMaze: goal reached; Relocate: ball at the target) / progress (the accomplish rate's "
-        "analogue, docs/studies/robotics.md), mean over seeds.",
-        methods, scenarios, lambda m, s: _outcomes(cell.get((m, s)), "accomplish_rate"))
+    if all(s in ROBOTICS_ORDER for s in scenarios):  # the paper's robotics tasks
+        returns = ("Test return on the robotics tasks, mean ± std over seeds (the paper's metric there; its Figure 7 "
+                   f"gives curves for {', '.join(PAPER_ROBOTICS_METHODS)}, no numbers: on Relocate only CSIRL's return "
+                   f"is positive), {budget_caption(scenarios)}.")
+        outcomes = ("Success rate (AntMaze: goal reached; Relocate: ball at the target) / progress (the accomplish "
+                    "rate's analogue, docs/studies/robotics.md), mean over seeds.")
+    else:
+        returns = f"Test return (the environment's own reward), mean ± std over seeds, {budget_caption(scenarios)}."
+        outcomes = ("Success rate / accomplish rate (the success rate where the task has no finish, "
+                    "docs/own-task.md), mean over seeds.")
+    lines = _method_table(returns, methods, scenarios,
+                          lambda m, s: _score(cell.get((m, s)), None, "return", _return_format(cell.get((m, s)))))
+    lines += [""] + _method_table(outcomes, methods, scenarios, lambda m, s: _outcomes(cell.get((m, s)), "accomplish_rate"))
     lines += [""] + _method_table(
         "Cost per run: wall time [min] (start-up and final evaluation included) and updates/s, mean over runs.",
         methods, scenarios, lambda m, s: _cost(cell.get((m, s))))
