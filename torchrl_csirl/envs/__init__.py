@@ -1,4 +1,5 @@
-"""The paper's tasks: driving scenarios (highway-env based), robotics tasks, the metrics.
+"""The paper's tasks: driving scenarios (highway-env based), robotics tasks, the metrics; and beyond the
+paper gymnasium's MuJoCo locomotion (``hopper``, ``halfcheetah``: :mod:`torchrl_csirl.envs.locomotion`).
 
 Importing this package registers the gymnasium ids ``csirl/highway-fast-v0``,
 ``csirl/merge-v0``, ``csirl/roundabout-v0``, ``csirl/intersection-v0`` and the robotics tasks'
@@ -20,6 +21,7 @@ from __future__ import annotations
 
 from torchrl_csirl._compat import gym_env_of
 from torchrl_csirl.envs.gymnasium_task import make_gymnasium_env, make_gymnasium_task
+from torchrl_csirl.envs.locomotion import LOCOMOTION_TASKS, LocomotionExpert, make_locomotion_env
 from torchrl_csirl.envs.metrics import (
     accomplish_rate,
     accomplish_rate_from_rollout,
@@ -48,6 +50,8 @@ register_scenarios()
 __all__ = [
     "FAILURE_KEYS",
     "INFO_KEYS",
+    "LOCOMOTION_TASKS",
+    "LocomotionExpert",
     "SCENARIOS",
     "ScenarioSpec",
     "TASKS",
@@ -63,6 +67,7 @@ __all__ = [
     "make_env",
     "make_gymnasium_env",
     "make_gymnasium_task",
+    "make_locomotion_env",
     "make_gym_env",
     "make_serial_env",
     "normalized_accomplish_rate",

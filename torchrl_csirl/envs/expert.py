@@ -34,9 +34,13 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
+import os
+from functools import partial
 from typing import Any, Callable, Sequence
 
 import numpy as np
+
+from torchrl_csirl.envs.locomotion import LOCOMOTION_TASKS
 
 ACCELERATION_SCALE = 15.0
 """Physical acceleration [m/s^2] of a normalised action of 1."""
@@ -831,10 +835,15 @@ class ExpertDriver:
 
 
 def _robotics_experts() -> dict[str, Any]:
+    from torchrl_csirl.envs.locomotion import LocomotionExpert, expert_policy_path
     from torchrl_csirl.envs.robotics.ant_goal import WaypointAntExpert
     from torchrl_csirl.envs.robotics.expert import DAPGRelocateExpert
 
-    return {"antmaze-umaze": WaypointAntExpert, "relocate": DAPGRelocateExpert}
+    experts: dict[str, Any] = {"antmaze-umaze": WaypointAntExpert, "relocate": DAPGRelocateExpert}
+    for name in ("hopper", "halfcheetah"):  # once their SAC expert is shipped
+        if os.path.isfile(expert_policy_path(name)):
+            experts[name] = partial(LocomotionExpert, name)
+    return experts
 
 
 def expert_tasks() -> tuple[str, ...]:
@@ -854,7 +863,8 @@ def make_expert(name: str, **overrides: Any) -> Any:
     expert, :class:`~torchrl_csirl.envs.robotics.expert.DAPGRelocateExpert`; ``"antmaze-umaze"``:
     :class:`~torchrl_csirl.envs.robotics.WaypointAntExpert` driving the shipped goal-reaching ant, or
     ``policy=<policy.pt or run directory of recipes/train_ant_expert.py>``, and its ``lookahead=``
-    and ``action_gain=``).
+    and ``action_gain=``; ``"hopper"``, ``"halfcheetah"``: the shipped SAC policy,
+    :class:`~torchrl_csirl.envs.locomotion.LocomotionExpert`, or ``policy=``).
 
     Every expert has ``reset(env)`` and ``act(env) -> action``.
 
@@ -875,6 +885,13 @@ def make_expert(name: str, **overrides: Any) -> Any:
             )
         policy = overrides.pop("policy", None)
         return robotics[name](policy, **overrides)
+    if name in LOCOMOTION_TASKS and (name in robotics or "policy" in overrides):
+        from torchrl_csirl.envs.locomotion import LocomotionExpert
+
+        unknown = sorted(set(overrides) - {"policy"})
+        if unknown:
+            raise ValueError(f"The {name!r} expert takes only policy=<policy.pt or run directory>, got {unknown}.")
+        return LocomotionExpert(name, overrides.get("policy"))
     if name in robotics:
         if overrides:
             raise ValueError(f"The {name!r} expert takes no options, got {sorted(overrides)}.")

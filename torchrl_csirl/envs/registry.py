@@ -17,15 +17,16 @@ from functools import partial
 
 from torchrl.envs import EnvBase
 
+from torchrl_csirl.envs.locomotion import locomotion_factories
 from torchrl_csirl.envs.scenarios import TASKS
 from torchrl_csirl.envs.spec import TaskSpec
 
 __all__ = ["env_factory", "import_task_module", "register_task", "registered_factory", "task_names"]
 
-#: the paper's tasks and ``ant-goal``: never replaced by :func:`register_task`
+#: the paper's tasks, ``ant-goal`` and the locomotion tasks: never replaced by :func:`register_task`
 BUILTIN_TASKS: frozenset[str] = frozenset(TASKS)
 
-_FACTORIES: dict[str, Callable[..., EnvBase]] = {}
+_FACTORIES: dict[str, Callable[..., EnvBase]] = dict(locomotion_factories())
 
 
 def register_task(spec: TaskSpec, make_env: Callable[..., EnvBase], *, replace: bool = False) -> TaskSpec:
@@ -74,7 +75,7 @@ def register_task(spec: TaskSpec, make_env: Callable[..., EnvBase], *, replace: 
 
 
 def registered_factory(name: str) -> Callable[..., EnvBase] | None:
-    """The factory :func:`register_task` holds for ``name`` (None for the built-in tasks)."""
+    """The factory :func:`register_task` holds for ``name`` (a locomotion task's; None for the other built-in tasks)."""
     return _FACTORIES.get(name)
 
 

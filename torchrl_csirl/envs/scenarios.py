@@ -22,6 +22,7 @@ from torchrl_csirl.envs.driving import (
     CSIRLMergeEnv,
     CSIRLRoundaboutEnv,
 )
+from torchrl_csirl.envs.locomotion import LOCOMOTION_TASKS
 from torchrl_csirl.envs.robotics.ant_goal import ANT_GOAL_SPEC
 from torchrl_csirl.envs.robotics.tasks import ROBOTICS_TASKS
 from torchrl_csirl.envs.spec import TaskSpec
@@ -221,7 +222,7 @@ SCENARIOS: dict[str, ScenarioSpec] = {
 """The four driving scenarios by name: ``"highway-fast"``, ``"merge"``, ``"roundabout"``, ``"intersection"``."""
 
 
-TASKS: dict[str, TaskSpec] = {**SCENARIOS, **ROBOTICS_TASKS, ANT_GOAL_SPEC.name: ANT_GOAL_SPEC}
+TASKS: dict[str, TaskSpec] = {**SCENARIOS, **ROBOTICS_TASKS, ANT_GOAL_SPEC.name: ANT_GOAL_SPEC, **LOCOMOTION_TASKS}
 """Every task by name: the driving :data:`SCENARIOS`, the robotics tasks (``"antmaze-umaze"``,
 ``"relocate"``) and ``"ant-goal"`` (the AntMaze expert's training task,
 :class:`~torchrl_csirl.envs.robotics.AntGoalEnv`), all described by a

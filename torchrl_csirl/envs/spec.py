@@ -42,6 +42,9 @@ class TaskSpec:
         position_feature_indices: observation indices of the matching features ``h(s)``,
             the potential of the matching reward.
         matching_scale: scale of the matching reward.
+        hidden_feature_indices: observation indices the networks do not read (the matching reward
+            does): they read the observation through :class:`~torchrl_csirl.modules.DropFeatures`
+            (the locomotion tasks' torso x, an absolute position a policy should not see).
         episode_ends_at_goal: whether reaching the goal completes the task, so that recorded
             demonstrations end there (driving: arrival at the finish; AntMaze: the goal); False
             where the goal must be held (Relocate: the ball stays at the target).
@@ -68,6 +71,7 @@ class TaskSpec:
     ego_feature_indices: tuple[int, ...]
     position_feature_indices: tuple[int, ...]
     matching_scale: float
+    hidden_feature_indices: tuple[int, ...] = ()
     episode_ends_at_goal: bool = True
     dt: float = 0.2
     family: str = "custom"
@@ -84,6 +88,10 @@ class TaskSpec:
                 raise ValueError(
                     f"{self.name}: {name} must be non-empty indices in [0, {self.obs_dim}), got {indices}."
                 )
+        hidden = self.hidden_feature_indices
+        if any(not 0 <= i < self.obs_dim for i in hidden) or len(set(hidden)) >= self.obs_dim:
+            raise ValueError(f"{self.name}: hidden_feature_indices must be indices in [0, {self.obs_dim}) that leave "
+                             f"the networks some input, got {hidden}.")
 
     @property
     def matching_features(self) -> tuple[str, ...]:

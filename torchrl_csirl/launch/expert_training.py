@@ -24,7 +24,7 @@ from torchrl_csirl.launch.builders import Run, assemble_trainer, make_online_buf
 from torchrl_csirl.launch.config import DEVICES, LoggerConfig, UpdateRatioConfig, option
 from torchrl_csirl.launch.robotics import RoboticsEnvConfig
 from torchrl_csirl.launch.run import resolve_device
-from torchrl_csirl.modules import make_actor, make_qvalue
+from torchrl_csirl.modules import make_actor, make_input_features, make_qvalue
 from torchrl_csirl.objectives import SACHyperparameters, make_sac_learner
 from torchrl_csirl.trainers import SACUpdate
 
@@ -79,8 +79,9 @@ def make_sac_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume
     device = resolve_device(cfg.device)
     spec = resolve_scenario(cfg.env.scenario)
     hp = SACHyperparameters(**OmegaConf.to_container(cfg.sac))
-    actor = make_actor(spec.obs_dim, spec.action_dim)
-    loss = make_sac_learner(actor, make_qvalue(spec.obs_dim, spec.action_dim), hp).to(device)
+    features = make_input_features(spec, ego_relative=False)  # the task's hidden entries dropped (locomotion's x)
+    actor = make_actor(spec.obs_dim, spec.action_dim, input_features=features)
+    loss = make_sac_learner(actor, make_qvalue(spec.obs_dim, spec.action_dim, input_features=features), hp).to(device)
     optimizer = torch.optim.Adam([p for p in loss.parameters() if p.requires_grad], lr=hp.lr)
     online = make_online_buffer(cfg.replay_buffer.size, hp.batch_size, [], device)
     return assemble_trainer(

@@ -10,7 +10,7 @@ from torchrl_csirl.modules.actor_critic import (
 )
 from torchrl_csirl.modules.ensemble import FusedCriticEnsemble, fused_critic_ensemble
 from torchrl_csirl.modules.export import load_policy, save_policy
-from torchrl_csirl.modules.features import EgoRelativeFeatures, FeatureChain, make_input_features
+from torchrl_csirl.modules.features import DropFeatures, EgoRelativeFeatures, FeatureChain, make_input_features
 from torchrl_csirl.modules.fused_actor import FusedTanhNormalActor, fused_tanh_normal_actor
 from torchrl_csirl.modules.lane_features import LaneFeatures
 from torchrl_csirl.modules.reward import (
@@ -37,6 +37,7 @@ __all__ = [
     "expert_reference_states",
     "make_actor",
     "make_input_features",
+    "DropFeatures",
     "make_qvalue",
     "make_reward_network",
     "save_policy",

@@ -9,7 +9,7 @@ import torch
 from torchrl.modules import ProbabilisticActor
 
 from torchrl_csirl.modules.actor_critic import make_actor
-from torchrl_csirl.modules.features import EgoRelativeFeatures, FeatureChain, feature_map_from_config
+from torchrl_csirl.modules.features import DropFeatures, EgoRelativeFeatures, FeatureChain, feature_map_from_config
 from torchrl_csirl.modules.lane_features import LaneFeatures
 
 __all__ = ["load_policy", "save_policy"]
@@ -23,7 +23,7 @@ def save_policy(actor: ProbabilisticActor, path: str | os.PathLike, *, obs_dim: 
     """Writes the actor's weights and what is needed to rebuild it (``metadata``: e.g. the scenario).
 
     An input map inside the actor (:class:`~torchrl_csirl.modules.EgoRelativeFeatures`,
-    :class:`~torchrl_csirl.modules.LaneFeatures` or a chain of both) is saved with it (its
+    :class:`~torchrl_csirl.modules.LaneFeatures`, :class:`~torchrl_csirl.modules.DropFeatures` or a chain) is saved with it (its
     constructor arguments) and rebuilt by :func:`load_policy`.
 
     Examples:
@@ -50,7 +50,7 @@ def save_policy(actor: ProbabilisticActor, path: str | os.PathLike, *, obs_dim: 
 
 
 def _input_features_config(actor: ProbabilisticActor) -> dict[str, Any] | None:
-    found = [m for m in actor.modules() if isinstance(m, (FeatureChain, EgoRelativeFeatures, LaneFeatures))]
+    found = [m for m in actor.modules() if isinstance(m, (FeatureChain, EgoRelativeFeatures, LaneFeatures, DropFeatures))]
     return found[0].config() if found else None  # the outermost map (a chain comes before its members)
 
 

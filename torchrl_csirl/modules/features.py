@@ -18,7 +18,7 @@ from torch import nn
 
 from torchrl_csirl.modules.lane_features import LaneFeatures
 
-__all__ = ["EgoRelativeFeatures", "FeatureChain", "RELATIVE_REFERENCE", "feature_map_from_config", "make_input_features"]
+__all__ = ["DropFeatures", "EgoRelativeFeatures", "FeatureChain", "RELATIVE_REFERENCE", "feature_map_from_config", "make_input_features"]
 
 #: metres (positions) and metres per second (velocities) that one unit of a relative feature
 #: represents, before clipping to ``[-clip, clip]``.
@@ -146,6 +146,58 @@ class EgoRelativeFeatures(nn.Module):
         return f"vehicles={self.vehicles_count}, relative={self.relative_indices}, gains={list(self.gains)}"
 
 
+class DropFeatures(nn.Module):
+    """Drops observation entries the networks must not read: a task's ``hidden_feature_indices``.
+
+    The locomotion tasks keep the torso's absolute x in the observation for the matching reward;
+    every network reads the observation through this map, so a policy sees what gymnasium's default
+    observation holds. Parameter-free, like the other input maps.
+
+    Args:
+        in_features (int): input size.
+        hidden (sequence of int): indices to drop, in ``[0, in_features)``.
+
+    Examples:
+        >>> import torch
+        >>> drop = DropFeatures(4, hidden=[0])
+        >>> drop(torch.tensor([[9.0, 1.0, 2.0, 3.0]])), drop.out_features
+        (tensor([[1., 2., 3.]]), 3)
+    """
+
+    def __init__(self, in_features: int, hidden: Sequence[int]) -> None:
+        super().__init__()
+        hidden = sorted({int(i) for i in hidden})
+        if not hidden or any(not 0 <= i < in_features for i in hidden) or len(hidden) >= in_features:
+            raise ValueError(f"hidden must be indices in [0, {in_features}) that keep at least one entry, got {hidden}.")
+        self._in_features = int(in_features)
+        self.hidden = tuple(hidden)
+        # a plain tuple, not a buffer (as EgoRelativeFeatures.gains); a contiguous run is a slice
+        self.keep = tuple(i for i in range(in_features) if i not in self.hidden)
+        contiguous = self.keep == tuple(range(self.keep[0], self.keep[-1] + 1))
+        self._slice = slice(self.keep[0], self.keep[-1] + 1) if contiguous else None
+
+    @property
+    def in_features(self) -> int:
+        return self._in_features
+
+    @property
+    def out_features(self) -> int:
+        return len(self.keep)
+
+    def config(self) -> dict[str, Any]:
+        return {"kind": "drop", "in_features": self._in_features, "hidden": list(self.hidden)}
+
+    def forward(self, observation: torch.Tensor) -> torch.Tensor:
+        if observation.shape[-1] != self._in_features:
+            raise ValueError(f"DropFeatures expects observations of size {self._in_features}, got {observation.shape[-1]}.")
+        if self._slice is not None:
+            return observation[..., self._slice]
+        return observation.index_select(-1, torch.as_tensor(self.keep, device=observation.device))
+
+    def extra_repr(self) -> str:
+        return f"in_features={self._in_features}, hidden={list(self.hidden)}"
+
+
 class FeatureChain(nn.Sequential):
     """Parameter-free input maps applied one after the other (each appends to its input).
 
@@ -169,8 +221,9 @@ class FeatureChain(nn.Sequential):
 
 
 def make_input_features(spec: Any, ego_relative: bool = True, lane: bool = False) -> nn.Module | None:
-    """The networks' input map for a driving scenario: :class:`EgoRelativeFeatures` (``ego_relative``),
-    then :class:`~torchrl_csirl.modules.LaneFeatures` (``lane``); ``None`` for neither.
+    """The networks' input map for a task: :class:`EgoRelativeFeatures` (``ego_relative``, driving),
+    then :class:`~torchrl_csirl.modules.LaneFeatures` (``lane``, driving), then :class:`DropFeatures`
+    where the task hides entries (``spec.hidden_feature_indices``); ``None`` for none of them.
 
     Examples:
         >>> from torchrl_csirl.envs import SCENARIOS
@@ -178,12 +231,18 @@ def make_input_features(spec: Any, ego_relative: bool = True, lane: bool = False
         True
         >>> make_input_features(SCENARIOS["merge"], ego_relative=False, lane=True).out_features  # + lateral offset
         26
+        >>> from torchrl_csirl.envs import resolve_scenario
+        >>> make_input_features(resolve_scenario("hopper"), ego_relative=False)  # x hidden
+        DropFeatures(in_features=12, hidden=[0])
     """
     maps: list[nn.Module] = []
     if ego_relative:
         maps.append(EgoRelativeFeatures.from_scenario(spec))
     if lane:
         maps.append(LaneFeatures.from_scenario(spec, in_features=maps[-1].out_features if maps else None))
+    hidden = tuple(getattr(spec, "hidden_feature_indices", ()))
+    if hidden:  # last: the maps above append, so the observation's own indices stay where they were
+        maps.append(DropFeatures(maps[-1].out_features if maps else int(spec.obs_dim), hidden))
     if not maps:
         return None
     return maps[0] if len(maps) == 1 else FeatureChain(*maps)
@@ -199,4 +258,6 @@ def feature_map_from_config(config: dict[str, Any],
         return FeatureChain(*(feature_map_from_config(c, lane_centres) for c in config["maps"]))
     if kind == "lane":
         return LaneFeatures.from_config(config, lane_centres)
+    if kind == "drop":
+        return DropFeatures(config["in_features"], config["hidden"])
     return EgoRelativeFeatures(**{k: v for k, v in config.items() if k != "kind"})

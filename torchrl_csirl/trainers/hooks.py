@@ -62,7 +62,7 @@ class EvaluationHook:
     Args:
         evaluate: ``callable() -> dict`` of metrics (e.g. a partial of
             :func:`~torchrl_csirl.trainers.evaluate_policy`, which works on any task); the progress
-            line shows its ``accomplish_rate`` (or ``env_return``).
+            line shows its ``accomplish_rate`` and its ``env_return``.
         every_rounds: evaluation cadence in rounds.
     """
 
@@ -78,9 +78,11 @@ class EvaluationHook:
         metrics = self.evaluate()
         self.history.append({"frames": trainer.frames, "updates": trainer.updates, **metrics})
         trainer.record(**{f"eval_{key}": value for key, value in metrics.items()})
-        shown = metrics.get("accomplish_rate", metrics.get("env_return"))  # an evaluator of one's own may have neither
-        if isinstance(shown, (int, float)):
-            trainer.postfix["eval"] = f"{shown:.2f}"
+        rate, ret = metrics.get("accomplish_rate"), metrics.get("env_return")  # an evaluator of one's own may have neither
+        if isinstance(rate, (int, float)):
+            trainer.postfix["eval"] = f"{rate:.2f}"
+        if isinstance(ret, (int, float)):  # the score of a task without a goal (locomotion)
+            trainer.postfix["return"] = f"{ret:.0f}" if abs(ret) >= 100 else f"{ret:.2f}"
         return metrics
 
     def __call__(self, trainer: CSIRLTrainer) -> None:

@@ -1,0 +1,121 @@
+"""gymnasium's MuJoCo locomotion as tasks (``hopper``, ``halfcheetah``): x in the observation for the
+matching reward, out of every network's input; the expert script, CSIRL and a baseline on tiny budgets."""
+from __future__ import annotations
+
+import json
+
+import pytest
+import torch
+from tensordict import TensorDict
+
+from torchrl_csirl._compat import gym_env_of
+from torchrl_csirl.envs import TaskSpec, make_env, resolve_scenario
+from torchrl_csirl.envs.expert import make_expert
+from torchrl_csirl.modules import DropFeatures, load_policy, make_actor, make_input_features, save_policy
+from torchrl_csirl.modules.features import feature_map_from_config
+from torchrl_csirl.scripts import csirl_robotics, imitation_robotics, train_expert
+
+TINY = [
+    "collector.total_frames=400", "collector.frames_per_batch=200", "collector.cut_episodes=true",
+    "collector.num_workers=1", "collector.init_random_frames=200", "collector.main_threads=1",
+    "replay_buffer.warmup_frames=200", "optim.utd_ratio=0.1", "eval.episodes=1", "eval.final_episodes=2",
+    "eval.video=false", "logger.backend=csv", "logger.progress_bar=false",
+]
+
+
+@pytest.mark.parametrize("name, gym_size", [("hopper", 11), ("halfcheetah", 17)])
+def test_the_observation_keeps_x_first_and_the_networks_drop_it(name, gym_size):
+    spec = resolve_scenario(name)
+    assert spec.obs_dim == gym_size + 1 and spec.hidden_feature_indices == (0,)
+    assert spec.matching_features == ("x",) and spec.feature_name(1) == "z"
+    env = make_env(name, seed=0)
+    rollout = env.rollout(5)
+    assert rollout["next", "observation"][-1, 0].item() == pytest.approx(float(gym_env_of(env).unwrapped.data.qpos[0]))
+    assert not rollout["next", "success"].any()  # no goal: returns are compared
+    features = make_input_features(spec, ego_relative=False)
+    assert isinstance(features, DropFeatures) and features.out_features == gym_size
+    actor = make_actor(spec.obs_dim, spec.action_dim, input_features=features)
+    obs = rollout["observation"][:1]
+    moved = obs.clone()
+    moved[:, 0] += 50.0  # 50 m further on: the same state for the policy
+    with torch.no_grad():
+        loc = actor.module[0](TensorDict({"observation": obs}, [1]))["loc"]
+        loc_moved = actor.module[0](TensorDict({"observation": moved}, [1]))["loc"]
+    torch.testing.assert_close(loc, loc_moved, rtol=0, atol=0)
+
+
+def test_drop_features_keeps_the_rest_in_order_and_round_trips():
+    drop = DropFeatures(5, hidden=[3, 1])
+    torch.testing.assert_close(drop(torch.arange(5.0)), torch.tensor([0.0, 2.0, 4.0]))
+    rebuilt = feature_map_from_config(drop.config())
+    assert isinstance(rebuilt, DropFeatures) and rebuilt.keep == (0, 2, 4)
+    with pytest.raises(ValueError, match="size 5, got 4"):
+        drop(torch.zeros(4))
+    with pytest.raises(ValueError, match="keep at least one entry"):
+        DropFeatures(2, hidden=[0, 1])
+    spec = resolve_scenario("hopper")
+    with pytest.raises(ValueError, match="hidden_feature_indices must be indices in \\[0, 12\\)"):
+        TaskSpec(**{**{f: getattr(spec, f) for f in ("obs_dim", "action_dim", "max_steps", "finish_position",
+                                                      "ego_feature_indices", "position_feature_indices", "matching_scale")},
+                    "name": "bad", "hidden_feature_indices": (12,)})
+
+
+def test_a_saved_policy_keeps_its_input_map(tmp_path):
+    spec = resolve_scenario("halfcheetah")
+    actor = make_actor(spec.obs_dim, spec.action_dim, input_features=make_input_features(spec, ego_relative=False))
+    path = save_policy(actor, str(tmp_path / "policy.pt"), obs_dim=spec.obs_dim, action_dim=spec.action_dim)
+    loaded = load_policy(path)
+    obs = TensorDict({"observation": torch.randn(3, spec.obs_dim)}, [3])
+    with torch.no_grad():
+        torch.testing.assert_close(actor.module[0](obs.clone())["loc"], loaded.module[0](obs.clone())["loc"])
+
+
+def test_an_expert_its_demonstrations_then_csirl_and_a_baseline_on_the_hopper(tmp_path):
+    """train_expert.py -> demonstrations -> csirl_robotics.py and imitation_robotics.py; the expert row's
+    policy is the trained one (make_expert(policy=...))."""
+    expert = train_expert.main(["env.scenario=hopper", *TINY, "demos.episodes=2", f"logger.output_dir={tmp_path}"])
+    assert expert["scenario"] == "hopper" and expert["demos_episodes"] == 2
+    demos = expert["demos_path"]
+    csirl = csirl_robotics.main(["env.task=hopper", f"expert.path={demos}", "expert.num_trajectories=2",
+                                 "csirl.updates_per_round=10", "csirl.num_qvalue_nets=2", "replay_buffer.batch_size=32",
+                                 *TINY, f"logger.output_dir={tmp_path}"])
+    assert csirl["scenario"] == "hopper" and csirl["frames"] == 400 and csirl["return"] > 0
+    bc = imitation_robotics.main(["method=bc", "env.task=hopper", f"expert.path={demos}", "expert.num_trajectories=2",
+                                  *TINY, f"logger.output_dir={tmp_path}"])
+    assert bc["updates"] > 0 and bc["success_rate"] == 0.0
+    driver = make_expert("hopper", policy=expert["run_dir"])
+    env = make_env("hopper", seed=0)
+    env.reset()
+    action = driver.act(gym_env_of(env))
+    assert action.shape == (3,) and abs(action).max() <= 1
+
+
+def test_the_collector_refuses_a_batch_that_cuts_a_locomotion_episode():
+    from torchrl_csirl.launch import ConfigError
+    from torchrl_csirl.launch.builders import check_whole_episodes
+
+    cfg = csirl_robotics.load_config(["env.task=hopper"])  # the robotics scripts' 1 400 frames: 700 per worker
+    with pytest.raises(ConfigError, match="frames_per_batch >= 2000"):
+        check_whole_episodes(cfg.collector, resolve_scenario("hopper"), 1)
+
+
+def test_the_benchmark_report_normalises_by_the_expert_row_and_shows_the_published_table(tmp_path):
+    import torchrl_csirl.scripts.benchmark as bench
+
+    for method, seed, value in [("expert", 0, 3500.0), ("random", 0, 17.5), ("csirl", 0, 1750.0), ("csirl", 1, 2450.0),
+                                ("dac", 0, 3150.0), ("dac", 1, 3290.0)]:
+        run_dir = tmp_path / f"hopper-{method}-s{seed}"
+        run_dir.mkdir()
+        frames = 0 if method in bench.REFERENCE_METHODS else bench.TABLE_BUDGETS["hopper"]
+        (run_dir / "summary.json").write_text(json.dumps({
+            "scenario": "hopper", "method": method, "seed": seed, "return": value, "frames": frames,
+            "success_rate": 0.0, "accomplish_rate": 0.0, "total_wall_s": 600.0}))
+    rows = bench.table_rows(bench.read_runs([str(tmp_path)]))
+    row = {r["method"]: r for r in rows}
+    assert row["expert"]["normalized_return_mean"] == 1.0 and row["random"]["normalized_return_mean"] == 0.005
+    assert row["csirl"]["normalized_return_mean"] == pytest.approx(0.6)
+    assert row["dac"]["vs_csirl"] == pytest.approx(3220.0 - 2100.0)
+    table = bench.markdown_table(rows)
+    assert "| csirl | 0.60 ± 0.14 (n=2) |" in table and "300 000 frames per run" in table
+    assert f"| dac | {3305.1 / 3532.7:.2f} (IQ-Learn Tab. 3) |" in table
+    assert "antmaze" not in table and "accomplish rate" not in table
