@@ -70,11 +70,20 @@ def test_a_saved_policy_keeps_its_input_map(tmp_path):
         torch.testing.assert_close(actor.module[0](obs.clone())["loc"], loaded.module[0](obs.clone())["loc"])
 
 
-def test_an_expert_its_demonstrations_then_csirl_and_a_baseline_on_the_hopper(tmp_path):
-    """train_expert.py -> demonstrations -> csirl_robotics.py and imitation_robotics.py; the expert row's
-    policy is the trained one (make_expert(policy=...))."""
-    expert = train_expert.main(["env.scenario=hopper", *TINY, "demos.episodes=2", f"logger.output_dir={tmp_path}"])
+def test_an_expert_its_demonstrations_then_csirl_and_a_baseline_on_the_hopper(tmp_path, monkeypatch):
+    """train_expert.py -> demonstrations (.npz and Minari) -> csirl_robotics.py and imitation_robotics.py; the
+    expert row's policy is the trained one (make_expert(policy=...))."""
+    import minari
+
+    from torchrl_csirl.data import load_minari_dataset
+
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "minari"))
+    expert = train_expert.main(["env.scenario=hopper", *TINY, "demos.episodes=2", "demos.minari_id=csirl/hopper/tiny-v0",
+                                f"logger.output_dir={tmp_path}"])
     assert expert["scenario"] == "hopper" and expert["demos_episodes"] == 2
+    assert load_minari_dataset("csirl/hopper/tiny-v0").num_trajectories == 2
+    recovered = minari.load_dataset("csirl/hopper/tiny-v0").recover_environment()  # x kept, as the task's
+    assert recovered.observation_space.shape == (12,)
     demos = expert["demos_path"]
     csirl = csirl_robotics.main(["env.task=hopper", f"expert.path={demos}", "expert.num_trajectories=2",
                                  "csirl.updates_per_round=10", "csirl.num_qvalue_nets=2", "replay_buffer.batch_size=32",
@@ -119,3 +128,22 @@ def test_the_benchmark_report_normalises_by_the_expert_row_and_shows_the_publish
     assert "| csirl | 0.60 ± 0.14 (n=2) |" in table and "300 000 frames per run" in table
     assert f"| dac | {3305.1 / 3532.7:.2f} (IQ-Learn Tab. 3) |" in table
     assert "antmaze" not in table and "accomplish rate" not in table
+
+
+@pytest.mark.parametrize("name, published_expert", [("halfcheetah", 5098.3)])
+def test_the_shipped_expert_and_its_demonstrations(tmp_path, name, published_expert):
+    """25 whole episodes above the published table's expert (IQ-Learn's), running forward; the expert row
+    replays the shipped policy on the test episodes and earns what the demonstrations earned."""
+    from torchrl_csirl.data.shipped import load_expert_demonstrations
+
+    spec = resolve_scenario(name)
+    demos = load_expert_demonstrations(name, 25)
+    episodes = demos.metadata["episodes"]
+    assert len(episodes) == 25 and all(e["length"] == spec.max_steps for e in episodes)
+    assert min(e["return"] for e in episodes) > published_expert
+    first = load_expert_demonstrations(name, 1).transitions()
+    assert first["observation"].shape == (spec.max_steps, spec.obs_dim)
+    assert first["next", "observation"][-1, 0] > first["observation"][0, 0] + 10  # x: metres run forward
+    row = imitation_robotics.main(["method=expert", f"env.task={name}", "eval.final_episodes=1", "eval.video=false",
+                                   "logger.backend=csv", f"logger.output_dir={tmp_path}"])
+    assert row["return"] == pytest.approx(sum(e["return"] for e in episodes) / 25, rel=0.05)

@@ -158,7 +158,7 @@ def save_minari_dataset(
         from torchrl_csirl.envs.scenarios import register_scenarios
 
         register_scenarios()
-        env_spec = gym.spec(resolve_scenario(task).gym_id)
+        env_spec = _task_env_spec(resolve_scenario(task))
     observation_space = gym.spaces.Box(-np.inf, np.inf, (demos.observation_dim,), np.float32)
     action_space = gym.spaces.Box(-1.0, 1.0, (demos.action_dim,), np.float32)
     with _minari_root(root):
@@ -181,6 +181,26 @@ def save_minari_dataset(
         )
         dataset.storage.update_metadata({_METADATA_KEY: json.dumps(demos.metadata, sort_keys=True)})
     return os.fspath(path)
+
+
+def _task_env_spec(spec: Any) -> Any:
+    """The gymnasium ``EnvSpec`` a dataset of ``spec``'s task records (``recover_environment()`` builds it): the
+    task's own id; a locomotion task's gymnasium id with x kept in the observation; a gymnasium id run as a task;
+    None for a task of one's own (registered with its factory only: the dataset then records no environment)."""
+    import dataclasses
+
+    import gymnasium as gym
+
+    from torchrl_csirl.envs.locomotion import LOCOMOTION_GYM_IDS
+
+    if spec.gym_id:
+        return gym.spec(spec.gym_id)
+    if spec.name in LOCOMOTION_GYM_IDS:
+        base = gym.spec(LOCOMOTION_GYM_IDS[spec.name])
+        return dataclasses.replace(base, kwargs={**base.kwargs, "exclude_current_positions_from_observation": False})
+    if spec.family == "gymnasium" and spec.name in gym.registry:
+        return gym.spec(spec.name)
+    return None
 
 
 def _flat_observations(observations: Any, keys: Sequence[str], episode: int) -> np.ndarray:

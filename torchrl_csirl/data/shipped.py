@@ -3,10 +3,11 @@
 Layout: ``torchrl_csirl/data/experts/<task>/<curriculum>_25.npz``. Driving scenarios (our expert
 driver): ``curriculum`` in ``"empty"`` (trajectory 0 recorded on an empty road, as in the paper)
 and ``"traffic"`` (trajectory 0 recorded with traffic); both files share trajectories 1..24
-(successful expert episodes with traffic). Relocate (the DAPG policy) and AntMaze (the waypoint-driven
-ant): one file each, ``"expert"``. The paper's dataset sizes N in {1, 5, 10, 15, 20, 25} are the nested
-prefixes: the dataset of size N is the first N trajectories, so every size contains the
-curriculum trajectory. See ``docs/experts.md`` for how the files were generated.
+(successful expert episodes with traffic). Relocate (the DAPG policy), AntMaze (the waypoint-driven
+ant) and the locomotion tasks (their SAC experts, whole 1 000-step episodes): one file each,
+``"expert"``. The paper's dataset sizes N in {1, 5, 10, 15, 20, 25} are the nested prefixes: the
+dataset of size N is the first N trajectories, so every size contains the curriculum trajectory.
+See ``docs/experts.md`` for how the files were generated.
 
 Examples:
     >>> from torchrl_csirl.data.shipped import load_expert_demonstrations, curriculum_trajectory
@@ -44,6 +45,8 @@ TASK_CURRICULA: dict[str, tuple[str, ...]] = {
     **{name: CURRICULA for name in SCENARIO_NAMES},
     "antmaze-umaze": ("expert",),
     "relocate": ("expert",),
+    "hopper": ("expert",),
+    "halfcheetah": ("expert",),
 }
 """Task -> the curricula of its shipped files (the first is the default)."""
 _FILE_SIZE = 25
@@ -54,7 +57,7 @@ def available_expert_datasets() -> dict[str, list[str]]:
 
     Examples:
         >>> sorted(available_expert_datasets())
-        ['antmaze-umaze', 'highway-fast', 'intersection', 'merge', 'relocate', 'roundabout']
+        ['antmaze-umaze', 'halfcheetah', 'highway-fast', 'intersection', 'merge', 'relocate', 'roundabout']
     """
     found: dict[str, list[str]] = {}
     for scenario, task_curricula in TASK_CURRICULA.items():

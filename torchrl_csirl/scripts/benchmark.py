@@ -93,10 +93,11 @@ TABLE_BUDGETS.update({task: 300_000 for task in LOCOMOTION_ORDER})
 #: what a task's cells need besides the budget (before the user's overrides). The locomotion tasks: 1 000-step
 #: episodes need 1 000 frames per worker and batch (the robotics scripts' 1 400 would cut them); one expert
 #: trajectory, the protocol of the published table beside ours (IQ-Learn's Table 3, also ValueDICE's); an
-#: evaluation and a checkpoint every 5 rounds (10 000 updates: 10 validation episodes of 1 000 steps each)
+#: evaluation and a checkpoint every 5 rounds (10 000 updates: 10 validation episodes of 1 000 steps each); no
+#: video of every cell (1 000 frames each; ``recipes/watch.py`` films a run)
 TASK_OVERRIDES: dict[str, tuple[str, ...]] = {
     task: ("collector.frames_per_batch=2000", "expert.num_trajectories=1", "eval.every_rounds=5",
-           "checkpoint.every_rounds=5") for task in LOCOMOTION_ORDER}
+           "checkpoint.every_rounds=5", "eval.video=false") for task in LOCOMOTION_ORDER}
 
 #: the paper's Table I (accomplish rate, 25 expert trajectories, 5 seeds; the expert at 1.00, so
 #: read as expert-normalised): /work/shared/SPEC.md section 2, paper Table "tab:result"
