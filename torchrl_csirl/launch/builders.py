@@ -37,7 +37,7 @@ from torchrl_csirl.data import (
 )
 from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, TaskSpec, env_factory, make_serial_env, resolve_scenario  # noqa: F401
 from torchrl_csirl.envs import make_env as make_scenario_env
-from torchrl_csirl.launch.config import ConfigError
+from torchrl_csirl.launch.config import ConfigError, override_strings
 from torchrl_csirl.launch.run import ExpertDataError, default_run_name, make_run_dir, resolve_resume, stop_with_checkpoint
 from torchrl_csirl.modules import make_input_features
 from torchrl_csirl.trainers import (
@@ -536,7 +536,7 @@ def requested_config(argv: list[str], load: Callable[[list[str]], DictConfig],
     """The configuration a recipe's command line asks for: ``load(argv)`` for a new run, or with
     ``checkpoint.resume=`` the saved run's configuration updated by the rest of the command line
     (``load_run(run_dir, argv)``, e.g. a larger ``collector.total_frames``), ``checkpoint.resume`` kept."""
-    resume = next((a.split("=", 1)[1] for a in argv if a.startswith("checkpoint.resume=")), None)
+    resume = override_strings(argv).get("checkpoint.resume")
     if resume is None or resume == "null":
         return load(argv)
     cfg = load_run(resolve_resume(resume)[0], [a for a in argv if not a.startswith("checkpoint.resume=")])

@@ -224,6 +224,17 @@ def parse_overrides(overrides: list[str]) -> DictConfig:
         raise ConfigError(f"bad override: {_first_line(err)}") from None
 
 
+def override_strings(overrides: list[str] | None) -> dict[str, str]:
+    """``key=value`` strings as ``{key: value}``, the values as written (the last one of a key wins): what a script
+    reads of its command line before the configuration is built (the task to register, the run to resume).
+
+    Examples:
+        >>> override_strings(["env.gym_id=Pendulum-v1", "checkpoint.resume=runs/a=b"])
+        {'env.gym_id': 'Pendulum-v1', 'checkpoint.resume': 'runs/a=b'}
+    """
+    return {key: value for key, _, value in (item.partition("=") for item in overrides or [])}
+
+
 def scene_defaults_path(config_dir: str, scenario: str) -> str:
     """``<config_dir>/scene/<scenario>.yaml``: a scenario's own defaults (the file may not exist)."""
     return os.path.join(config_dir, "scene", f"{scenario}.yaml")

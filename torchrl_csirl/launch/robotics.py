@@ -17,7 +17,7 @@ from omegaconf import DictConfig, OmegaConf
 from torchrl_csirl.envs import import_task_module, make_gymnasium_task, task_names
 from torchrl_csirl.envs.robotics import ANT_GOAL_SPEC
 from torchrl_csirl.launch import config as config_lib  # noqa: F401 - doctests
-from torchrl_csirl.launch.config import CollectorConfig, ConfigError, ExpertConfig, ModelConfig, option
+from torchrl_csirl.launch.config import CollectorConfig, ConfigError, ExpertConfig, ModelConfig, option, override_strings
 
 __all__ = ["RoboticsCollectorConfig", "RoboticsEnvConfig", "RoboticsExpertConfig", "RoboticsModelConfig",
            "RoboticsSections", "check_driving_task", "check_robotics_config", "prepare_task", "resolve_task", "task_choices"]
@@ -70,10 +70,6 @@ class RoboticsSections:
     collector: RoboticsCollectorConfig = field(default_factory=RoboticsCollectorConfig)
 
 
-def _given(overrides: list[str] | None) -> dict[str, str]:
-    return {key: value for key, _, value in (item.partition("=") for item in overrides or [])}
-
-
 def prepare_task(overrides: list[str] | None, run_dir: str | None = None) -> list[str]:
     """Registers the task the configuration names before it is checked; returns the overrides.
 
@@ -94,7 +90,7 @@ def prepare_task(overrides: list[str] | None, run_dir: str | None = None) -> lis
     saved: dict = {}
     if run_dir is not None and os.path.isfile(os.path.join(run_dir, "config.yaml")):
         saved = OmegaConf.to_container(OmegaConf.load(os.path.join(run_dir, "config.yaml"))).get("env") or {}
-    given = {**{f"env.{k}": ("null" if v is None else str(v)) for k, v in saved.items()}, **_given(overrides)}
+    given = {**{f"env.{k}": ("null" if v is None else str(v)) for k, v in saved.items()}, **override_strings(overrides)}
     module = given.get("env.module", "null")
     try:
         if module != "null":
@@ -107,7 +103,7 @@ def prepare_task(overrides: list[str] | None, run_dir: str | None = None) -> lis
                             success=given.get("env.success", "termination"))
     except ValueError as err:
         raise ConfigError(str(err)) from None
-    named = _given(overrides)
+    named = override_strings(overrides)
     for key in ("env.scenario", "env.task"):
         if named.get(key, gym_id) != gym_id:
             raise ConfigError(f"{key}={named[key]} and env.gym_id={gym_id}: the task is the gymnasium id; give one of them")
@@ -125,7 +121,7 @@ def check_driving_task(overrides: list[str] | None, script: str) -> None:
         ...
         torchrl_csirl.launch.config.ConfigError: env.scenario=relocate: not a driving scene; recipes/csirl_robotics.py runs it
     """
-    given = _given(overrides)
+    given = override_strings(overrides)
     for key in ("env.gym_id", "env.module", "env.task"):
         if given.get(key, "null") != "null":
             raise ConfigError(f"{key}={given[key]}: the driving scripts take env.scenario only; {script} runs any other task")
@@ -144,7 +140,7 @@ def resolve_task(cfg: DictConfig, overrides: list[str] | None) -> None:
         >>> cfg.env.scenario, cfg.env.task
         ('antmaze-umaze', 'antmaze-umaze')
     """
-    given = _given(overrides)
+    given = override_strings(overrides)
     task, scenario = given.get("env.task"), given.get("env.scenario")
     if task is not None and scenario is not None and task != scenario:
         raise ConfigError(f"env.task={task} and env.scenario={scenario}: the same setting, give one of them")
