@@ -847,12 +847,12 @@ def _robotics_experts() -> dict[str, Any]:
 
 
 def expert_tasks() -> tuple[str, ...]:
-    """The tasks with an expert: the four driving scenarios, AntMaze (the waypoint-driven ant) and
-    Relocate (the DAPG policy).
+    """The tasks with an expert: the four driving scenarios, AntMaze (the waypoint-driven ant),
+    Relocate (the DAPG policy) and the locomotion tasks whose SAC expert is shipped.
 
     Examples:
-        >>> expert_tasks()[-2:]
-        ('antmaze-umaze', 'relocate')
+        >>> expert_tasks()[4:6], "halfcheetah" in expert_tasks()
+        (('antmaze-umaze', 'relocate'), True)
     """
     return (*EXPERT_CONFIGS, *_robotics_experts())
 
