@@ -191,13 +191,13 @@ def _task_env_spec(spec: Any) -> Any:
 
     import gymnasium as gym
 
-    from torchrl_csirl.envs.locomotion import LOCOMOTION_GYM_IDS
+    from torchrl_csirl.envs.locomotion import LOCOMOTION_GYM_IDS, LOCOMOTION_MAKE_KWARGS
 
     if spec.gym_id:
         return gym.spec(spec.gym_id)
     if spec.name in LOCOMOTION_GYM_IDS:
         base = gym.spec(LOCOMOTION_GYM_IDS[spec.name])
-        return dataclasses.replace(base, kwargs={**base.kwargs, "exclude_current_positions_from_observation": False})
+        return dataclasses.replace(base, kwargs={**base.kwargs, **LOCOMOTION_MAKE_KWARGS})
     if spec.family == "gymnasium" and spec.name in gym.registry:
         return gym.spec(spec.name)
     return None

@@ -840,7 +840,7 @@ def _robotics_experts() -> dict[str, Any]:
     from torchrl_csirl.envs.robotics.expert import DAPGRelocateExpert
 
     experts: dict[str, Any] = {"antmaze-umaze": WaypointAntExpert, "relocate": DAPGRelocateExpert}
-    for name in ("hopper", "halfcheetah"):  # once their SAC expert is shipped
+    for name in LOCOMOTION_TASKS:  # once their SAC expert is shipped
         if os.path.isfile(expert_policy_path(name)):
             experts[name] = partial(LocomotionExpert, name)
     return experts

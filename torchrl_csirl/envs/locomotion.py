@@ -38,11 +38,13 @@ import torch
 from torchrl_csirl._paths import EXPERTS_DIR
 from torchrl_csirl.envs.spec import TaskSpec
 
-__all__ = ["LOCOMOTION_GYM_IDS", "LOCOMOTION_TASKS", "LocomotionExpert", "expert_policy_path", "locomotion_factories",
-           "make_locomotion_env"]
+__all__ = ["LOCOMOTION_GYM_IDS", "LOCOMOTION_MAKE_KWARGS", "LOCOMOTION_TASKS", "LocomotionExpert", "expert_policy_path",
+           "locomotion_factories", "make_locomotion_env"]
 
 #: task name -> the gymnasium id it wraps
 LOCOMOTION_GYM_IDS: dict[str, str] = {"hopper": "Hopper-v5", "halfcheetah": "HalfCheetah-v5"}
+#: the ``gym.make`` keywords of every locomotion task: x kept in the observation
+LOCOMOTION_MAKE_KWARGS: dict[str, bool] = {"exclude_current_positions_from_observation": False}
 
 
 def _locomotion_spec(name: str, joints: int, action_dim: int, dt: float, scale: float, body: str) -> TaskSpec:
@@ -86,8 +88,7 @@ def make_locomotion_env(name: str, device: torch.device | str = "cpu", **make_kw
 
     if name not in LOCOMOTION_GYM_IDS:
         raise ValueError(f"{name!r} is not a locomotion task; expected one of {sorted(LOCOMOTION_GYM_IDS)}.")
-    return make_gymnasium_env(LOCOMOTION_GYM_IDS[name], "none", device,
-                              exclude_current_positions_from_observation=False, **make_kwargs)
+    return make_gymnasium_env(LOCOMOTION_GYM_IDS[name], "none", device, **LOCOMOTION_MAKE_KWARGS, **make_kwargs)
 
 
 def locomotion_factories() -> dict[str, Callable[..., Any]]:
