@@ -12,6 +12,9 @@ process), collects ``--frames`` transitions into its online buffer and then time
 * ``mean_update_ms``: the average over ``csirl.meta_every`` updates, i.e. what one update costs
   in the training loop, and ``updates_per_s`` its inverse.
 
+Each figure is the median over iterations; ``*_ms_mean`` keys give the means (what a training run's
+updates-per-second measures).
+
 Usage::
 
     python benchmarks/bench_recipe_update.py [--iters 40] [key=value overrides of the recipe]
@@ -88,12 +91,14 @@ def main() -> None:
                   "overrides": args.overrides,
                   "batch": cfg.replay_buffer.batch_size, "meta_every": meta_every}
         result.update({f"{name}_ms": round(statistics.median(ts), 2) for name, ts in times.items()})
-        if meta_every is None:
-            mean = result["sac_step_ms"]
-        else:
-            mean = (result["joint_step_ms"] + (meta_every - 1) * result["sac_step_ms"]) / meta_every
-        result["mean_update_ms"] = round(mean, 2)
-        result["updates_per_s"] = round(1e3 / mean, 1)
+        result.update({f"{name}_ms_mean": round(statistics.mean(ts), 2) for name, ts in times.items()})
+        for suffix in ("", "_mean"):
+            if meta_every is None:
+                mean = result[f"sac_step_ms{suffix}"]
+            else:
+                mean = (result[f"joint_step_ms{suffix}"] + (meta_every - 1) * result[f"sac_step_ms{suffix}"]) / meta_every
+            result[f"mean_update_ms{suffix}"] = round(mean, 2)
+        result["updates_per_s"] = round(1e3 / result["mean_update_ms"], 1)
         print(json.dumps(result))
     finally:
         run.close()

@@ -13,8 +13,9 @@ storage. This script runs, ``--rounds`` times and alternated so that the machine
   episodes, no video): ``run_ms``, its learner time per update (``1 / updates_per_s`` of its
   ``summary.json``: the updates only, collection and evaluation excluded).
 
-``recipe_over_mix`` and ``run_over_mix`` are the medians over rounds of ``recipe_ms / mix_ms`` and
-``run_ms / mix_ms``.
+The benchmarks' figures come as medians over iterations and as means; the run's is a mean (total
+learner time over updates), so ``run_over_mix_mean`` compares like with like. ``*_over_mix_*`` are
+medians over rounds of the per-round ratios.
 
 Usage::
 
@@ -43,19 +44,21 @@ def _last_json_line(text: str) -> dict:
     raise RuntimeError(f"no JSON line in the output:\n{text[-2000:]}")
 
 
-def bench_mix_ms(iters: int) -> float:
-    """``bench_update.py``'s mean update over the recipe's mix of CSIRL iterations and SAC updates."""
+def bench_mix_ms(iters: int) -> tuple[float, float]:
+    """``bench_update.py``'s update over the recipe's mix of CSIRL iterations and SAC updates: (median, mean)."""
     out = subprocess.run([sys.executable, os.path.join(ROOT, "benchmarks", "bench_update.py"), "--iters", str(iters)],
                          capture_output=True, text=True, check=True, cwd=ROOT).stdout
     result = _last_json_line(out)
-    return (result["csirl_iteration_ms"] + (META_EVERY - 1) * result["sac_update_ms"]) / META_EVERY
+    return tuple((result[f"csirl_iteration_ms{s}"] + (META_EVERY - 1) * result[f"sac_update_ms{s}"]) / META_EVERY
+                 for s in ("", "_mean"))
 
 
-def recipe_mix_ms(iters: int) -> float:
-    """``bench_recipe_update.py``'s mean update (the recipe's own steps, same mix)."""
+def recipe_mix_ms(iters: int) -> tuple[float, float]:
+    """``bench_recipe_update.py``'s update (the recipe's own steps, same mix): (median, mean)."""
     out = subprocess.run([sys.executable, os.path.join(ROOT, "benchmarks", "bench_recipe_update.py"), "--iters", str(iters)],
                          capture_output=True, text=True, check=True, cwd=ROOT).stdout
-    return _last_json_line(out)["mean_update_ms"]
+    result = _last_json_line(out)
+    return result["mean_update_ms"], result["mean_update_ms_mean"]
 
 
 def run_update_ms(frames: int, out_dir: str, name: str) -> float:
@@ -82,15 +85,15 @@ def main() -> None:
         mix.append(bench_mix_ms(args.iters))
         recipe.append(recipe_mix_ms(args.iters))
         run.append(run_update_ms(args.frames, out_dir, f"round{i}"))
-        print(f"round {i}: learner alone {mix[-1]:.1f} ms, recipe's steps {recipe[-1]:.1f} ms, run {run[-1]:.1f} ms",
-              file=sys.stderr, flush=True)
-    print(json.dumps({
-        "rounds": args.rounds, "frames": args.frames,
-        "mix_ms": [round(x, 1) for x in mix], "recipe_ms": [round(x, 1) for x in recipe],
-        "run_ms": [round(x, 1) for x in run],
-        "recipe_over_mix": round(statistics.median(r / m for r, m in zip(recipe, mix)), 3),
-        "run_over_mix": round(statistics.median(r / m for r, m in zip(run, mix)), 3),
-    }))
+        print(f"round {i}: learner alone {mix[-1][0]:.1f} ms (mean {mix[-1][1]:.1f}), recipe's steps {recipe[-1][0]:.1f} "
+              f"ms (mean {recipe[-1][1]:.1f}), run {run[-1]:.1f} ms (a mean)", file=sys.stderr, flush=True)
+    result = {"rounds": args.rounds, "frames": args.frames, "run_ms": [round(x, 1) for x in run]}
+    for k, stat in enumerate(("median", "mean")):
+        result[f"mix_ms_{stat}"] = [round(x[k], 1) for x in mix]
+        result[f"recipe_ms_{stat}"] = [round(x[k], 1) for x in recipe]
+        result[f"recipe_over_mix_{stat}"] = round(statistics.median(r[k] / m[k] for r, m in zip(recipe, mix)), 3)
+        result[f"run_over_mix_{stat}"] = round(statistics.median(r / m[k] for r, m in zip(run, mix)), 3)
+    print(json.dumps(result))
 
 
 if __name__ == "__main__":

@@ -10,6 +10,8 @@ network evaluated without grad), then ``MetaRewardLoss`` forward/backward and th
 Adam step. 5 critics 2x256, observation size 25, action size 2,
 expert batch 32, ``torch.set_num_threads(2)``; warm-up then the median over iterations.
 The measurements are interleaved so that their ratios are robust to machine load.
+Medians are the headline figures; ``*_mean`` keys give the means (what a training run's
+updates-per-second measures) and ``*_min`` the minima.
 ``--reference`` also times, interleaved in the same process, the same learner with the critics
 evaluated by SACLoss's ``torch.vmap`` and the losses on SACLoss's own path (``reference_*`` keys
 and the ``*_speedup`` ratios). ``--stock-losses`` times the SACLoss path of the losses
@@ -147,6 +149,8 @@ def _summary(prefix: str, times: dict[str, list[float]]) -> dict[str, float]:
         f"{prefix}sac_update_ms": round(statistics.median(sac_ms), 2),
         f"{prefix}csirl_iteration_ms": round(statistics.median(csirl_ms), 2),
         f"{prefix}csirl_sequential_ms": round(statistics.median(seq_ms), 2),
+        f"{prefix}sac_update_ms_mean": round(statistics.mean(sac_ms), 2),
+        f"{prefix}csirl_iteration_ms_mean": round(statistics.mean(csirl_ms), 2),
         f"{prefix}sac_update_ms_min": round(min(sac_ms), 2),
         f"{prefix}csirl_iteration_ms_min": round(min(csirl_ms), 2),
         f"{prefix}csirl_sequential_ms_min": round(min(seq_ms), 2),
