@@ -5,10 +5,11 @@
 regulariser batches, maps ego-relative inputs, keeps two collector worker processes and a 1 M-slot
 storage. This script runs, ``--rounds`` times and alternated so that the machine's drift hits both:
 
-* ``bench_update.py --iters N``: ``mix_ms``, the mean update of the recipe's mix, one CSIRL
-  iteration every ``meta_every`` (2) updates and a plain SAC update otherwise;
-* ``bench_recipe_update.py --iters N``: ``recipe_ms``, the same mix of the recipe's own steps
+* ``bench_recipe_update.py --iters N``: ``recipe_ms_*``, the recipe's own steps in its mix
   (sampling through the buffer transforms, expert and regulariser batches, ego-relative inputs);
+* ``bench_update.py --iters N``: ``mix_ms_*``, the learner alone in the same mix, one CSIRL
+  iteration every ``csirl.meta_every`` updates (as ``bench_recipe_update.py`` reports it) and a
+  plain SAC update otherwise;
 * the README's run, shortened to ``--frames`` frames (its default configuration otherwise; 2 test
   episodes, no video): ``run_ms``, its learner time per update (``1 / updates_per_s`` of its
   ``summary.json``: the updates only, collection and evaluation excluded).
@@ -34,7 +35,6 @@ import sys
 import tempfile
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-META_EVERY = 2  # the recipe's csirl.meta_every default
 
 
 def _last_json_line(text: str) -> dict:
@@ -44,21 +44,26 @@ def _last_json_line(text: str) -> dict:
     raise RuntimeError(f"no JSON line in the output:\n{text[-2000:]}")
 
 
-def bench_mix_ms(iters: int) -> tuple[float, float]:
-    """``bench_update.py``'s update over the recipe's mix of CSIRL iterations and SAC updates: (median, mean)."""
-    out = subprocess.run([sys.executable, os.path.join(ROOT, "benchmarks", "bench_update.py"), "--iters", str(iters)],
+def _benchmark_json(script: str, iters: int) -> dict:
+    """The final JSON line of ``benchmarks/<script> --iters <iters>``."""
+    out = subprocess.run([sys.executable, os.path.join(ROOT, "benchmarks", script), "--iters", str(iters)],
                          capture_output=True, text=True, check=True, cwd=ROOT).stdout
-    result = _last_json_line(out)
-    return tuple((result[f"csirl_iteration_ms{s}"] + (META_EVERY - 1) * result[f"sac_update_ms{s}"]) / META_EVERY
+    return _last_json_line(out)
+
+
+def recipe_mix_ms(iters: int) -> tuple[tuple[float, float], int]:
+    """``bench_recipe_update.py``'s update (the recipe's own steps): (median, mean), and the recipe's
+    ``csirl.meta_every``."""
+    result = _benchmark_json("bench_recipe_update.py", iters)
+    return (result["mean_update_ms"], result["mean_update_ms_mean"]), result["meta_every"]
+
+
+def bench_mix_ms(iters: int, meta_every: int) -> tuple[float, float]:
+    """``bench_update.py``'s update over the recipe's mix (a CSIRL iteration every ``meta_every``
+    updates, SAC updates otherwise): (median, mean)."""
+    result = _benchmark_json("bench_update.py", iters)
+    return tuple((result[f"csirl_iteration_ms{s}"] + (meta_every - 1) * result[f"sac_update_ms{s}"]) / meta_every
                  for s in ("", "_mean"))
-
-
-def recipe_mix_ms(iters: int) -> tuple[float, float]:
-    """``bench_recipe_update.py``'s update (the recipe's own steps, same mix): (median, mean)."""
-    out = subprocess.run([sys.executable, os.path.join(ROOT, "benchmarks", "bench_recipe_update.py"), "--iters", str(iters)],
-                         capture_output=True, text=True, check=True, cwd=ROOT).stdout
-    result = _last_json_line(out)
-    return result["mean_update_ms"], result["mean_update_ms_mean"]
 
 
 def run_update_ms(frames: int, out_dir: str, name: str) -> float:
@@ -77,13 +82,14 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--rounds", type=int, default=2)
     parser.add_argument("--frames", type=int, default=8500, help="the shortened run's frames (8 500: two rounds)")
-    parser.add_argument("--iters", type=int, default=40, help="bench_update.py's timed iterations")
+    parser.add_argument("--iters", type=int, default=40, help="timed iterations of each benchmark script")
     args = parser.parse_args()
     out_dir = tempfile.mkdtemp(prefix="bench_run_update-")
     mix, recipe, run = [], [], []
     for i in range(args.rounds):
-        mix.append(bench_mix_ms(args.iters))
-        recipe.append(recipe_mix_ms(args.iters))
+        recipe_ms, meta_every = recipe_mix_ms(args.iters)
+        recipe.append(recipe_ms)
+        mix.append(bench_mix_ms(args.iters, meta_every))
         run.append(run_update_ms(args.frames, out_dir, f"round{i}"))
         print(f"round {i}: learner alone {mix[-1][0]:.1f} ms (mean {mix[-1][1]:.1f}), recipe's steps {recipe[-1][0]:.1f} "
               f"ms (mean {recipe[-1][1]:.1f}), run {run[-1]:.1f} ms (a mean)", file=sys.stderr, flush=True)
