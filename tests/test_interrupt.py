@@ -64,3 +64,30 @@ def test_sigterm_in_the_first_round_checkpoints_and_prints_the_resume_command(tm
     summary = json.loads(done.stdout.strip().splitlines()[-1])
     assert summary["frames"] == 400 and summary["run_dir"] == run_dir
     assert [r["frames"] for r in _rows(run_dir) if "round" in r] == [100, 200, 300, 400]  # each batch once
+
+
+def test_sigterm_to_a_sweep_checkpoints_its_running_cell_before_the_sweep_exits(tmp_path):
+    from torchrl_csirl.scripts import benchmark
+
+    out = str(tmp_path / "bench")
+    run_dir = os.path.join(out, "merge-csirl-s0")
+    proc = subprocess.Popen([sys.executable, os.path.join("recipes", "benchmark.py"), "--methods", "csirl", "--scenarios",
+                             "merge", "--seeds", "0", "--output-dir", out, "--cpus-per-trial", "1", *TINY],
+                            cwd=ROOT, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 240
+        while not _rows(run_dir) and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.5)
+        assert proc.poll() is None, f"the sweep ended before it could be stopped:\n{proc.stderr.read()[-2000:]}"
+        assert list(benchmark.running_cells(out)) == ["merge-csirl-s0"]
+        proc.send_signal(signal.SIGTERM)
+        outs, err = proc.communicate(timeout=240)
+    finally:
+        proc.kill()
+    assert proc.returncode == 128 + signal.SIGTERM, outs + err[-3000:]
+    assert "SIGTERM: stopping merge-csirl-s0" in err and "every running cell checkpointed" in err, err[-2000:]
+    with open(os.path.join(out, "logs", "merge-csirl-s0.log")) as f:
+        assert "SIGTERM: training stopped; checkpoint saved" in f.read()
+    assert benchmark.running_cells(out) == {}
+    (cell,), _ = benchmark.plan_cells(["csirl"], ["merge"], [0], out, [])
+    assert cell.resumed  # the same command continues it

@@ -17,7 +17,9 @@ go to every cell; ``<method>:key=value`` or ``<recipe>:key=value`` (``csirl_high
 ``imitation_highway``, ``csirl_robotics``, ``imitation_robotics``) to that method's or that
 recipe's cells only. ``--address`` joins an
 existing Ray cluster (``ray start --head`` on it first); ``--max-concurrent`` and
-``--cpus-per-trial`` size the trials.
+``--cpus-per-trial`` size the trials. SIGTERM to the sweep stops it without losing work: each running
+cell gets SIGTERM too (it checkpoints at its next batch boundary) and the sweep exits (status 143) once they
+have (on local Ray, Linux); run the same command again to continue.
 
 Write the table (method rows x scenario columns, expert-normalised accomplish rate mean +- std over
 seeds, the paper's Table I beside it; on the robotics tasks the test return, the paper's metric
@@ -34,9 +36,11 @@ import argparse
 import csv
 import json
 import os
+import signal
 import subprocess
 import sys
 import textwrap
+import time
 from collections import defaultdict
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -303,8 +307,15 @@ def run_cell(config: dict[str, Any]) -> None:
     with open(log_path, "a") as log:
         log.write("$ " + " ".join(cell["command"]) + "\n")
         log.flush()
-        proc = subprocess.run(cell["command"], check=False, stdout=subprocess.PIPE, stderr=log, text=True, env=env, cwd=cell["cwd"])
-        log.write(proc.stdout)
+        proc = subprocess.Popen(cell["command"], stdout=subprocess.PIPE, stderr=log, text=True, env=env, cwd=cell["cwd"])
+        pid_path = cell_pid_path(log_path)
+        with open(pid_path, "w") as f:
+            f.write(f"{proc.pid} {process_start_time(proc.pid)}\n")
+        try:
+            stdout, _ = proc.communicate()
+        finally:
+            os.remove(pid_path)
+        log.write(stdout)
     if proc.returncode != 0:
         with open(log_path) as f:
             tail = f.read()[-2000:]
@@ -313,6 +324,80 @@ def run_cell(config: dict[str, Any]) -> None:
     metrics = {k: summary[k] for k in ("accomplish_rate", "normalized_accomplish_rate", "success_rate", "crash_rate", "return",
                                        "frames", "updates", "wall_s") if summary.get(k) is not None}
     tune.report({**metrics, "run_dir": summary["run_dir"]})
+
+
+def cell_pid_path(log_path: str) -> str:
+    """Where a running cell's process id is kept: beside its log (``logs/<cell>.pid``), while it runs."""
+    return os.path.splitext(log_path)[0] + ".pid"
+
+
+def process_start_time(pid: int) -> str | None:
+    """When process ``pid`` started (clock ticks since boot, ``/proc/<pid>/stat``); none if it is gone (or
+    without ``/proc``). With the id, it names one process: ids are reused, start times are not.
+
+    Examples:
+        >>> process_start_time(os.getpid()) == process_start_time(os.getpid()) is not None
+        True
+    """
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[19]  # field 22; the name before ")" may hold spaces
+    except (OSError, IndexError):
+        return None
+
+
+def running_cells(output_dir: str) -> dict[str, int]:
+    """The cells of the sweep in ``output_dir`` running on this machine: cell name -> process id (Linux).
+
+    Examples:
+        >>> running_cells("no/such/sweep")
+        {}
+    """
+    logs, cells = os.path.join(output_dir, "logs"), {}
+    for name in sorted(os.listdir(logs)) if os.path.isdir(logs) else ():
+        if name.endswith(".pid"):
+            try:
+                with open(os.path.join(logs, name)) as f:
+                    pid, started = f.read().split()
+            except (OSError, ValueError):  # gone or half-written
+                continue
+            if process_start_time(int(pid)) == started:  # alive, and not another process that got the id since
+                cells[name[:-len(".pid")]] = int(pid)
+    return cells
+
+
+def stop_running_cells(output_dir: str, *, timeout_s: float = 1800.0, poll_s: float = 2.0) -> list[str]:
+    """SIGTERM to every running cell of the sweep in ``output_dir`` (each checkpoints at its next batch
+    boundary and exits); waits for them, at most ``timeout_s``. Returns the names of the cells still running.
+    """
+    cells = running_cells(output_dir)
+    for name, pid in cells.items():
+        print(f"SIGTERM: stopping {name} (pid {pid}) at its next checkpoint", file=sys.stderr)
+        try:
+            os.kill(pid, signal.SIGTERM)
+        except OSError:
+            pass
+    deadline = time.monotonic() + timeout_s
+    while cells and time.monotonic() < deadline:
+        time.sleep(poll_s)
+        cells = {n: p for n, p in running_cells(output_dir).items() if n in cells}
+    return sorted(cells)
+
+
+def stop_sweep_on_sigterm(output_dir: str) -> None:
+    """Installs the sweep driver's SIGTERM handler: the running cells stop at a checkpoint first, then the
+    driver exits with status 143 (Ray's own handler would exit at once, and the cells with it)."""
+    def handler(signum: int, frame: Any) -> None:
+        import ray
+
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)  # a second SIGTERM: at once
+        left = stop_running_cells(output_dir)
+        print("SIGTERM: sweep stopped" + (f"; still running: {' '.join(left)}" if left else "; every running cell "
+              "checkpointed") + "; run the same command again to continue", file=sys.stderr, flush=True)
+        ray.shutdown()
+        os._exit(128 + signum)  # not SystemExit: Ray Tune's loop, which the signal interrupted, would catch it
+
+    signal.signal(signal.SIGTERM, handler)
 
 
 def run_sweep(cells: list[Cell], output_dir: str, *, address: str | None, max_concurrent: int,
@@ -331,6 +416,8 @@ def run_sweep(cells: list[Cell], output_dir: str, *, address: str | None, max_co
              # Ray starts its workers at niceness 15: a trial's recipe would then get the CPU only
              # when nothing else wants it (on a shared machine, 6 frames/s instead of ~1 000)
              runtime_env={"env_vars": worker_env})
+    if address is None:  # the cells run here (after ray.init, which installs a handler of its own)
+        stop_sweep_on_sigterm(output_dir)
     try:
         space = [{"name": c.name, "command": list(c.command), "cwd": os.getcwd(),
                   "log": os.path.join(output_dir, "logs", f"{c.name}.log")} for c in cells]
