@@ -70,6 +70,55 @@ def test_a_saved_policy_keeps_its_input_map(tmp_path):
         torch.testing.assert_close(actor.module[0](obs.clone())["loc"], loaded.module[0](obs.clone())["loc"])
 
 
+def test_valuedice_standardised_states_measure_the_gradient_penalty_in_them():
+    """A network reading raw states through a standardisation, its penalty with the scale, equals the same
+    network's layers on standardised states with no scale (the authors' code standardises the env), float64."""
+    from torchrl_csirl.modules import ConcatMLP, StandardizeFeatures
+    from torchrl_csirl.objectives._imitation import gradient_penalty
+
+    torch.manual_seed(0)
+    raw = torch.randn(64, 5, dtype=torch.float64) * torch.tensor([0.05, 1.0, 13.0, 2.0, 0.5], dtype=torch.float64) + 3.0
+    norm = StandardizeFeatures.from_data(raw).double()
+    net = ConcatMLP(5 + 2, (16,), input_features=norm).double()
+    inner = ConcatMLP(5 + 2, (16,)).double()
+    inner.mlp.load_state_dict(net.mlp.state_dict())
+    action = torch.rand(64, 2, dtype=torch.float64)
+    standardised = (raw - norm.loc.double()) / norm.scale.double()
+    torch.testing.assert_close(net(raw, action), inner(standardised, action))
+    torch.testing.assert_close(gradient_penalty(net, [raw, action], scales=[norm.scale.double(), None]),
+                               gradient_penalty(inner, [standardised, action]))
+    assert not torch.allclose(gradient_penalty(net, [raw, action]), gradient_penalty(inner, [standardised, action]))
+
+
+def test_valuedice_reads_standardised_states_where_asked_and_says_where_it_cannot(tmp_path):
+    from torchrl_csirl.data import load_expert_demonstrations
+    from torchrl_csirl.launch import ConfigError
+    from torchrl_csirl.launch.imitation import ImitationHighwayConfig, load_baseline_config, make_trainer
+    from torchrl_csirl.modules import StandardizeFeatures, find_standardization
+
+    cfg = load_baseline_config(imitation_robotics.ImitationRoboticsConfig, [
+        "method=valuedice", "env.scenario=halfcheetah", "valuedice.normalize_states=true", "expert.num_trajectories=1", *TINY,
+        f"logger.output_dir={tmp_path}"])
+    run = make_trainer(cfg, str(tmp_path / "run"))
+    method = run.parts["method"]
+    norm = find_standardization(method.policy)
+    assert isinstance(norm, StandardizeFeatures) and norm.in_features == 18  # x too: dropped after it
+    observations = load_expert_demonstrations("halfcheetah", 1).transitions()["observation"]
+    torch.testing.assert_close(norm.loc, observations.double().mean(0).float())
+    loss = method.states["loss"]
+    torch.testing.assert_close(loss.observation_scale, norm.scale)
+    assert find_standardization(loss.nu_network) is not None
+    path = save_policy(method.policy, str(tmp_path / "policy.pt"), obs_dim=18, action_dim=6)
+    obs = TensorDict({"observation": observations[:3]}, [3])
+    with torch.no_grad():
+        torch.testing.assert_close(method.policy.module[0](obs.clone())["loc"], load_policy(path).module[0](obs.clone())["loc"])
+    driving = load_baseline_config(ImitationHighwayConfig, ["method=valuedice", "env.scenario=merge",
+                                                            "valuedice.normalize_states=true"])
+    with pytest.raises(ConfigError, match="valuedice.normalize_states=true: standardised states need an input map .* "
+                                          "got EgoRelativeFeatures"):
+        make_trainer(driving, str(tmp_path / "driving"))
+
+
 def test_an_expert_its_demonstrations_then_csirl_and_a_baseline_on_the_hopper(tmp_path, monkeypatch):
     """train_expert.py -> demonstrations (.npz and Minari) -> csirl_robotics.py and imitation_robotics.py; the
     expert row's policy is the trained one (make_expert(policy=...))."""

@@ -43,6 +43,7 @@ from typing import Any, Optional
 
 import torch
 from omegaconf import DictConfig, OmegaConf
+from torch import nn
 from torchrl.envs import Compose
 from torchrl.envs.utils import RandomPolicy
 from torchrl.objectives import BCLoss, SoftUpdate
@@ -78,7 +79,7 @@ from torchrl_csirl.launch.config import (
 from torchrl_csirl.launch.registry import register_recipe
 from torchrl_csirl.launch.robotics import RoboticsSections, check_driving_task
 from torchrl_csirl.launch.run import ExpertDataError, expert_accomplish_rate, resolve_device
-from torchrl_csirl.modules import make_actor, make_qvalue
+from torchrl_csirl.modules import make_actor, make_qvalue, with_standardization
 from torchrl_csirl.objectives._imitation import SACHyperparameters, make_sac_learner
 from torchrl_csirl.trainers import BCUpdate, SACUpdate, evaluate_policy
 from torchrl_csirl.trainers.imitation import (
@@ -262,10 +263,9 @@ def true_reward_transforms(cfg: DictConfig, spec: TaskSpec, device: torch.device
     return [reward, CombineRewards(["progress_reward"])]
 
 
-def make_sac(cfg: DictConfig, spec: TaskSpec, device: torch.device) -> ImitationMethod:
+def make_sac(cfg: DictConfig, spec: TaskSpec, device: torch.device, features: nn.Module | None) -> ImitationMethod:
     """SAC on the task's true reward (:func:`true_reward_transforms`; the paper's "SAC (true distance reward)")."""
     hp = sac_hyperparameters(cfg.sac)
-    features = model_input_features(cfg.model, spec)
     actor = make_actor(spec.obs_dim, spec.action_dim, input_features=features)
     loss = make_sac_learner(actor, make_qvalue(spec.obs_dim, spec.action_dim, input_features=features), hp).to(device)
     optimizer = torch.optim.Adam([p for p in loss.parameters() if p.requires_grad], lr=hp.lr)
@@ -274,9 +274,9 @@ def make_sac(cfg: DictConfig, spec: TaskSpec, device: torch.device) -> Imitation
                            {"loss": loss, "optim_sac": optimizer}, lambda online, expert: update, hp)
 
 
-def make_bc(cfg: DictConfig, spec: TaskSpec, device: torch.device) -> ImitationMethod:
+def make_bc(cfg: DictConfig, spec: TaskSpec, device: torch.device, features: nn.Module | None) -> ImitationMethod:
     """Behavioural cloning (TorchRL's ``BCLoss``) on expert batches of ``expert.batch_size``."""
-    actor = make_actor(spec.obs_dim, spec.action_dim, input_features=model_input_features(cfg.model, spec)).to(device)
+    actor = make_actor(spec.obs_dim, spec.action_dim, input_features=features).to(device)
     loss = BCLoss(actor, loss_function=cfg.bc.loss_function)
     optimizer = torch.optim.Adam(actor.parameters(), lr=cfg.bc.lr)
 
@@ -286,10 +286,9 @@ def make_bc(cfg: DictConfig, spec: TaskSpec, device: torch.device) -> ImitationM
     return ImitationMethod("bc", actor, [], [], {"actor": actor, "optim_bc": optimizer}, make_update_step)
 
 
-def make_loss_method(cfg: DictConfig, spec: TaskSpec, device: torch.device) -> ImitationMethod:
+def make_loss_method(cfg: DictConfig, spec: TaskSpec, device: torch.device, features: nn.Module | None) -> ImitationMethod:
     """A loss-based baseline (:func:`~torchrl_csirl.trainers.imitation.make_imitation_method`) with
     the ``<method>`` section as its hyperparameters and CSIRL's actor and critic factory."""
-    features = model_input_features(cfg.model, spec)
     actor = make_actor(spec.obs_dim, spec.action_dim, input_features=features)
     return make_imitation_method(
         cfg.method, actor, partial(make_qvalue, spec.obs_dim, spec.action_dim, input_features=features),
@@ -298,6 +297,21 @@ def make_loss_method(cfg: DictConfig, spec: TaskSpec, device: torch.device) -> I
 
 
 METHOD_BUILDERS = {"sac": make_sac, "bc": make_bc, **{name: make_loss_method for name in LOSS_METHODS}}
+
+
+def method_input_features(cfg: DictConfig, spec: TaskSpec, demos: ExpertDemonstrations) -> nn.Module | None:
+    """The input map of the method's networks: the ``model`` section's
+    (:func:`~torchrl_csirl.launch.builders.model_input_features`), after a standardisation fitted to the
+    demonstrations' observations where the method's section asks for it (``valuedice.normalize_states``)."""
+    features = model_input_features(cfg.model, spec)
+    section = cfg.get(cfg.method)
+    if section is None or not section.get("normalize_states", False):
+        return features
+    try:
+        return with_standardization(features, demos.transitions().get("observation"))
+    except ValueError as err:
+        raise ConfigError(f"{cfg.method}.normalize_states=true: {err} (model.ego_relative_features=false "
+                          "model.lane_features=false)") from None
 
 
 def make_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume_frames: int | None = None) -> Run:
@@ -312,7 +326,7 @@ def make_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume_fra
     spec = resolve_scenario(cfg.env.scenario)  # a driving scenario or a robotics task
     demos = load_demonstrations(cfg, spec)
     try:  # e.g. a negative learning rate of a section read from a hyperparameter dataclass
-        method = METHOD_BUILDERS[cfg.method](cfg, spec, device)
+        method = METHOD_BUILDERS[cfg.method](cfg, spec, device, method_input_features(cfg, spec, demos))
     except ConfigError:
         raise
     except (ValueError, TypeError) as err:

@@ -10,7 +10,15 @@ from torchrl_csirl.modules.actor_critic import (
 )
 from torchrl_csirl.modules.ensemble import FusedCriticEnsemble, fused_critic_ensemble
 from torchrl_csirl.modules.export import load_policy, save_policy
-from torchrl_csirl.modules.features import DropFeatures, EgoRelativeFeatures, FeatureChain, make_input_features
+from torchrl_csirl.modules.features import (
+    DropFeatures,
+    EgoRelativeFeatures,
+    FeatureChain,
+    StandardizeFeatures,
+    find_standardization,
+    make_input_features,
+    with_standardization,
+)
 from torchrl_csirl.modules.fused_actor import FusedTanhNormalActor, fused_tanh_normal_actor
 from torchrl_csirl.modules.lane_features import LaneFeatures
 from torchrl_csirl.modules.reward import (
@@ -41,4 +49,7 @@ __all__ = [
     "make_qvalue",
     "make_reward_network",
     "save_policy",
+    "StandardizeFeatures",
+    "find_standardization",
+    "with_standardization",
 ]

@@ -18,7 +18,8 @@ from torch import nn
 
 from torchrl_csirl.modules.lane_features import LaneFeatures
 
-__all__ = ["DropFeatures", "EgoRelativeFeatures", "FeatureChain", "RELATIVE_REFERENCE", "feature_map_from_config", "make_input_features"]
+__all__ = ["DropFeatures", "EgoRelativeFeatures", "FeatureChain", "RELATIVE_REFERENCE", "StandardizeFeatures", "feature_map_from_config",
+           "find_standardization", "make_input_features", "with_standardization"]
 
 #: metres (positions) and metres per second (velocities) that one unit of a relative feature
 #: represents, before clipping to ``[-clip, clip]``.
@@ -198,8 +199,62 @@ class DropFeatures(nn.Module):
         return f"in_features={self._in_features}, hidden={list(self.hidden)}"
 
 
+class StandardizeFeatures(nn.Module):
+    """Standardises each input entry with fixed statistics: ``(x - loc) / scale``.
+
+    ValueDICE's networks read states standardised with the demonstrations' mean and standard deviation
+    (the authors' code, ``google-research/value_dice``: ``scale = std + 1e-3``); :meth:`from_data`
+    computes them so. The statistics are buffers (saved with the network), not parameters.
+
+    Args:
+        loc (tensor): per-entry offset, shape ``[in_features]``.
+        scale (tensor): per-entry divisor (positive), the same shape.
+
+    Examples:
+        >>> import torch
+        >>> norm = StandardizeFeatures.from_data(torch.tensor([[0.0, 10.0], [2.0, 30.0]]))
+        >>> norm.loc.tolist(), norm(torch.tensor([[1.0, 20.0], [2.0, 30.0]])).double().round(decimals=3).tolist()
+        ([1.0, 20.0], [[0.0, 0.0], [0.999, 1.0]])
+    """
+
+    def __init__(self, loc: torch.Tensor, scale: torch.Tensor) -> None:
+        super().__init__()
+        loc, scale = torch.as_tensor(loc, dtype=torch.float32), torch.as_tensor(scale, dtype=torch.float32)
+        if loc.ndim != 1 or loc.shape != scale.shape or not bool((scale > 0).all()) or not bool(torch.isfinite(loc).all()):
+            raise ValueError(f"loc and scale must be finite vectors of one size with scale > 0, got shapes "
+                             f"{tuple(loc.shape)} and {tuple(scale.shape)}.")
+        self.register_buffer("loc", loc)
+        self.register_buffer("scale", scale)
+
+    @classmethod
+    def from_data(cls, features: torch.Tensor, eps: float = 1e-3) -> StandardizeFeatures:
+        """The standardisation of ``features`` (``[N, in_features]``): their mean, and their standard
+        deviation plus ``eps`` (the authors' ValueDICE code)."""
+        features = features.reshape(-1, features.shape[-1]).to(torch.float64)
+        return cls(features.mean(0), features.std(0, correction=0) + eps)
+
+    @property
+    def in_features(self) -> int:
+        return int(self.loc.numel())
+
+    @property
+    def out_features(self) -> int:
+        return self.in_features
+
+    def config(self) -> dict[str, Any]:
+        return {"kind": "standardize", "loc": self.loc.tolist(), "scale": self.scale.tolist()}
+
+    def forward(self, observation: torch.Tensor) -> torch.Tensor:
+        if observation.shape[-1] != self.in_features:
+            raise ValueError(f"StandardizeFeatures expects inputs of size {self.in_features}, got {observation.shape[-1]}.")
+        return (observation - self.loc.to(observation.dtype)) / self.scale.to(observation.dtype)
+
+    def extra_repr(self) -> str:
+        return f"in_features={self.in_features}"
+
+
 class FeatureChain(nn.Sequential):
-    """Parameter-free input maps applied one after the other (each appends to its input).
+    """Parameter-free input maps applied one after the other.
 
     Examples:
         >>> from torchrl_csirl.envs import SCENARIOS
@@ -248,6 +303,37 @@ def make_input_features(spec: Any, ego_relative: bool = True, lane: bool = False
     return maps[0] if len(maps) == 1 else FeatureChain(*maps)
 
 
+def with_standardization(features: nn.Module | None, observations: torch.Tensor) -> nn.Module:
+    """A :class:`StandardizeFeatures` fitted to the raw ``observations``, then ``features``: the networks read
+    standardised states (ValueDICE's authors' code). ``features`` must read the observation entry by entry
+    (:class:`DropFeatures`, or none): the driving maps compute on the raw rows.
+
+    Examples:
+        >>> import torch
+        >>> chain = with_standardization(DropFeatures(3, hidden=[0]), torch.tensor([[5.0, 0.0, 1.0], [7.0, 2.0, 1.0]]))
+        >>> [type(m).__name__ for m in chain], chain[0].loc.tolist(), chain.out_features
+        (['StandardizeFeatures', 'DropFeatures'], [6.0, 1.0, 1.0], 2)
+    """
+    if features is not None and not isinstance(features, DropFeatures):
+        raise ValueError(f"standardised states need an input map that reads the observation entry by entry (none or "
+                         f"DropFeatures), got {type(features).__name__}: it computes on the raw observation.")
+    norm = StandardizeFeatures.from_data(observations)
+    return norm if features is None else FeatureChain(norm, features)
+
+
+def find_standardization(module: nn.Module) -> StandardizeFeatures | None:
+    """The :class:`StandardizeFeatures` a network reads its observation through (the first one found), or None.
+
+    Examples:
+        >>> import torch
+        >>> from torchrl_csirl.modules import make_actor
+        >>> norm = StandardizeFeatures(torch.zeros(3), torch.ones(3))
+        >>> find_standardization(make_actor(3, 1, hidden=(8,), input_features=norm)) is norm
+        True
+    """
+    return next((m for m in module.modules() if isinstance(m, StandardizeFeatures)), None)
+
+
 def feature_map_from_config(config: dict[str, Any],
                             lane_centres: Callable[[str], Any] | None = None) -> nn.Module:
     """Rebuilds an input map from its ``config()`` (a saved policy's; a config without ``kind`` is an
@@ -260,4 +346,6 @@ def feature_map_from_config(config: dict[str, Any],
         return LaneFeatures.from_config(config, lane_centres)
     if kind == "drop":
         return DropFeatures(config["in_features"], config["hidden"])
+    if kind == "standardize":
+        return StandardizeFeatures(torch.tensor(config["loc"]), torch.tensor(config["scale"]))
     return EgoRelativeFeatures(**{k: v for k, v in config.items() if k != "kind"})

@@ -89,13 +89,17 @@ def logit_network(qvalue: TensorDictModule, out_key: str = "discriminator_logit"
                             out_keys=[out_key])
 
 
-def gradient_penalty(function: Callable[..., torch.Tensor], inputs: Sequence[torch.Tensor], target_norm: float = 1.0) -> torch.Tensor:
+def gradient_penalty(function: Callable[..., torch.Tensor], inputs: Sequence[torch.Tensor], target_norm: float = 1.0,
+                     scales: Sequence[torch.Tensor | None] | None = None) -> torch.Tensor:
     """WGAN-GP penalty ``mean_i (||grad_x f(x_i)||_2 - target_norm)^2`` (Gulrajani et al., 2017).
 
     Args:
         function: maps ``inputs`` to one output per sample (``[B]`` or ``[B, 1]``).
         inputs: tensors ``[B, *]`` (e.g. observation and action); the gradient norm is taken over
             all of them together, per sample.
+        target_norm: the norm the gradient is pulled to (1).
+        scales: per input, None or a per-entry scale ``c``: the gradient is taken with respect to
+            ``x / c`` (``c * grad_x f``), e.g. standardised states whose networks read the raw ones.
 
     Examples:
         >>> import torch
@@ -106,6 +110,8 @@ def gradient_penalty(function: Callable[..., torch.Tensor], inputs: Sequence[tor
     inputs = [x.detach().requires_grad_(True) for x in inputs]
     out = function(*inputs)
     grads = torch.autograd.grad(out.sum(), inputs, create_graph=True)
+    if scales is not None:
+        grads = [g if c is None else g * c.to(g.dtype) for g, c in zip(grads, scales, strict=True)]
     norm = torch.cat([g.flatten(1) for g in grads], -1).norm(dim=-1)
     return ((norm - target_norm) ** 2).mean()
 

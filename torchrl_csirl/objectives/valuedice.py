@@ -74,6 +74,12 @@ class ValueDICEHyperparameters(AbsorbingStateSettings):
         gp_lambda: weight of ``nu``'s gradient penalty (10).
         initial_states: ``"expert"`` (every expert state, the authors' code) or ``"episode_starts"``
             (the first state of each expert trajectory).
+        normalize_states: the networks read states standardised with the demonstrations' mean and
+            standard deviation (+ 1e-3), and the gradient penalty is measured in them: the authors'
+            code's default (on MuJoCo). Off by default: the driving observations come scaled to
+            [-1, 1] by highway-env and are read through maps of the raw rows; the locomotion cells
+            turn it on (``recipes/benchmark.py`` ``TASK_OVERRIDES``). Read by the recipes' network
+            builder (:func:`~torchrl_csirl.modules.with_standardization`).
         max_grad_norm: gradient-norm clipping (None: none).
     """
 
@@ -85,6 +91,7 @@ class ValueDICEHyperparameters(AbsorbingStateSettings):
     orthogonal_regularization: float = 1e-4
     gp_lambda: float = 10.0
     initial_states: str = "expert"
+    normalize_states: bool = False
     max_grad_norm: float | None = None
 
     def __post_init__(self) -> None:
@@ -168,6 +175,10 @@ class ValueDICELoss(LossModule):
         replay_regularization (float): ``alpha``. Defaults to ``0.1``.
         orthogonal_regularization (float): Defaults to ``1e-4``.
         gp_lambda (float): Defaults to ``10``.
+        observation_scale (tensor, optional): when the networks read standardised states
+            (:class:`~torchrl_csirl.modules.StandardizeFeatures` first in their input map), its scale:
+            the gradient penalty is then measured in the standardised states, as in the authors' code,
+            whose networks read them directly. Defaults to ``None`` (the raw observation).
 
     Examples:
         >>> import torch
@@ -215,7 +226,7 @@ class ValueDICELoss(LossModule):
 
     def __init__(self, actor_network: TensorDictModule, nu_network: TensorDictModule, *, gamma: float = 0.99,
                  replay_regularization: float = 0.1, orthogonal_regularization: float = 1e-4,
-                 gp_lambda: float = 10.0) -> None:
+                 gp_lambda: float = 10.0, observation_scale: torch.Tensor | None = None) -> None:
         super().__init__()
         if not 0.0 <= replay_regularization < 1.0:
             raise ValueError(f"replay_regularization must be in [0, 1), got {replay_regularization}.")
@@ -227,6 +238,8 @@ class ValueDICELoss(LossModule):
         self.replay_regularization = float(replay_regularization)
         self.orthogonal_regularization = float(orthogonal_regularization)
         self.gp_lambda = float(gp_lambda)
+        self.register_buffer("observation_scale", None if observation_scale is None
+                             else torch.as_tensor(observation_scale, dtype=torch.float32).detach().clone())
 
     def _forward_value_estimator_keys(self, **kwargs) -> None:
         pass
@@ -284,7 +297,8 @@ class ValueDICELoss(LossModule):
             pairs = [(expert.get(key), replay.get(key)), (expert_successor.get(key), replay_successor.get(key))]
             return torch.cat([eps * a[:n].detach().float() + (1 - eps) * b[:n].detach().float() for a, b in pairs])
 
-        return self.gp_lambda * gradient_penalty(self.nu, [mixed(key) for key in inputs])
+        scales = [self.observation_scale] + [None] * (len(inputs) - 1)
+        return self.gp_lambda * gradient_penalty(self.nu, [mixed(key) for key in inputs], scales=scales)
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         keys = self.tensor_keys

@@ -98,10 +98,13 @@ TABLE_BUDGETS.update({task: 300_000 for task in LOCOMOTION_ORDER})
 #: episodes need 1 000 frames per worker and batch (the robotics scripts' 1 400 would cut them); one expert
 #: trajectory, the protocol of the published table beside ours (IQ-Learn's Table 3, also ValueDICE's); an
 #: evaluation and a checkpoint every 5 rounds (10 000 updates: 10 validation episodes of 1 000 steps each); no
-#: video of every cell (1 000 frames each; ``recipes/watch.py`` films a run)
+#: video of every cell (1 000 frames each; ``recipes/watch.py`` films a run); ValueDICE on standardised states, as
+#: its authors' code runs MuJoCo (docs/baselines.md, "Standardised states"). Every method updates at the project's rate,
+#: ``optim.utd_ratio=0.5`` (150 000 updates): docs/benchmark.md#published-results compares the updates
 TASK_OVERRIDES: dict[str, tuple[str, ...]] = {
     task: ("collector.frames_per_batch=2000", "expert.num_trajectories=1", "eval.every_rounds=5",
-           "checkpoint.every_rounds=5", "eval.video=false") for task in LOCOMOTION_ORDER}
+           "checkpoint.every_rounds=5", "eval.video=false", "valuedice:valuedice.normalize_states=true")
+    for task in LOCOMOTION_ORDER}
 
 #: the paper's Table I (accomplish rate, 25 expert trajectories, 5 seeds; the expert at 1.00, so
 #: read as expert-normalised): /work/shared/SPEC.md section 2, paper Table "tab:result"
@@ -235,7 +238,7 @@ def has_checkpoint(run_dir: str) -> bool:
 
 def table_overrides(scenario: str) -> list[str]:
     """The overrides that run a cell on ``scenario`` as its table does: its :data:`TABLE_BUDGETS` budget and its
-    :data:`TASK_OVERRIDES` (none for another scenario).
+    :data:`TASK_OVERRIDES` (none for another scenario); ``<method>:key=value`` ones go to that method's cells.
 
     Examples:
         >>> table_overrides("roundabout")
@@ -248,13 +251,14 @@ def table_overrides(scenario: str) -> list[str]:
 
 
 def make_cell(method: str, scenario: str, seed: int, output_dir: str, overrides: list[str]) -> Cell | None:
-    """The cell's command line, or None when its ``summary.json`` exists (done)."""
+    """The cell's command line, or None when its ``summary.json`` exists (done). ``overrides``: the cell's own
+    (:func:`split_overrides` of the table's and the user's)."""
     run_dir = os.path.join(output_dir, f"{scenario}-{method}-s{seed}")
     if os.path.isfile(os.path.join(run_dir, "summary.json")):
         return None
     recipe = f"torchrl_csirl.scripts.{recipe_of(method, scenario)}"
     task = f"env.gym_id={scenario}" if is_gymnasium_id(scenario) else f"env.scenario={scenario}"
-    args = [task, f"seed={seed}", "logger.progress_bar=false", *table_overrides(scenario), *overrides]
+    args = [task, f"seed={seed}", "logger.progress_bar=false", *overrides]
     if method not in CSIRL_METHODS:
         args.insert(0, f"method={method}")
     else:
@@ -280,7 +284,7 @@ def plan_cells(methods: list[str], scenarios: list[str], seeds: list[int], outpu
                              "id (a task of your own: its module's name as env.module=<module> among the overrides)")
     todo, done = [], []
     for scenario in scenarios:
-        per_method = split_overrides(overrides, methods, scenario)
+        per_method = split_overrides([*table_overrides(scenario), *overrides], methods, scenario)
         for method in methods:
             for seed in seeds[:1] if method in SEED_FREE_METHODS else seeds:
                 cell = make_cell(method, scenario, seed, output_dir, per_method[method])

@@ -23,6 +23,7 @@ from torchrl.envs.transforms import Transform
 from torchrl.objectives import GAILLoss, SoftUpdate
 
 from torchrl_csirl.data.mixing import DemonstrationMixer
+from torchrl_csirl.modules.features import find_standardization
 from torchrl_csirl.objectives._imitation import SACHyperparameters, logit_network, make_sac_learner, sample
 from torchrl_csirl.objectives.dac import DACDiscriminatorLoss, DACHyperparameters, make_dac_discriminator
 from torchrl_csirl.objectives.gail import GAILHyperparameters, gail_discriminator_input, make_gail_discriminator
@@ -170,8 +171,13 @@ def _make_iqlearn(actor, make_qvalue, hp: IQLearnHyperparameters, device) -> Imi
 # ------------------------------------------------------------------------------ ValueDICE
 def _make_valuedice(actor, make_qvalue, hp: ValueDICEHyperparameters, device) -> ImitationMethod:
     nu = logit_network(make_qvalue(), "nu", "absorbing" if hp.absorbing_states else None)
+    norms = find_standardization(actor), find_standardization(nu)
+    if hp.normalize_states and (norms[0] is None or norms[1] is None):
+        raise ValueError("normalize_states=True: the actor and nu must read the observation through a "
+                         "StandardizeFeatures (torchrl_csirl.modules.with_standardization).")
     loss = ValueDICELoss(actor, nu, gamma=hp.gamma, replay_regularization=hp.replay_regularization,
-                         orthogonal_regularization=hp.orthogonal_regularization, gp_lambda=hp.gp_lambda).to(device)
+                         orthogonal_regularization=hp.orthogonal_regularization, gp_lambda=hp.gp_lambda,
+                         observation_scale=norms[1].scale if hp.normalize_states else None).to(device)
     nu_optimizer, actor_optimizer = _adam(nu, hp.nu_lr), _adam(actor, hp.actor_lr)
 
     def make_update_step(online: TensorDictReplayBuffer, expert: TensorDictReplayBuffer) -> UpdateStep:
