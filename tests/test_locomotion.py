@@ -175,7 +175,15 @@ def test_the_benchmark_report_normalises_by_the_expert_row_and_shows_the_publish
     assert row["dac"]["vs_csirl"] == pytest.approx(3220.0 - 2100.0)
     table = bench.markdown_table(rows)
     assert "| csirl | 0.60 ± 0.14 (n=2) |" in table and "300 000 frames per run" in table
-    assert f"| dac | {3305.1 / 3532.7:.2f} (IQ-Learn Tab. 3) |" in table
+    dac = 3305.1 / 3532.7
+    assert f"| dac | {3220.0 / 3500.0:.2f} ± 0.03 (n=2) [{dac:.2f}] |" in table
+    assert f"| dac | {dac:.2f} (IQ-Learn Tab. 3); ours {3220.0 / 3500.0 - dac:+.2f} |" in table
+    assert f"| gail | {3252.5 / 3532.7:.2f} (IQ-Learn Tab. 3) |" in table  # no run: no difference
+    (tmp_path / "hopper-dac-s1" / "summary.json").write_text(json.dumps({
+        "scenario": "hopper", "method": "dac", "seed": 1, "return": 1400.0, "frames": bench.TABLE_BUDGETS["hopper"],
+        "success_rate": 0.0, "accomplish_rate": 0.0, "total_wall_s": 600.0}))
+    table = bench.markdown_table(bench.table_rows(bench.read_runs([str(tmp_path)])))
+    assert f"ours **{(3150.0 + 1400.0) / 7000.0 - dac:+.2f}** |" in table  # more than 0.2 below its paper
     assert "antmaze" not in table and "accomplish rate" not in table
 
 
