@@ -339,6 +339,28 @@ def test_iqlearn_reads_the_successor_value_from_the_target_critics(use_target_va
     assert sorted(group["lr"] for group in method.states["optim_sac"].param_groups) == [3e-5, 3e-4]
 
 
+def test_iqlearn_v0_takes_the_initial_state_term_on_the_expert_states():
+    """The authors' Hopper form: ``-E_E[r] + (1 - gamma) E_E[V(s)] + E_mix[r^2] / (4 c)`` (``"value"``: the
+    mixture's ``V(s) - gamma V(s')``), the same sampled actions."""
+    from torchrl_csirl.objectives._imitation import concat_shared, sample
+    from torchrl_csirl.objectives.iq_learn import inverse_soft_q_objective
+
+    gamma = 0.9
+    method = build("iqlearn", {"batch_size": 16, "gamma": gamma, "value_loss": "v0"})
+    online, expert = buffers(method, *expert_vs_random(40))
+    loss = method.states["loss"]
+    td = TensorDict({"expert": sample(expert, 8), "collector": sample(online, 8)}, [])
+    torch.manual_seed(0)
+    got = loss(td)["loss_qvalue"]
+    torch.manual_seed(0)
+    reward, value_difference = loss._implicit_reward(concat_shared(td["expert"], td["collector"]))
+    initial = (1 - gamma) * loss.soft_value(td["expert", "observation"])
+    torch.testing.assert_close(got, inverse_soft_q_objective(reward[:, :8], initial, reward, 0.5))
+    assert not torch.allclose(got, inverse_soft_q_objective(reward[:, :8], value_difference, reward, 0.5))
+    with pytest.raises(ValueError, match="value_loss must be one of"):
+        build("iqlearn", {"value_loss": "v1"})
+
+
 @pytest.mark.parametrize("absorbing_states", [True, False])
 def test_valuedice_residual_after_a_termination(absorbing_states):
     """With absorbing states (the paper's): ``nu(s, a) - gamma nu(s_a, 0)`` after a termination and one

@@ -62,6 +62,9 @@ class IQLearnHyperparameters(SACHyperparameters):
         actor_lr: Adam learning rate of the actor (3e-5, the authors' continuous-control setting; the
             critics use ``lr``, 3e-4).
         use_target_value: ``V(s')`` from the target critics (the authors' setting).
+        value_loss: the initial-state term (the authors' ``method.loss``): ``"value"``,
+            ``E_mix[V(s) - gamma V(s')]`` (their HalfCheetah command), or ``"v0"``,
+            ``(1 - gamma) E_E[V(s)]`` with the expert states as initial states (their Hopper command).
     """
 
     chi2_coefficient: float = 0.5
@@ -71,6 +74,14 @@ class IQLearnHyperparameters(SACHyperparameters):
     fixed_alpha: bool = True
     actor_lr: float = 3e-5
     use_target_value: bool = True
+    value_loss: str = "value"
+
+    def __post_init__(self) -> None:
+        if self.value_loss not in VALUE_LOSSES:
+            raise ValueError(f"value_loss must be one of {VALUE_LOSSES}, got {self.value_loss!r}.")
+
+
+VALUE_LOSSES = ("value", "v0")
 
 
 def inverse_soft_q_objective(expert_reward: torch.Tensor, value_difference: torch.Tensor,
@@ -79,7 +90,8 @@ def inverse_soft_q_objective(expert_reward: torch.Tensor, value_difference: torc
 
     Args:
         expert_reward: the implicit rewards ``r = Q(s, a) - gamma V(s')`` on expert transitions ``[..., B_E]``.
-        value_difference: ``V(s) - gamma V(s')`` on the mixture ``mu`` (the "value" initial-state term).
+        value_difference: the initial-state term's samples: ``V(s) - gamma V(s')`` on the mixture ``mu``
+            (the "value" form), or ``(1 - gamma) V(s)`` on the expert states (the "v0" form).
         mixture_reward: ``r`` on the mixture (the chi-squared regulariser's support).
         chi2_coefficient: ``c``.
 
@@ -117,6 +129,8 @@ class IQLearnLoss(EnsembleSACLoss):
         alpha_init (float): SAC temperature. Defaults to ``0.01``.
         use_target_value (bool): ``V(s')`` from the target critics (updated by the caller's
             :class:`~torchrl.objectives.SoftUpdate`). Defaults to ``True``.
+        value_loss (str): the initial-state term, ``"value"`` or ``"v0"`` (:class:`IQLearnHyperparameters`).
+            Defaults to ``"value"``.
         **kwargs: forwarded to :class:`~torchrl_csirl.objectives.EnsembleSACLoss`.
 
     Examples:
@@ -149,8 +163,11 @@ class IQLearnLoss(EnsembleSACLoss):
     default_keys = _AcceptedKeys
 
     def __init__(self, actor_network, qvalue_network, *, chi2_coefficient: float = 0.5, num_qvalue_nets: int = 2,
-                 alpha_init: float = 0.01, use_target_value: bool = True, **kwargs) -> None:
+                 alpha_init: float = 0.01, use_target_value: bool = True, value_loss: str = "value",
+                 **kwargs) -> None:
         _check_num_critics(num_qvalue_nets)
+        if value_loss not in VALUE_LOSSES:
+            raise ValueError(f"value_loss must be one of {VALUE_LOSSES}, got {value_loss!r}.")
         if not chi2_coefficient > 0:
             raise ValueError(f"chi2_coefficient must be positive, got {chi2_coefficient}.")
         super().__init__(actor_network, qvalue_network, num_qvalue_nets=num_qvalue_nets, alpha_init=alpha_init,
@@ -158,6 +175,7 @@ class IQLearnLoss(EnsembleSACLoss):
         self.chi2_coefficient = float(chi2_coefficient)
         self.discount = float(kwargs.get("gamma", 0.99))
         self.use_target_value = bool(use_target_value)
+        self.value_loss = value_loss
 
     def soft_value(self, observation: torch.Tensor, *, target: bool = False) -> torch.Tensor:
         """``V(s) = Q_k(s, a) - alpha log pi(a | s)``, ``a ~ pi(s)`` detached, per critic: ``[N, B]``.
@@ -194,6 +212,8 @@ class IQLearnLoss(EnsembleSACLoss):
         mixture = concat_shared(expert, agent)
         n_expert = expert.numel()
         reward, value_difference = self._implicit_reward(mixture)
+        if self.value_loss == "v0":  # (1 - gamma) V(s_0), the expert states as initial states
+            value_difference = (1.0 - self.discount) * self.soft_value(expert.get(obs_key))
         loss_qvalue = inverse_soft_q_objective(reward[:, :n_expert], value_difference, reward, self.chi2_coefficient)
         loss_actor, metadata = self.actor_loss(mixture)
         loss_alpha = sac_reduced_alpha_loss(self, metadata["log_prob"], mixture)

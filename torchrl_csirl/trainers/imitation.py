@@ -151,7 +151,7 @@ def _make_dac(actor, make_qvalue, hp: DACHyperparameters, device) -> ImitationMe
 def _make_iqlearn(actor, make_qvalue, hp: IQLearnHyperparameters, device) -> ImitationMethod:
     loss = IQLearnLoss(actor, make_qvalue(), chi2_coefficient=hp.chi2_coefficient, num_qvalue_nets=hp.num_qvalue_nets,
                        alpha_init=hp.alpha_init, fixed_alpha=hp.fixed_alpha, gamma=hp.gamma,
-                       use_target_value=hp.use_target_value).to(device)
+                       use_target_value=hp.use_target_value, value_loss=hp.value_loss).to(device)
     optimizer = _adam(loss, hp.lr, {"actor_network_params": hp.actor_lr})
     target_updater = SoftUpdate(loss, tau=hp.tau)
     num_expert = round(hp.expert_fraction * hp.batch_size)
