@@ -339,9 +339,9 @@ def test_iqlearn_reads_the_successor_value_from_the_target_critics(use_target_va
     assert sorted(group["lr"] for group in method.states["optim_sac"].param_groups) == [3e-5, 3e-4]
 
 
-def test_iqlearn_v0_takes_the_initial_state_term_on_the_expert_states():
+def test_iqlearn_v0_and_the_policy_actions_regulariser_as_the_authors_code():
     """The authors' Hopper form: ``-E_E[r] + (1 - gamma) E_E[V(s)] + E_mix[r^2] / (4 c)`` (``"value"``: the
-    mixture's ``V(s) - gamma V(s')``), the same sampled actions."""
+    mixture's ``V(s) - gamma V(s')``), the same sampled actions; their regulariser at the policy's actions."""
     from torchrl_csirl.objectives._imitation import concat_shared, sample
     from torchrl_csirl.objectives.iq_learn import inverse_soft_q_objective
 
@@ -353,10 +353,15 @@ def test_iqlearn_v0_takes_the_initial_state_term_on_the_expert_states():
     torch.manual_seed(0)
     got = loss(td)["loss_qvalue"]
     torch.manual_seed(0)
-    reward, value_difference = loss._implicit_reward(concat_shared(td["expert"], td["collector"]))
-    initial = (1 - gamma) * loss.soft_value(td["expert", "observation"])
-    torch.testing.assert_close(got, inverse_soft_q_objective(reward[:, :8], initial, reward, 0.5))
-    assert not torch.allclose(got, inverse_soft_q_objective(reward[:, :8], value_difference, reward, 0.5))
+    reward, value, next_value, policy_q = loss._implicit_reward(concat_shared(td["expert"], td["collector"]))
+    torch.testing.assert_close(got, inverse_soft_q_objective(reward[:, :8], (1 - gamma) * value[:, :8], reward, 0.5))
+    assert not torch.allclose(got, inverse_soft_q_objective(reward[:, :8], value - next_value, reward, 0.5))
+    # the authors' code regularises the replay part at the policy's actions: Q(s, a ~ pi) - gamma V(s')
+    loss.chi2_policy_actions = True
+    torch.manual_seed(0)
+    got = loss(td)["loss_qvalue"]
+    at_policy = torch.cat([reward[:, :8], (policy_q - next_value)[:, 8:]], -1)
+    torch.testing.assert_close(got, inverse_soft_q_objective(reward[:, :8], (1 - gamma) * value[:, :8], at_policy, 0.5))
     with pytest.raises(ValueError, match="value_loss must be one of"):
         build("iqlearn", {"value_loss": "v1"})
 

@@ -201,11 +201,12 @@ def test_a_corrupted_checkpoint_is_one_line_naming_it(tmp_path, capsys):
     assert f"the previous checkpoint is kept at {run_dir / 'checkpoints' / 'last.old'}" in line, line
 
 
-def test_benchmark_sweeps_on_ray_resumes_and_reports(tmp_path):
+def test_benchmark_sweeps_on_ray_resumes_and_reports(tmp_path, capsys):
     out = str(tmp_path / "bench")
     args = ["--methods", "random", "bc", "sac", "--scenarios", "merge", "--seeds", "0", "--output-dir", out,
             "--cpus-per-trial", "1", *TINY, "collector.total_frames=200", "logger.backend=csv", "sac:sac.lr=-1"]
     assert benchmark.main(args) == 1  # the sac cell fails (bad learning rate), the others finish
+    assert json.loads(capsys.readouterr().out.strip().splitlines()[-1])["failed"] == ["merge-sac-s0"]
     with open(os.path.join(out, "logs", "merge-sac-s0.log")) as f:
         assert "error: sac.*: Invalid learning rate" in f.read()
     for cell in ("merge-random-s0", "merge-bc-s0"):

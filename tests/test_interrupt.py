@@ -10,6 +10,7 @@ import subprocess
 import sys
 import time
 
+import pytest
 import torch
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -67,6 +68,7 @@ def test_sigterm_in_the_first_round_checkpoints_and_prints_the_resume_command(tm
 
 
 def test_sigterm_to_a_sweep_checkpoints_its_running_cell_before_the_sweep_exits(tmp_path):
+    from torchrl_csirl.launch.processes import StopCellsOnSigterm, SweepBusyError, running_cells
     from torchrl_csirl.scripts import benchmark
 
     out = str(tmp_path / "bench")
@@ -79,7 +81,11 @@ def test_sigterm_to_a_sweep_checkpoints_its_running_cell_before_the_sweep_exits(
         while not _rows(run_dir) and proc.poll() is None and time.monotonic() < deadline:
             time.sleep(0.5)
         assert proc.poll() is None, f"the sweep ended before it could be stopped:\n{proc.stderr.read()[-2000:]}"
-        assert list(benchmark.running_cells(out)) == ["merge-csirl-s0"]
+        assert list(running_cells(out)) == ["merge-csirl-s0"]
+        with open(os.path.join(out, "logs", "sweep.pid")) as f:
+            assert int(f.read().split()[0]) == proc.pid
+        with pytest.raises(SweepBusyError, match="merge-csirl-s0 pid"):  # a second sweep of the same folder
+            StopCellsOnSigterm(out).__enter__()
         proc.send_signal(signal.SIGTERM)
         outs, err = proc.communicate(timeout=240)
     finally:
@@ -88,6 +94,6 @@ def test_sigterm_to_a_sweep_checkpoints_its_running_cell_before_the_sweep_exits(
     assert "SIGTERM: stopping merge-csirl-s0" in err and "every running cell checkpointed" in err, err[-2000:]
     with open(os.path.join(out, "logs", "merge-csirl-s0.log")) as f:
         assert "SIGTERM: training stopped; checkpoint saved" in f.read()
-    assert benchmark.running_cells(out) == {}
+    assert running_cells(out) == {}
     (cell,), _ = benchmark.plan_cells(["csirl"], ["merge"], [0], out, [])
     assert cell.resumed  # the same command continues it

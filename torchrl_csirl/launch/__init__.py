@@ -18,6 +18,8 @@ an installed wheel) are thin calls into this layer. Its modules:
 * :mod:`torchrl_csirl.launch.registry`: which schema trains a method (its loader by method name).
 * :mod:`torchrl_csirl.launch.summaries`: finished runs' ``summary.json`` files, mean / std over
   seeds, Welch's test.
+* :mod:`torchrl_csirl.launch.processes`: a local sweep's cell processes (pid files; SIGTERM stops
+  them at a checkpoint before the sweep exits).
 * :mod:`torchrl_csirl.launch.csirl` / :mod:`torchrl_csirl.launch.imitation`: CSIRL's and the
   baselines' schemas (driving and robotics) and builders.
 * :mod:`torchrl_csirl.launch.robotics`: the robotics tasks' schema sections and checks.

@@ -280,11 +280,15 @@ def load_config(schema: type, overrides: list[str] | None = None, config_dir: st
     return _merge_and_validate(schema, base, [*layers, cli])
 
 
+#: keys a resumed run keeps: ``preset`` (the saved values already hold it) and the settings that decide what the
+#: checkpoint's networks and losses are (a standardisation's statistics, an objective's form)
+RESUME_FIXED_KEYS = ("preset", "valuedice.normalize_states", "iqlearn.value_loss")
+
+
 def load_run_config(schema: type, run_dir: str, overrides: list[str] | None = None) -> DictConfig:
     """A run's saved ``config.yaml`` over the schema, updated by ``overrides`` (resume).
 
-    ``checkpoint.resume`` of the saved file is dropped, and ``preset`` cannot change (the saved
-    values already hold it).
+    ``checkpoint.resume`` of the saved file is dropped, and the :data:`RESUME_FIXED_KEYS` cannot change.
     """
     path = os.path.join(run_dir, "config.yaml")
     if not os.path.isfile(path):
@@ -294,8 +298,11 @@ def load_run_config(schema: type, run_dir: str, overrides: list[str] | None = No
         saved.checkpoint.resume = None
     cli = parse_overrides(list(overrides or []))
     check_known_keys(schema, cli)
-    if "preset" in cli and "preset" in saved and cli.preset != saved.preset:
-        raise ConfigError(f"preset={cli.preset}: a resumed run keeps its preset ({saved.preset})")
+    for key in RESUME_FIXED_KEYS:
+        new, old = OmegaConf.select(cli, key), OmegaConf.select(saved, key)
+        if new is not None and old is not None and new != old:
+            what = "its preset" if key == "preset" else "this setting"
+            raise ConfigError(f"{key}={new}: a resumed run keeps {what} ({old})")
     return _merge_and_validate(schema, OmegaConf.structured(schema), [saved, cli], source=path)
 
 

@@ -305,7 +305,7 @@ def method_input_features(cfg: DictConfig, spec: TaskSpec, demos: ExpertDemonstr
     demonstrations' observations where the method's section asks for it (``valuedice.normalize_states``)."""
     features = model_input_features(cfg.model, spec)
     section = cfg.get(cfg.method)
-    if section is None or not section.get("normalize_states", False):
+    if section is None or not section.get("normalize_states"):
         return features
     try:
         return with_standardization(features, demos.transitions().get("observation"))

@@ -322,7 +322,8 @@ def with_standardization(features: nn.Module | None, observations: torch.Tensor)
 
 
 def find_standardization(module: nn.Module) -> StandardizeFeatures | None:
-    """The :class:`StandardizeFeatures` a network reads its observation through (the first one found), or None.
+    """The :class:`StandardizeFeatures` a network reads its raw observation through: its input map's first
+    map (as :func:`with_standardization` builds it), or None.
 
     Examples:
         >>> import torch
@@ -331,7 +332,10 @@ def find_standardization(module: nn.Module) -> StandardizeFeatures | None:
         >>> find_standardization(make_actor(3, 1, hidden=(8,), input_features=norm)) is norm
         True
     """
-    return next((m for m in module.modules() if isinstance(m, StandardizeFeatures)), None)
+    outer = next((m for m in module.modules() if isinstance(m, (FeatureChain, StandardizeFeatures, EgoRelativeFeatures,
+                                                                LaneFeatures, DropFeatures))), None)  # the outermost map
+    first = outer[0] if isinstance(outer, FeatureChain) else outer
+    return first if isinstance(first, StandardizeFeatures) else None
 
 
 def feature_map_from_config(config: dict[str, Any],
@@ -348,4 +352,6 @@ def feature_map_from_config(config: dict[str, Any],
         return DropFeatures(config["in_features"], config["hidden"])
     if kind == "standardize":
         return StandardizeFeatures(torch.tensor(config["loc"]), torch.tensor(config["scale"]))
+    if kind != "ego":
+        raise ValueError(f"unknown input map kind {kind!r} (saved by a newer torchrl-csirl?)")
     return EgoRelativeFeatures(**{k: v for k, v in config.items() if k != "kind"})

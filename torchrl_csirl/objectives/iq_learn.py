@@ -41,6 +41,10 @@ from torchrl_csirl.objectives.ensemble_sac import EnsembleSACLoss
 __all__ = ["IQLearnHyperparameters", "IQLearnLoss", "inverse_soft_q_objective"]
 
 
+#: the initial-state term's forms (the authors' ``method.loss``)
+VALUE_LOSSES = ("value", "v0")
+
+
 @dataclass
 class IQLearnHyperparameters(SACHyperparameters):
     """IQ-Learn's settings (continuous control).
@@ -65,6 +69,10 @@ class IQLearnHyperparameters(SACHyperparameters):
         value_loss: the initial-state term (the authors' ``method.loss``): ``"value"``,
             ``E_mix[V(s) - gamma V(s')]`` (their HalfCheetah command), or ``"v0"``,
             ``(1 - gamma) E_E[V(s)]`` with the expert states as initial states (their Hopper command).
+        chi2_policy_actions: the chi-squared regulariser's replay part ``r(s, a)`` at an action of the
+            current policy, ``a ~ pi(s)``, instead of the replay's own (the authors' code, "use current policy
+            for regularization instead of RB", with its MuJoCo commands' ``method.regularize=True``; the
+            paper's mixture has the replay's actions).
     """
 
     chi2_coefficient: float = 0.5
@@ -75,13 +83,12 @@ class IQLearnHyperparameters(SACHyperparameters):
     actor_lr: float = 3e-5
     use_target_value: bool = True
     value_loss: str = "value"
+    chi2_policy_actions: bool = False
 
     def __post_init__(self) -> None:
         if self.value_loss not in VALUE_LOSSES:
             raise ValueError(f"value_loss must be one of {VALUE_LOSSES}, got {self.value_loss!r}.")
 
-
-VALUE_LOSSES = ("value", "v0")
 
 
 def inverse_soft_q_objective(expert_reward: torch.Tensor, value_difference: torch.Tensor,
@@ -131,6 +138,8 @@ class IQLearnLoss(EnsembleSACLoss):
             :class:`~torchrl.objectives.SoftUpdate`). Defaults to ``True``.
         value_loss (str): the initial-state term, ``"value"`` or ``"v0"`` (:class:`IQLearnHyperparameters`).
             Defaults to ``"value"``.
+        chi2_policy_actions (bool): the chi-squared regulariser's replay part at actions of the current policy
+            (:class:`IQLearnHyperparameters`). Defaults to ``False``.
         **kwargs: forwarded to :class:`~torchrl_csirl.objectives.EnsembleSACLoss`.
 
     Examples:
@@ -164,7 +173,7 @@ class IQLearnLoss(EnsembleSACLoss):
 
     def __init__(self, actor_network, qvalue_network, *, chi2_coefficient: float = 0.5, num_qvalue_nets: int = 2,
                  alpha_init: float = 0.01, use_target_value: bool = True, value_loss: str = "value",
-                 **kwargs) -> None:
+                 chi2_policy_actions: bool = False, **kwargs) -> None:
         _check_num_critics(num_qvalue_nets)
         if value_loss not in VALUE_LOSSES:
             raise ValueError(f"value_loss must be one of {VALUE_LOSSES}, got {value_loss!r}.")
@@ -176,12 +185,18 @@ class IQLearnLoss(EnsembleSACLoss):
         self.discount = float(kwargs.get("gamma", 0.99))
         self.use_target_value = bool(use_target_value)
         self.value_loss = value_loss
+        self.chi2_policy_actions = bool(chi2_policy_actions)
 
     def soft_value(self, observation: torch.Tensor, *, target: bool = False) -> torch.Tensor:
         """``V(s) = Q_k(s, a) - alpha log pi(a | s)``, ``a ~ pi(s)`` detached, per critic: ``[N, B]``.
 
         With ``target=True`` the target critics give ``Q_k`` (no gradient).
         """
+        qvalues, log_prob = self._policy_qvalues(observation, target=target)
+        return qvalues - sac_alpha(self) * log_prob
+
+    def _policy_qvalues(self, observation: torch.Tensor, *, target: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(Q_k(s, a), log pi(a | s))`` with ``a ~ pi(s)`` detached: ``[N, B]`` and ``[B]``."""
         obs_key = self.qvalue_network.in_keys[0]
         td = TensorDict({obs_key: observation}, observation.shape[:1])
         with torch.no_grad(), set_exploration_type(ExplorationType.RANDOM), \
@@ -191,16 +206,18 @@ class IQLearnLoss(EnsembleSACLoss):
         td.set(self.tensor_keys.action, action)
         with torch.set_grad_enabled(torch.is_grad_enabled() and not target):
             qvalues = self.qvalues(td, target=target)
-        return qvalues - sac_alpha(self) * log_prob
+        return qvalues, log_prob
 
-    def _implicit_reward(self, transitions: TensorDictBase) -> tuple[torch.Tensor, torch.Tensor]:
-        """``(r, V(s) - gamma V(s'))`` per critic, ``[N, B]`` each."""
+    def _implicit_reward(self, transitions: TensorDictBase) -> tuple[torch.Tensor, ...]:
+        """``(r, V(s), gamma V(s'), Q(s, a ~ pi))`` per critic, ``[N, B]`` each (``V`` and the last from one
+        sampled action)."""
         obs_key = self.qvalue_network.in_keys[0]
         not_done = 1.0 - transitions.get(("next", self.tensor_keys.terminated)).float().reshape(1, -1)
         next_value = self.discount * not_done * self.soft_value(transitions.get(("next", obs_key)),
                                                                 target=self.use_target_value)
         reward = self.qvalues(transitions) - next_value
-        return reward, self.soft_value(transitions.get(obs_key)) - next_value
+        policy_q, log_prob = self._policy_qvalues(transitions.get(obs_key))
+        return reward, policy_q - sac_alpha(self) * log_prob, next_value, policy_q
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         expert = tensordict.get(self.tensor_keys.expert)
@@ -211,10 +228,15 @@ class IQLearnLoss(EnsembleSACLoss):
         require_keys(agent, needed, "IQ-Learn replay transitions")
         mixture = concat_shared(expert, agent)
         n_expert = expert.numel()
-        reward, value_difference = self._implicit_reward(mixture)
-        if self.value_loss == "v0":  # (1 - gamma) V(s_0), the expert states as initial states
-            value_difference = (1.0 - self.discount) * self.soft_value(expert.get(obs_key))
-        loss_qvalue = inverse_soft_q_objective(reward[:, :n_expert], value_difference, reward, self.chi2_coefficient)
+        reward, value, next_value, policy_q = self._implicit_reward(mixture)
+        regularized = reward
+        if self.chi2_policy_actions:  # the replay part at the policy's actions: Q(s, a ~ pi) - gamma V(s')
+            regularized = torch.cat([reward[:, :n_expert], (policy_q - next_value)[:, n_expert:]], -1)
+        if self.value_loss == "v0":  # (1 - gamma) V(s_0), the expert states (first in the mixture) as initial states
+            value_difference = (1.0 - self.discount) * value[:, :n_expert]
+        else:
+            value_difference = value - next_value
+        loss_qvalue = inverse_soft_q_objective(reward[:, :n_expert], value_difference, regularized, self.chi2_coefficient)
         loss_actor, metadata = self.actor_loss(mixture)
         loss_alpha = sac_reduced_alpha_loss(self, metadata["log_prob"], mixture)
         return TensorDict({

@@ -78,7 +78,7 @@ class ValueDICEHyperparameters(AbsorbingStateSettings):
             standard deviation (+ 1e-3), and the gradient penalty is measured in them: the authors'
             code's default (on MuJoCo). Off by default: the driving observations come scaled to
             [-1, 1] by highway-env and are read through maps of the raw rows; the locomotion cells
-            turn it on (``recipes/benchmark.py`` ``TASK_OVERRIDES``). Read by the recipes' network
+            turn it on (``TASK_OVERRIDES`` of :mod:`torchrl_csirl.scripts.benchmark`). Read by the recipes' network
             builder (:func:`~torchrl_csirl.modules.with_standardization`).
         max_grad_norm: gradient-norm clipping (None: none).
     """
@@ -238,8 +238,9 @@ class ValueDICELoss(LossModule):
         self.replay_regularization = float(replay_regularization)
         self.orthogonal_regularization = float(orthogonal_regularization)
         self.gp_lambda = float(gp_lambda)
+        # not saved: it is nu's input map's own scale, rebuilt with the network
         self.register_buffer("observation_scale", None if observation_scale is None
-                             else torch.as_tensor(observation_scale, dtype=torch.float32).detach().clone())
+                             else torch.as_tensor(observation_scale, dtype=torch.float32).detach().clone(), persistent=False)
 
     def _forward_value_estimator_keys(self, **kwargs) -> None:
         pass

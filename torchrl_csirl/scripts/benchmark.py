@@ -17,9 +17,10 @@ go to every cell; ``<method>:key=value`` or ``<recipe>:key=value`` (``csirl_high
 ``imitation_highway``, ``csirl_robotics``, ``imitation_robotics``) to that method's or that
 recipe's cells only. ``--address`` joins an
 existing Ray cluster (``ray start --head`` on it first); ``--max-concurrent`` and
-``--cpus-per-trial`` size the trials. SIGTERM to the sweep stops it without losing work: each running
-cell gets SIGTERM too (it checkpoints at its next batch boundary) and the sweep exits (status 143) once they
-have (on local Ray, Linux); run the same command again to continue.
+``--cpus-per-trial`` size the trials. SIGTERM to the sweep (its pid: ``<output-dir>/logs/sweep.pid``) stops it
+without losing work: each running cell gets SIGTERM too (it checkpoints at its next batch boundary) and the sweep
+exits (status 143) once they have (local Ray, Linux: :mod:`torchrl_csirl.launch.processes`); run the same command
+again to continue.
 
 Write the table (method rows x scenario columns, expert-normalised accomplish rate mean +- std over
 seeds, the paper's Table I beside it; on the robotics tasks the test return, the paper's metric
@@ -33,14 +34,12 @@ See docs/benchmark.md.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
 import json
 import os
-import signal
-import subprocess
 import sys
 import textwrap
-import time
 from collections import defaultdict
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -50,6 +49,7 @@ from omegaconf import OmegaConf
 
 from torchrl_csirl.envs import TASKS, task_names
 from torchrl_csirl.launch.config import SCENARIO_NAMES, EvalConfig
+from torchrl_csirl.launch.processes import StopCellsOnSigterm, SweepBusyError, run_cell_process
 from torchrl_csirl.launch.summaries import find_summaries, mean_std, welch_test
 
 #: the table's rows, in the paper's order, and the recipe of each
@@ -99,12 +99,14 @@ TABLE_BUDGETS.update({task: 300_000 for task in LOCOMOTION_ORDER})
 #: trajectory, the protocol of the published table beside ours (IQ-Learn's Table 3, also ValueDICE's); an
 #: evaluation and a checkpoint every 5 rounds (10 000 updates: 10 validation episodes of 1 000 steps each); no
 #: video of every cell (1 000 frames each; ``recipes/watch.py`` films a run); ValueDICE on standardised states, as
-#: its authors' code runs MuJoCo (docs/baselines.md, "Standardised states"); IQ-Learn with its authors' initial-state
-#: term per task (``v0`` on the Hopper, ``value`` on the HalfCheetah: their commands). Every method updates at the
+#: its authors' code runs MuJoCo (docs/baselines.md, "Standardised states"); IQ-Learn as its authors' MuJoCo
+#: commands run it: the regulariser at the policy's actions, the initial-state term per task (``v0`` on the
+#: Hopper, ``value`` on the HalfCheetah). Every method updates at the
 #: project's rate, ``optim.utd_ratio=0.5`` (150 000 updates): docs/benchmark.md#published-results compares the updates
 TASK_OVERRIDES: dict[str, tuple[str, ...]] = {
     task: ("collector.frames_per_batch=2000", "expert.num_trajectories=1", "eval.every_rounds=5",
-           "checkpoint.every_rounds=5", "eval.video=false", "valuedice:valuedice.normalize_states=true")
+           "checkpoint.every_rounds=5", "eval.video=false", "valuedice:valuedice.normalize_states=true",
+           "iqlearn:iqlearn.chi2_policy_actions=true")
     for task in LOCOMOTION_ORDER}
 TASK_OVERRIDES["hopper"] += ("iqlearn:iqlearn.value_loss=v0",)
 
@@ -310,100 +312,15 @@ def run_cell(config: dict[str, Any]) -> None:
     log_path = cell["log"]
     os.makedirs(os.path.dirname(log_path), exist_ok=True)
     env = {**os.environ, "WANDB_SILENT": "true", "MPLBACKEND": "Agg"}
-    with open(log_path, "a") as log:
-        log.write("$ " + " ".join(cell["command"]) + "\n")
-        log.flush()
-        proc = subprocess.Popen(cell["command"], stdout=subprocess.PIPE, stderr=log, text=True, env=env, cwd=cell["cwd"])
-        pid_path = cell_pid_path(log_path)
-        with open(pid_path, "w") as f:
-            f.write(f"{proc.pid} {process_start_time(proc.pid)}\n")
-        try:
-            stdout, _ = proc.communicate()
-        finally:
-            os.remove(pid_path)
-        log.write(stdout)
-    if proc.returncode != 0:
+    returncode, stdout = run_cell_process(cell["command"], log_path, env=env, cwd=cell["cwd"])
+    if returncode != 0:
         with open(log_path) as f:
             tail = f.read()[-2000:]
-        raise RuntimeError(f"{cell['name']}: exit status {proc.returncode}; see {log_path}:\n{tail}")
-    summary = json.loads(proc.stdout.strip().splitlines()[-1])
+        raise RuntimeError(f"{cell['name']}: exit status {returncode}; see {log_path}:\n{tail}")
+    summary = json.loads(stdout.strip().splitlines()[-1])
     metrics = {k: summary[k] for k in ("accomplish_rate", "normalized_accomplish_rate", "success_rate", "crash_rate", "return",
                                        "frames", "updates", "wall_s") if summary.get(k) is not None}
     tune.report({**metrics, "run_dir": summary["run_dir"]})
-
-
-def cell_pid_path(log_path: str) -> str:
-    """Where a running cell's process id is kept: beside its log (``logs/<cell>.pid``), while it runs."""
-    return os.path.splitext(log_path)[0] + ".pid"
-
-
-def process_start_time(pid: int) -> str | None:
-    """When process ``pid`` started (clock ticks since boot, ``/proc/<pid>/stat``); none if it is gone (or
-    without ``/proc``). With the id, it names one process: ids are reused, start times are not.
-
-    Examples:
-        >>> process_start_time(os.getpid()) == process_start_time(os.getpid()) is not None
-        True
-    """
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().rsplit(")", 1)[1].split()[19]  # field 22; the name before ")" may hold spaces
-    except (OSError, IndexError):
-        return None
-
-
-def running_cells(output_dir: str) -> dict[str, int]:
-    """The cells of the sweep in ``output_dir`` running on this machine: cell name -> process id (Linux).
-
-    Examples:
-        >>> running_cells("no/such/sweep")
-        {}
-    """
-    logs, cells = os.path.join(output_dir, "logs"), {}
-    for name in sorted(os.listdir(logs)) if os.path.isdir(logs) else ():
-        if name.endswith(".pid"):
-            try:
-                with open(os.path.join(logs, name)) as f:
-                    pid, started = f.read().split()
-            except (OSError, ValueError):  # gone or half-written
-                continue
-            if process_start_time(int(pid)) == started:  # alive, and not another process that got the id since
-                cells[name[:-len(".pid")]] = int(pid)
-    return cells
-
-
-def stop_running_cells(output_dir: str, *, timeout_s: float = 1800.0, poll_s: float = 2.0) -> list[str]:
-    """SIGTERM to every running cell of the sweep in ``output_dir`` (each checkpoints at its next batch
-    boundary and exits); waits for them, at most ``timeout_s``. Returns the names of the cells still running.
-    """
-    cells = running_cells(output_dir)
-    for name, pid in cells.items():
-        print(f"SIGTERM: stopping {name} (pid {pid}) at its next checkpoint", file=sys.stderr)
-        try:
-            os.kill(pid, signal.SIGTERM)
-        except OSError:
-            pass
-    deadline = time.monotonic() + timeout_s
-    while cells and time.monotonic() < deadline:
-        time.sleep(poll_s)
-        cells = {n: p for n, p in running_cells(output_dir).items() if n in cells}
-    return sorted(cells)
-
-
-def stop_sweep_on_sigterm(output_dir: str) -> None:
-    """Installs the sweep driver's SIGTERM handler: the running cells stop at a checkpoint first, then the
-    driver exits with status 143 (Ray's own handler would exit at once, and the cells with it)."""
-    def handler(signum: int, frame: Any) -> None:
-        import ray
-
-        signal.signal(signal.SIGTERM, signal.SIG_DFL)  # a second SIGTERM: at once
-        left = stop_running_cells(output_dir)
-        print("SIGTERM: sweep stopped" + (f"; still running: {' '.join(left)}" if left else "; every running cell "
-              "checkpointed") + "; run the same command again to continue", file=sys.stderr, flush=True)
-        ray.shutdown()
-        os._exit(128 + signum)  # not SystemExit: Ray Tune's loop, which the signal interrupted, would catch it
-
-    signal.signal(signal.SIGTERM, handler)
 
 
 def run_sweep(cells: list[Cell], output_dir: str, *, address: str | None, max_concurrent: int,
@@ -422,19 +339,19 @@ def run_sweep(cells: list[Cell], output_dir: str, *, address: str | None, max_co
              # Ray starts its workers at niceness 15: a trial's recipe would then get the CPU only
              # when nothing else wants it (on a shared machine, 6 frames/s instead of ~1 000)
              runtime_env={"env_vars": worker_env})
-    if address is None:  # the cells run here (after ray.init, which installs a handler of its own)
-        stop_sweep_on_sigterm(output_dir)
-    try:
-        space = [{"name": c.name, "command": list(c.command), "cwd": os.getcwd(),
-                  "log": os.path.join(output_dir, "logs", f"{c.name}.log")} for c in cells]
-        tuner = tune.Tuner(
-            tune.with_resources(run_cell, {"cpu": cpus_per_trial}),
-            param_space={"cell": tune.grid_search(space)},
-            tune_config=tune.TuneConfig(max_concurrent_trials=max_concurrent),
-            run_config=tune.RunConfig(name="benchmark", storage_path=os.path.join(output_dir, "ray"), verbose=0),
-        )
-        results = tuner.fit()
-        return [r.config["cell"]["name"] for r in results if r.error is not None]
+    local = address is None and not os.environ.get("RAY_ADDRESS")  # the cells run here: SIGTERM stops them first
+    try:  # the stopper after ray.init, which installs a SIGTERM handler of its own
+        with StopCellsOnSigterm(output_dir, shutdown=ray.shutdown) if local else contextlib.nullcontext():
+            space = [{"name": c.name, "command": list(c.command), "cwd": os.getcwd(),
+                      "log": os.path.join(output_dir, "logs", f"{c.name}.log")} for c in cells]
+            tuner = tune.Tuner(
+                tune.with_resources(run_cell, {"cpu": cpus_per_trial}),
+                param_space={"cell": tune.grid_search(space)},
+                tune_config=tune.TuneConfig(max_concurrent_trials=max_concurrent),
+                run_config=tune.RunConfig(name="benchmark", storage_path=os.path.join(output_dir, "ray"), verbose=0),
+            )
+            results = tuner.fit()
+            return [r.config["cell"]["name"] for r in results if r.error is not None]
     finally:
         ray.shutdown()
 
@@ -728,7 +645,7 @@ def published_normalized(method: str, task: str) -> float | None:
 
 def _published(method: str, task: str, row: dict[str, Any] | None) -> str:
     """A published figure of :data:`PUBLISHED_LOCOMOTION`: ``value (source)``, then ours minus it (**bold**
-    beyond :data:`PUBLISHED_GAP` below), ``—`` where there is none."""
+    beyond :data:`PUBLISHED_GAP` below, never for a run at another budget), ``—`` where there is none."""
     value = published_normalized(method, task)
     if value is None:
         return "—"
@@ -737,6 +654,8 @@ def _published(method: str, task: str, row: dict[str, Any] | None) -> str:
     if ours is None:
         return text
     gap = f"{ours - value:+.2f}"
+    if off_budget(row):  # a short or longer run is not compared at the table's budget
+        return f"{text}; ours {gap} (at {row['frames']} frames)"
     return f"{text}; ours {f'**{gap}**' if ours - value < -PUBLISHED_GAP else gap}"
 
 
@@ -893,7 +812,7 @@ def main(argv: list[str] | None = None) -> int:
         if argv[:1] == ["report"]:
             return report_main(argv[1:])
         return sweep_main(argv)
-    except (BenchmarkError, FileNotFoundError) as err:
+    except (BenchmarkError, FileNotFoundError, SweepBusyError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
 

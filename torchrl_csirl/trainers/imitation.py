@@ -151,7 +151,8 @@ def _make_dac(actor, make_qvalue, hp: DACHyperparameters, device) -> ImitationMe
 def _make_iqlearn(actor, make_qvalue, hp: IQLearnHyperparameters, device) -> ImitationMethod:
     loss = IQLearnLoss(actor, make_qvalue(), chi2_coefficient=hp.chi2_coefficient, num_qvalue_nets=hp.num_qvalue_nets,
                        alpha_init=hp.alpha_init, fixed_alpha=hp.fixed_alpha, gamma=hp.gamma,
-                       use_target_value=hp.use_target_value, value_loss=hp.value_loss).to(device)
+                       use_target_value=hp.use_target_value, value_loss=hp.value_loss,
+                       chi2_policy_actions=hp.chi2_policy_actions).to(device)
     optimizer = _adam(loss, hp.lr, {"actor_network_params": hp.actor_lr})
     target_updater = SoftUpdate(loss, tau=hp.tau)
     num_expert = round(hp.expert_fraction * hp.batch_size)
@@ -174,7 +175,10 @@ def _make_valuedice(actor, make_qvalue, hp: ValueDICEHyperparameters, device) ->
     norms = find_standardization(actor), find_standardization(nu)
     if hp.normalize_states and (norms[0] is None or norms[1] is None):
         raise ValueError("normalize_states=True: the actor and nu must read the observation through a "
-                         "StandardizeFeatures (torchrl_csirl.modules.with_standardization).")
+                         "StandardizeFeatures first (torchrl_csirl.modules.with_standardization).")
+    if hp.normalize_states and hp.absorbing_states and hp.absorbing_observation == "placeholder":
+        raise ValueError("normalize_states=True with absorbing_observation='placeholder': the placeholder is a zero "
+                         "raw observation, not the zero standardised state of the authors' code; use 'terminal'.")
     loss = ValueDICELoss(actor, nu, gamma=hp.gamma, replay_regularization=hp.replay_regularization,
                          orthogonal_regularization=hp.orthogonal_regularization, gp_lambda=hp.gp_lambda,
                          observation_scale=norms[1].scale if hp.normalize_states else None).to(device)
