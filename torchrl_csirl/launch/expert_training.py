@@ -49,6 +49,8 @@ class DemosConfig:
     episodes: int = option(25, minimum=0, help="demonstrations of the trained policy written at the end (0: none)")
     seed: int = option(20_000, minimum=0, help="demonstration i is seeded with seed + i (apart from the test seeds)")
     only_successful: bool = option(False, help="keep only episodes that succeed (up to 10 x episodes tries)")
+    min_return: Optional[float] = option(None, help="keep only episodes that earn at least this return (up to 10 x "
+                                                    "episodes tries; IQ-Learn's MuJoCo threshold; null: all)")
     path: Optional[str] = option(None, help="the .npz written (null: <run dir>/demos_<episodes>.npz)")
     minari_id: Optional[str] = option(None, help="also write a local Minari dataset with this id (null: none)")
 

@@ -68,7 +68,7 @@ def write_demonstrations(run: Run) -> dict[str, object]:
     run.mirror.sync()
     with set_exploration_type(ExplorationType.DETERMINISTIC):
         demos = record_demonstrations(spec.name, run.mirror.policy, demos_cfg.episodes, seed=demos_cfg.seed,
-                                      only_successful=demos_cfg.only_successful)
+                                      only_successful=demos_cfg.only_successful, min_return=demos_cfg.min_return)
     path = demos_cfg.path or os.path.join(run.run_dir, f"demos_{demos_cfg.episodes}.npz")
     demos.save(path)
     episodes = demos.metadata["episodes"]
