@@ -148,6 +148,19 @@ def test_an_expert_its_demonstrations_then_csirl_and_a_baseline_on_the_hopper(tm
     assert action.shape == (3,) and abs(action).max() <= 1
 
 
+def test_an_expert_run_stops_at_its_target_and_keeps_demonstrations_above_a_return(tmp_path):
+    """eval.stop_at_return ends training at the first evaluation that reaches it (the final test and the
+    demonstrations follow); demos.min_return keeps only episodes earning that much."""
+    budget = [o for o in TINY if not o.startswith("collector.total_frames")]
+    summary = train_expert.main(["env.scenario=hopper", *budget, "collector.total_frames=2000", "updates_per_round=10",
+                                 "eval.stop_at_return=-1000000", "demos.episodes=2", "demos.min_return=-1000000",
+                                 f"logger.output_dir={tmp_path}"])
+    assert summary["frames"] == 200 and summary["demos_episodes"] == 2  # the first evaluation: the first batch's 20 updates
+    with pytest.raises(ValueError, match="only 0 of 1 episodes earned at least 1000000.0 in 10 tries"):
+        train_expert.main(["env.scenario=hopper", *budget, "collector.total_frames=200", "demos.episodes=1",
+                           "demos.min_return=1000000", f"logger.output_dir={tmp_path}"])
+
+
 def test_the_collector_refuses_a_batch_that_cuts_a_locomotion_episode():
     from torchrl_csirl.launch import ConfigError
     from torchrl_csirl.launch.builders import check_whole_episodes

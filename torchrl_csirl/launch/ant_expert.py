@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Optional
 
 from torchrl_csirl.launch.config import (
     DEVICES,
@@ -44,6 +45,8 @@ class AntReplayBufferConfig(LearnerReplayBufferConfig):
 class AntEvalConfig(EvalConfig):
     episodes: int = option(20, above=0, help="deterministic ant-goal episodes (4-goal chains) per evaluation")
     final_episodes: int = option(100, above=0, help="ant-goal episodes of the final test")
+    stop_at_return: Optional[float] = option(None, help="end training at the first evaluation whose mean return reaches "
+                                                        "this (then the final test; null: train to collector.total_frames)")
 
 
 @dataclass

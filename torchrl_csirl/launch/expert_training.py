@@ -26,7 +26,7 @@ from torchrl_csirl.launch.robotics import RoboticsEnvConfig
 from torchrl_csirl.launch.run import resolve_device
 from torchrl_csirl.modules import make_actor, make_input_features, make_qvalue
 from torchrl_csirl.objectives import SACHyperparameters, make_sac_learner
-from torchrl_csirl.trainers import SACUpdate
+from torchrl_csirl.trainers import SACUpdate, StopAtTarget
 
 __all__ = ["DemosConfig", "ExpertEnvConfig", "ExpertTrainingConfig", "make_sac_trainer"]
 
@@ -86,9 +86,12 @@ def make_sac_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume
     loss = make_sac_learner(actor, make_qvalue(spec.obs_dim, spec.action_dim, input_features=features), hp).to(device)
     optimizer = torch.optim.Adam([p for p in loss.parameters() if p.requires_grad], lr=hp.lr)
     online = make_online_buffer(cfg.replay_buffer.size, hp.batch_size, [], device)
-    return assemble_trainer(
+    run = assemble_trainer(
         cfg, spec, run_dir, device=device, demos=None, policy=actor, online_buffer=online,
         update_step=SACUpdate(loss, optimizer, SoftUpdate(loss, tau=hp.tau), hp.max_grad_norm),
         total_frames=cfg.collector.total_frames, updates_per_round=cfg.updates_per_round,
         states={"loss": loss, "optim_sac": optimizer}, frames_done=frames_done, resume_frames=resume_frames,
     )
+    if cfg.eval.stop_at_return is not None:
+        run.trainer.register_op("post_round", StopAtTarget(run.evaluation, cfg.eval.stop_at_return), "stop_at_return")
+    return run

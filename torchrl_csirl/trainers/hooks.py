@@ -1,19 +1,21 @@
 """The CSIRL round hooks of :class:`~torchrl_csirl.trainers.CSIRLTrainer` (stage ``round_end``).
 
 * :class:`SubgoalSelectionHook`: the curricular subgoal selection (Alg. 1);
-* :class:`EvaluationHook`: the deterministic policy's accomplish rate.
+* :class:`EvaluationHook`: the deterministic policy's accomplish rate;
+* :class:`StopAtTarget` (stage ``post_round``): ends training at the first evaluation that reaches a target.
 
 The update steps are in :mod:`torchrl_csirl.trainers.updates`, the checkpoints in
 :mod:`torchrl_csirl.trainers.checkpoint`.
 """
 from __future__ import annotations
 
+import sys
 from collections.abc import Callable
 from typing import Any
 
 from torchrl_csirl.trainers.trainer import CSIRLTrainer
 
-__all__ = ["EvaluationHook", "SubgoalSelectionHook"]
+__all__ = ["EvaluationHook", "StopAtTarget", "SubgoalSelectionHook"]
 
 
 class SubgoalSelectionHook:
@@ -94,3 +96,38 @@ class EvaluationHook:
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         self.history = list(state["history"])
+
+
+class StopAtTarget:
+    """``post_round`` (after the round's checkpoint): ends training at the first evaluation of
+    :class:`EvaluationHook` whose ``key`` reaches ``target``: the run then finishes as at its last frame
+    (final test, policy, summary), at the frames reached. An expert's training stops where it is good
+    enough, and the same command reproduces it.
+
+    Args:
+        evaluation: the run's evaluation hook.
+        target: the value to reach.
+        key: the evaluation metric compared (``"env_return"``, the mean validation return).
+
+    Examples:
+        >>> from types import SimpleNamespace
+        >>> evaluation = EvaluationHook(lambda: {"env_return": 3600.0})
+        >>> trainer = SimpleNamespace(frames=408_000, updates=400_000, total_frames=1_000_000, postfix={},
+        ...                           record=lambda **kw: None)
+        >>> _ = evaluation.run(trainer)
+        >>> StopAtTarget(evaluation, 3532.7)(trainer)
+        >>> trainer.total_frames
+        408000
+    """
+
+    def __init__(self, evaluation: EvaluationHook, target: float, key: str = "env_return") -> None:
+        self.evaluation, self.target, self.key = evaluation, float(target), key
+
+    def __call__(self, trainer: CSIRLTrainer) -> None:
+        last = self.evaluation.history[-1] if self.evaluation.history else None
+        if last is None or last["frames"] != trainer.frames or not isinstance(last.get(self.key), (int, float)):
+            return  # no evaluation this round
+        if last[self.key] >= self.target:
+            print(f"eval {self.key} {last[self.key]:.1f} >= {self.target:g}: training stops at {trainer.frames} frames",
+                  file=sys.stderr)
+            trainer.total_frames = trainer.frames
