@@ -35,15 +35,25 @@ def _rows(run_dir: str) -> list[dict]:
         return [json.loads(line) for line in f if line.strip()]
 
 
-def test_sigterm_in_the_first_round_checkpoints_and_prints_the_resume_command(tmp_path):
-    run_dir = os.path.join(tmp_path, "stopped")
-    proc = subprocess.Popen([sys.executable, RECIPE, *TINY, f"logger.output_dir={tmp_path}", "logger.exp_name=stopped"],
-                            cwd=ROOT, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+def _start_and_wait_for_a_row(command: list[str], run_dir: str, timeout_s: float) -> subprocess.Popen:
+    """Starts ``command`` and waits until ``run_dir`` logs its first metrics row (the process still running)."""
+    proc = subprocess.Popen(command, cwd=ROOT, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        deadline = time.monotonic() + 120
+        deadline = time.monotonic() + timeout_s
         while not _rows(run_dir) and proc.poll() is None and time.monotonic() < deadline:
             time.sleep(0.2)
-        assert proc.poll() is None, f"the run ended before it could be stopped:\n{proc.stderr.read()[-2000:]}"
+        assert proc.poll() is None, f"it ended before it could be stopped:\n{proc.stderr.read()[-2000:]}"
+    except BaseException:
+        proc.kill()
+        raise
+    return proc
+
+
+def test_sigterm_in_the_first_round_checkpoints_and_prints_the_resume_command(tmp_path):
+    run_dir = os.path.join(tmp_path, "stopped")
+    proc = _start_and_wait_for_a_row([sys.executable, RECIPE, *TINY, f"logger.output_dir={tmp_path}",
+                                      "logger.exp_name=stopped"], run_dir, 120)
+    try:
         proc.send_signal(signal.SIGTERM)
         _, err = proc.communicate(timeout=120)
     finally:
@@ -73,14 +83,10 @@ def test_sigterm_to_a_sweep_checkpoints_its_running_cell_before_the_sweep_exits(
 
     out = str(tmp_path / "bench")
     run_dir = os.path.join(out, "merge-csirl-s0")
-    proc = subprocess.Popen([sys.executable, os.path.join("recipes", "benchmark.py"), "--methods", "csirl", "--scenarios",
-                             "merge", "--seeds", "0", "--output-dir", out, "--cpus-per-trial", "1", *TINY],
-                            cwd=ROOT, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = _start_and_wait_for_a_row([sys.executable, os.path.join("recipes", "benchmark.py"), "--methods", "csirl",
+                                      "--scenarios", "merge", "--seeds", "0", "--output-dir", out, "--cpus-per-trial", "1",
+                                      *TINY], run_dir, 240)
     try:
-        deadline = time.monotonic() + 240
-        while not _rows(run_dir) and proc.poll() is None and time.monotonic() < deadline:
-            time.sleep(0.5)
-        assert proc.poll() is None, f"the sweep ended before it could be stopped:\n{proc.stderr.read()[-2000:]}"
         assert list(running_cells(out)) == ["merge-csirl-s0"]
         with open(os.path.join(out, "logs", "sweep.pid")) as f:
             assert int(f.read().split()[0]) == proc.pid

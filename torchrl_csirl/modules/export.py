@@ -9,14 +9,7 @@ import torch
 from torchrl.modules import ProbabilisticActor
 
 from torchrl_csirl.modules.actor_critic import make_actor
-from torchrl_csirl.modules.features import (
-    DropFeatures,
-    EgoRelativeFeatures,
-    FeatureChain,
-    StandardizeFeatures,
-    feature_map_from_config,
-)
-from torchrl_csirl.modules.lane_features import LaneFeatures
+from torchrl_csirl.modules.features import feature_map_from_config, input_map
 
 __all__ = ["load_policy", "save_policy"]
 
@@ -56,9 +49,8 @@ def save_policy(actor: ProbabilisticActor, path: str | os.PathLike, *, obs_dim: 
 
 
 def _input_features_config(actor: ProbabilisticActor) -> dict[str, Any] | None:
-    maps = (FeatureChain, EgoRelativeFeatures, LaneFeatures, DropFeatures, StandardizeFeatures)
-    found = [m for m in actor.modules() if isinstance(m, maps)]
-    return found[0].config() if found else None  # the outermost map (a chain comes before its members)
+    found = input_map(actor)
+    return None if found is None else found.config()
 
 
 def load_policy(path: str | os.PathLike,

@@ -19,7 +19,7 @@ from torch import nn
 from torchrl_csirl.modules.lane_features import LaneFeatures
 
 __all__ = ["DropFeatures", "EgoRelativeFeatures", "FeatureChain", "RELATIVE_REFERENCE", "StandardizeFeatures", "feature_map_from_config",
-           "find_standardization", "make_input_features", "with_standardization"]
+           "find_standardization", "input_map", "make_input_features", "with_standardization"]
 
 #: metres (positions) and metres per second (velocities) that one unit of a relative feature
 #: represents, before clipping to ``[-clip, clip]``.
@@ -321,6 +321,19 @@ def with_standardization(features: nn.Module | None, observations: torch.Tensor)
     return norm if features is None else FeatureChain(norm, features)
 
 
+def input_map(module: nn.Module) -> nn.Module | None:
+    """The input map a network reads its observation through (the outermost one: a chain comes before its
+    members), or None.
+
+    Examples:
+        >>> from torchrl_csirl.modules import make_actor
+        >>> input_map(make_actor(3, 1, hidden=(8,), input_features=DropFeatures(3, hidden=[0])))
+        DropFeatures(in_features=3, hidden=[0])
+    """
+    maps = (FeatureChain, EgoRelativeFeatures, LaneFeatures, DropFeatures, StandardizeFeatures)
+    return next((m for m in module.modules() if isinstance(m, maps)), None)
+
+
 def find_standardization(module: nn.Module) -> StandardizeFeatures | None:
     """The :class:`StandardizeFeatures` a network reads its raw observation through: its input map's first
     map (as :func:`with_standardization` builds it), or None.
@@ -332,8 +345,7 @@ def find_standardization(module: nn.Module) -> StandardizeFeatures | None:
         >>> find_standardization(make_actor(3, 1, hidden=(8,), input_features=norm)) is norm
         True
     """
-    outer = next((m for m in module.modules() if isinstance(m, (FeatureChain, StandardizeFeatures, EgoRelativeFeatures,
-                                                                LaneFeatures, DropFeatures))), None)  # the outermost map
+    outer = input_map(module)
     first = outer[0] if isinstance(outer, FeatureChain) else outer
     return first if isinstance(first, StandardizeFeatures) else None
 
