@@ -83,6 +83,20 @@ def test_method_curves_frame_axis(tmp_path, monkeypatch, with_curve):
     assert [t.get_text() for t in ax.get_legend().get_texts()][-2:] == ["expert (0.95)", "random (0.04)"]
 
 
+def test_return_curves_keep_their_values_and_references_in_view(tmp_path, monkeypatch):
+    """``rate=False`` (returns): the axis follows the data, the reference lines included (a reference loop
+    variable once shadowed ``rate`` and clipped every return figure with references to [0, 1])."""
+    import torchrl_csirl.visualization.curves as curves_module
+
+    figures = []
+    save_png = curves_module.save_png
+    monkeypatch.setattr(curves_module, "save_png", lambda fig, path: figures.append(fig) or save_png(fig, path))
+    curves = {"csirl": [([20000, 40000], [-236.8, 263.4])]}
+    plot_method_curves(curves, tmp_path / "curves.png", references={"expert": 6254.5, "random": -284.5}, rate=False)
+    low, high = figures[0].axes[0].get_ylim()
+    assert low < -284.5 and high > 6254.5
+
+
 # ---------------------------------------------------------------- subgoal curriculum
 def _selections(length: int, rounds: int) -> list[dict]:
     generator = torch.Generator().manual_seed(0)

@@ -167,9 +167,9 @@ def plot_method_curves(
         ax.plot(frames, mean, "o-", color=color, markersize=3, label=f"{method} ({len(runs)} run{'s' * (len(runs) > 1)})")
         ax.fill_between(frames, mean - std, mean + std, color=color, alpha=0.2, linewidth=0)
         curves_drawn = True
-    for k, (method, rate) in enumerate(sorted((references or {}).items())):
-        ax.axhline(float(rate), color=str(0.15 + 0.3 * (k % 3)), linestyle="--", linewidth=1.2,
-                   label=f"{method} ({float(rate):.2f})")
+    for k, (method, level) in enumerate(sorted((references or {}).items())):
+        ax.axhline(float(level), color=str(0.15 + 0.3 * (k % 3)), linestyle="--", linewidth=1.2,
+                   label=f"{method} ({float(level):.2f})")
     if not (curves_drawn or references):
         empty_message(ax, "no finished run")
     else:
