@@ -164,6 +164,26 @@ def test_an_expert_run_stops_at_its_target_and_keeps_demonstrations_above_a_retu
                            "demos.min_return=1000000", f"logger.output_dir={tmp_path}"])
 
 
+def test_an_expert_run_can_finish_with_its_best_evaluation(tmp_path):
+    """eval.keep_best: the final test, policy.pt and the demonstrations use the best validation's weights
+    (best_policy.pt); the checkpoint keeps the last weights, to resume from."""
+    budget = [o for o in TINY if not o.startswith("collector.total_frames")]
+    summary = train_expert.main(["env.scenario=hopper", *budget, "collector.total_frames=1000", "updates_per_round=10",
+                                 "eval.keep_best=true", "demos.episodes=1", f"logger.output_dir={tmp_path}"])
+    run_dir = summary["run_dir"]
+    rows = [json.loads(line) for line in open(f"{run_dir}/metrics.jsonl")]
+    evaluations = [(r["eval_env_return"], r["frames"]) for r in rows if "eval_env_return" in r]
+    assert len(evaluations) == 5, evaluations
+    best_return, best_frames = max(evaluations, key=lambda e: (e[0], -e[1]))  # the first of equal bests
+    assert best_frames < evaluations[-1][1], evaluations  # this seed's last evaluation is not its best
+    assert summary["policy_from"]["frames"] == best_frames
+    assert summary["policy_from"]["env_return"] == pytest.approx(best_return)
+    kept = torch.load(f"{run_dir}/best_policy.pt", weights_only=True)["state_dict"]
+    shipped = load_policy(run_dir)
+    exported = {k: v for k, v in shipped.state_dict().items() if k in kept}
+    assert exported and all(torch.equal(exported[k], kept[k]) for k in exported)
+
+
 def test_the_collector_refuses_a_batch_that_cuts_a_locomotion_episode():
     from torchrl_csirl.launch import ConfigError
     from torchrl_csirl.launch.builders import check_whole_episodes

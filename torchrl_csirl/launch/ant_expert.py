@@ -47,6 +47,8 @@ class AntEvalConfig(EvalConfig):
     final_episodes: int = option(100, above=0, help="ant-goal episodes of the final test")
     stop_at_return: Optional[float] = option(None, help="end training at the first evaluation whose mean return reaches "
                                                         "this (then the final test; null: train to collector.total_frames)")
+    keep_best: bool = option(False, help="finish (final test, policy.pt, demonstrations) with the policy of the best "
+                                         "evaluation, kept in <run dir>/best_policy.pt, instead of the last")
 
 
 @dataclass

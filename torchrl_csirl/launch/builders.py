@@ -639,13 +639,17 @@ def evaluation_summary(cfg: DictConfig, spec: ScenarioSpec, method: str, final: 
 
 def final_summary(run: Run, method: str, title: str) -> dict[str, Any]:
     """Final checkpoint and test evaluation, ``policy.pt``, the learning curve, and the summary
-    fields every recipe reports (the method adds its own)."""
+    fields every recipe reports (the method adds its own). A run keeping its best policy
+    (``run.parts["keep_best"]``, :class:`~torchrl_csirl.trainers.KeepBestPolicy`) is tested and saved with
+    those weights (``policy_from`` in the summary); its checkpoint keeps the last ones."""
     from torchrl_csirl.launch.run import expert_accomplish_rate
     from torchrl_csirl.modules import save_policy
     from torchrl_csirl.visualization import plot_learning_curve
 
     trainer, cfg = run.trainer, run.cfg
     run.checkpoint.save(trainer)
+    # eval.keep_best: the best evaluation's weights, loaded after the checkpoint (which keeps the last, to resume)
+    kept = run.parts["keep_best"].restore() if "keep_best" in run.parts else None
     final = run.evaluate(cfg.eval.final_episodes)
     expert_rate = expert_accomplish_rate(run.demos.metadata) if run.demos is not None else None
     save_policy(run.mirror.policy, os.path.join(run.run_dir, "policy.pt"), obs_dim=run.spec.obs_dim,
@@ -666,6 +670,8 @@ def final_summary(run: Run, method: str, title: str) -> dict[str, Any]:
         "earlier_wall_s": round(trainer.elapsed_before, 1),  # a resumed run's earlier processes (total_wall_s)
         "run_dir": run.run_dir,
     }
+    if kept is not None:
+        summary["policy_from"] = {"kept": "best evaluation", **kept}
     run.logger.log({"frames": trainer.frames, "updates": trainer.updates,
                     **{f"test_{k}": v for k, v in final.items()}})
     if cfg.eval.video:

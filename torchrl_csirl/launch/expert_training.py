@@ -5,6 +5,7 @@ the AntMaze waypoint test at the end.
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from typing import Optional
 
@@ -26,9 +27,12 @@ from torchrl_csirl.launch.robotics import RoboticsEnvConfig
 from torchrl_csirl.launch.run import resolve_device
 from torchrl_csirl.modules import make_actor, make_input_features, make_qvalue
 from torchrl_csirl.objectives import SACHyperparameters, make_sac_learner
-from torchrl_csirl.trainers import SACUpdate, StopAtTarget
+from torchrl_csirl.trainers import KeepBestPolicy, SACUpdate, StopAtTarget
 
-__all__ = ["DemosConfig", "ExpertEnvConfig", "ExpertTrainingConfig", "make_sac_trainer"]
+__all__ = ["BEST_POLICY_FILE", "DemosConfig", "ExpertEnvConfig", "ExpertTrainingConfig", "make_sac_trainer"]
+
+#: the weights of the best evaluation (``eval.keep_best``), in the run directory
+BEST_POLICY_FILE = "best_policy.pt"
 
 
 def expert_task_choices() -> tuple[str, ...]:
@@ -92,6 +96,9 @@ def make_sac_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume
         total_frames=cfg.collector.total_frames, updates_per_round=cfg.updates_per_round,
         states={"loss": loss, "optim_sac": optimizer}, frames_done=frames_done, resume_frames=resume_frames,
     )
+    if cfg.eval.keep_best:  # registered after the evaluation, before the round's checkpoint
+        run.parts["keep_best"] = KeepBestPolicy(run.evaluation, actor, os.path.join(run_dir, BEST_POLICY_FILE))
+        run.trainer.register_op("round_end", run.keep_best, "keep_best")
     if cfg.eval.stop_at_return is not None:
         run.trainer.register_op("post_round", StopAtTarget(run.evaluation, cfg.eval.stop_at_return), "stop_at_return")
     return run

@@ -9,7 +9,7 @@ from torchrl_csirl.trainers.checkpoint import (
 )
 from torchrl_csirl.trainers.collection import shutdown_collector
 from torchrl_csirl.trainers.evaluation import evaluate_policy
-from torchrl_csirl.trainers.hooks import EvaluationHook, StopAtTarget, SubgoalSelectionHook
+from torchrl_csirl.trainers.hooks import EvaluationHook, KeepBestPolicy, StopAtTarget, SubgoalSelectionHook
 from torchrl_csirl.trainers.imitation import (
     IMITATION_METHODS,
     ImitationMethod,
@@ -45,6 +45,7 @@ __all__ = [
     "MetricsLogger",
     "SACUpdate",
     "StopOnSignals",
+    "KeepBestPolicy",
     "StopAtTarget",
     "SubgoalSelectionHook",
     "TrainingDivergedError",

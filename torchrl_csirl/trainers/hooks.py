@@ -2,20 +2,25 @@
 
 * :class:`SubgoalSelectionHook`: the curricular subgoal selection (Alg. 1);
 * :class:`EvaluationHook`: the deterministic policy's accomplish rate;
-* :class:`StopAtTarget` (stage ``post_round``): ends training at the first evaluation that reaches a target.
+* :class:`StopAtTarget` (stage ``post_round``): ends training at the first evaluation that reaches a target;
+* :class:`KeepBestPolicy`: the policy of the best evaluation, written to a file, to finish with.
 
 The update steps are in :mod:`torchrl_csirl.trainers.updates`, the checkpoints in
 :mod:`torchrl_csirl.trainers.checkpoint`.
 """
 from __future__ import annotations
 
+import os
 import sys
 from collections.abc import Callable
 from typing import Any
 
+import torch
+from torch import nn
+
 from torchrl_csirl.trainers.trainer import CSIRLTrainer
 
-__all__ = ["EvaluationHook", "StopAtTarget", "SubgoalSelectionHook"]
+__all__ = ["EvaluationHook", "KeepBestPolicy", "StopAtTarget", "SubgoalSelectionHook"]
 
 
 class SubgoalSelectionHook:
@@ -124,10 +129,81 @@ class StopAtTarget:
         self.evaluation, self.target, self.key = evaluation, float(target), key
 
     def __call__(self, trainer: CSIRLTrainer) -> None:
-        last = self.evaluation.history[-1] if self.evaluation.history else None
-        if last is None or last["frames"] != trainer.frames or not isinstance(last.get(self.key), (int, float)):
-            return  # no evaluation this round
-        if last[self.key] >= self.target:
+        last = _this_round_evaluation(self.evaluation, trainer, self.key)
+        if last is not None and last[self.key] >= self.target:
             print(f"eval {self.key} {last[self.key]:.1f} >= {self.target:g}: training stops at {trainer.frames} frames",
                   file=sys.stderr)
             trainer.total_frames = trainer.frames
+
+
+def _this_round_evaluation(evaluation: EvaluationHook, trainer: CSIRLTrainer, key: str) -> dict[str, Any] | None:
+    """The evaluation made at this round's end (``None`` if the round had none or it lacks ``key``)."""
+    last = evaluation.history[-1] if evaluation.history else None
+    if last is None or last["frames"] != trainer.frames or not isinstance(last.get(key), (int, float)):
+        return None
+    return last
+
+
+class KeepBestPolicy:
+    """``round_end`` (after :class:`EvaluationHook`): writes the policy's weights to ``path`` whenever an
+    evaluation beats every earlier one written there, so a run whose learning curve swings (SAC on the
+    Hopper) can finish with its best policy instead of its last (as RL Zoo's ``EvalCallback`` keeps its
+    best model). The file holds ``{"state_dict", "frames", "updates", key}``; written before the round's
+    checkpoint, so a run resumed after an interruption redoes that round and writes the same weights.
+
+    The comparison is with the file: a run that turns this on when resumed keeps the best since then.
+
+    Args:
+        evaluation: the run's evaluation hook.
+        policy: the module whose ``state_dict`` is kept (the learner's actor).
+        path: the file written.
+        key: the evaluation metric compared (``"env_return"``, the mean validation return).
+
+    Examples:
+        >>> import tempfile, os
+        >>> from types import SimpleNamespace
+        >>> from torch import nn
+        >>> policy, path = nn.Linear(2, 1), os.path.join(tempfile.mkdtemp(), "best_policy.pt")
+        >>> returns = iter([10.0, 30.0, 20.0])
+        >>> evaluation = EvaluationHook(lambda: {"env_return": next(returns)})
+        >>> keep = KeepBestPolicy(evaluation, policy, path)
+        >>> for frames in (1000, 2000, 3000):
+        ...     trainer = SimpleNamespace(frames=frames, updates=frames, postfix={}, record=lambda **kw: None)
+        ...     _ = evaluation.run(trainer)
+        ...     keep(trainer)
+        >>> best = keep.restore()
+        >>> best["frames"], best["env_return"]
+        (2000, 30.0)
+    """
+
+    def __init__(self, evaluation: EvaluationHook, policy: nn.Module, path: str | os.PathLike,
+                 key: str = "env_return") -> None:
+        self.evaluation, self.policy, self.path, self.key = evaluation, policy, os.fspath(path), key
+
+    def best(self) -> dict[str, Any] | None:
+        """What the file holds (``None`` before the first evaluation)."""
+        if not os.path.isfile(self.path):
+            return None
+        return torch.load(self.path, map_location="cpu", weights_only=True)
+
+    def __call__(self, trainer: CSIRLTrainer) -> None:
+        last = _this_round_evaluation(self.evaluation, trainer, self.key)
+        if last is None:
+            return
+        kept = self.best()
+        if kept is not None and kept["frames"] != trainer.frames and last[self.key] <= kept[self.key]:
+            return
+        state = {k: v.detach().cpu().clone() for k, v in self.policy.state_dict().items()}
+        tmp = f"{self.path}.tmp"
+        torch.save({"state_dict": state, "frames": trainer.frames, "updates": trainer.updates,
+                    self.key: float(last[self.key])}, tmp)
+        os.replace(tmp, self.path)
+
+    def restore(self) -> dict[str, Any]:
+        """Loads the kept weights into the policy; returns the file's record (frames, updates, value)."""
+        kept = self.best()
+        if kept is None:
+            raise FileNotFoundError(f"no best policy was kept in {self.path}: the run made no evaluation with "
+                                    f"{self.key!r} while keeping the best.")
+        self.policy.load_state_dict(kept["state_dict"])
+        return {k: v for k, v in kept.items() if k != "state_dict"}
