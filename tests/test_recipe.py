@@ -11,6 +11,7 @@ import sys
 import numpy as np
 import pytest
 import torch
+from omegaconf import OmegaConf
 
 from torchrl_csirl.launch import builders, config, csirl, run
 from torchrl_csirl.trainers import (
@@ -133,6 +134,10 @@ def test_resume_gives_the_uninterrupted_metrics(full_run, tmp_path):
         part_summary = json.load(f)
     resumed = last_json(run_recipe(f"checkpoint.resume={out}/part", "collector.total_frames=600"))
     assert resumed["run_dir"] == os.path.join(out, "part")
+    # the changed setting is the run's now (the next resume keeps it), the one before stays on record
+    assert OmegaConf.load(os.path.join(out, "part", "config.yaml")).collector.total_frames == 600
+    with open(os.path.join(out, "part", "resumes.jsonl")) as f:
+        assert [json.loads(line) for line in f] == [{"frames": 400, "changed": {"collector.total_frames": [400, 600]}}]
     # the total wall time counts the first process (up to its checkpoint) as well as this one
     assert part_summary["wall_s"] <= resumed["earlier_wall_s"] <= part_summary["total_wall_s"]
     assert resumed["total_wall_s"] > resumed["earlier_wall_s"] and resumed["total_wall_s"] >= resumed["wall_s"]
@@ -536,7 +541,6 @@ def test_worker_processes_act_with_the_weights_the_main_process_trains():
 
 def test_summarize_runs_groups_seeds_by_configuration_variant(tmp_path, capsys):
     import summarize_runs
-    from omegaconf import OmegaConf
 
     for name, overrides, rate in [("a", [], 0.5), ("b", [], 0.7),
                                   ("c", ["model.ego_relative_features=false", "collector.main_threads=1"], 0.9)]:
@@ -559,7 +563,6 @@ def test_summarize_runs_groups_seeds_by_configuration_variant(tmp_path, capsys):
 def test_summarize_runs_variant_is_against_the_scenes_own_defaults(tmp_path):
     """A run of a scene's defaults is no variant; a run older than an option had the recipe's default."""
     import summarize_runs
-    from omegaconf import OmegaConf
 
     def save(name: str, cfg) -> str:
         (tmp_path / name).mkdir()
@@ -666,7 +669,6 @@ def test_unnamed_runs_get_a_fresh_directory(tmp_path):
 
 
 def test_resume_merges_schema_saved_config_and_command_line(tmp_path):
-    from omegaconf import OmegaConf
 
     cfg = csirl.load_config(["preset=paper", "seed=4", "csirl.meta_every=3"])
     saved = OmegaConf.to_container(cfg)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import atexit
 import copy
+import json
 import os
 import shutil
 import sys
@@ -37,7 +38,7 @@ from torchrl_csirl.data import (
 )
 from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, TaskSpec, env_factory, make_serial_env, resolve_scenario  # noqa: F401
 from torchrl_csirl.envs import make_env as make_scenario_env
-from torchrl_csirl.launch.config import ConfigError, override_strings
+from torchrl_csirl.launch.config import ConfigError, flatten_config, override_strings
 from torchrl_csirl.launch.run import ExpertDataError, default_run_name, make_run_dir, resolve_resume, stop_with_checkpoint
 from torchrl_csirl.modules import make_input_features
 from torchrl_csirl.trainers import (
@@ -528,7 +529,42 @@ def resume_run(cfg: DictConfig, run_dir: str, checkpoint: str, make_trainer: Cal
         run.close()
         raise
     print(f"resumed {run_dir} at {counters['frames']} frames, {counters['updates']} updates", file=sys.stderr)
+    record_resumed_settings(cfg, run_dir, counters["frames"])
     return run
+
+
+def record_resumed_settings(cfg: DictConfig, run_dir: str, frames: int) -> dict[str, list[Any]]:
+    """A resume that changes settings (``key=value`` beside ``checkpoint.resume``) writes them into the run's
+    ``config.yaml``, so the next resume keeps them and the file says what the run ran with, and appends
+    ``{"frames", "changed": {key: [before, after]}}`` to ``<run dir>/resumes.jsonl``, so the settings of
+    the frames before stay on record. Returns the changes (empty: nothing written).
+
+    Examples:
+        >>> import tempfile, os
+        >>> run_dir = tempfile.mkdtemp()
+        >>> OmegaConf.save(OmegaConf.create({"seed": 0, "collector": {"total_frames": 1000}}),
+        ...                os.path.join(run_dir, "config.yaml"))
+        >>> cfg = OmegaConf.create({"seed": 0, "collector": {"total_frames": 5000}})
+        >>> record_resumed_settings(cfg, run_dir, frames=1000)
+        {'collector.total_frames': [1000, 5000]}
+        >>> OmegaConf.load(os.path.join(run_dir, "config.yaml")).collector.total_frames
+        5000
+    """
+    path = os.path.join(run_dir, "config.yaml")
+    saved = OmegaConf.load(path)
+    effective = cfg.copy()
+    if "checkpoint" in effective and "resume" in effective.checkpoint:
+        effective.checkpoint.resume = None
+    before, after = flatten_config(saved), flatten_config(effective)
+    changed = {key: [before.get(key), value] for key, value in after.items()
+               if key != "checkpoint.resume" and before.get(key) != value}
+    if changed:
+        tmp = f"{path}.tmp"
+        OmegaConf.save(effective, tmp)
+        os.replace(tmp, path)
+        with open(os.path.join(run_dir, "resumes.jsonl"), "a") as f:
+            f.write(json.dumps({"frames": int(frames), "changed": changed}) + "\n")
+    return changed
 
 
 def requested_config(argv: list[str], load: Callable[[list[str]], DictConfig],
