@@ -81,8 +81,10 @@ def _run_dir(tmp_path, task="relocate", policy=True):
 @pytest.mark.parametrize("task, pictures", [
     ("relocate", 3),  # 10 ms steps: the reset, step 4 and step 8 (25 pictures a second)
     ("antmaze-umaze", 9),  # 50 ms steps: the reset and every step
+    ("hopper", 3),  # 8 ms steps: the reset, step 5 and the last (gymnasium's own env: EGL picked, no route)
 ])
-def test_watch_films_a_robotics_run_headless(tmp_path, capsys, task, pictures):
+def test_watch_films_a_robotics_run_headless(tmp_path, capsys, monkeypatch, task, pictures):
+    monkeypatch.delenv("MUJOCO_GL", raising=False)  # a fresh shell: the task picks EGL itself
     run_dir = _run_dir(tmp_path, task)
     paths = watch.main([str(run_dir), "--format", "gif", "--max-steps", "8"])
     assert paths == [str(run_dir / "videos" / "test-episode-0.gif")]

@@ -25,6 +25,7 @@ import torch
 from torchrl.envs import EnvBase
 from torchrl.envs.libs.gym import GymWrapper
 
+from torchrl_csirl.envs.headless import ensure_headless_gl
 from torchrl_csirl.envs.registry import register_task
 from torchrl_csirl.envs.scenarios import TASKS
 from torchrl_csirl.envs.spec import TaskSpec
@@ -103,6 +104,7 @@ def make_gymnasium_env(gym_id: str, success: str = "termination", device: torch.
     """
     from torchrl_csirl.envs.torchrl_env import ScenarioInfoReader, info_spec
 
+    ensure_headless_gl(make_kwargs.get("render_mode"))  # a MuJoCo task's pictures on a machine without a display
     env = GymWrapper(GymnasiumTaskWrapper(gym.make(gym_id, **make_kwargs), success), device=device)
     env.set_info_dict_reader(ScenarioInfoReader(["success"], spec=info_spec(["success"])))
     return env

@@ -3,8 +3,8 @@
 Films the run's policy (``policy.pt``) on the recipe's test episodes: episode ``i`` seeded with the
 run's ``eval.seed + i``, deterministic actions, stopped at the episode's end, exactly as the final
 evaluation plays them (:func:`~torchrl_csirl.visualization.film_test_episodes`). Works for a driving
-run (``csirl_highway.py``, ``imitation_highway.py``) and a robotics run (``csirl_robotics.py``,
-``imitation_robotics.py``; MuJoCo renders headless through EGL). Writes
+run (``csirl_highway.py``, ``imitation_highway.py``), a robotics or locomotion run (``csirl_robotics.py``,
+``imitation_robotics.py``, ``train_expert.py``; MuJoCo renders headless through EGL). Writes
 ``<run dir>/videos/test-episode-<i>.<format>`` (``--out`` elsewhere) and prints one line per episode.
 
 Formats: ``mp4`` (needs ``imageio-ffmpeg``, the ``video`` extra; the default when installed) or
@@ -88,8 +88,9 @@ def main(argv: list[str] | None = None) -> list[str]:
     for i, (path, rollout) in enumerate(film_test_episodes(policy, task, out, episodes=args.episodes, seed=seed,
                                                            fmt=fmt, max_steps=args.max_steps)):
         outcome = describe_rollout(rollout)
-        print(f"{path}  ({task}, seed {seed + i}: {outcome['steps']} steps, accomplish rate "
-              f"{outcome['accomplish_rate']:.3f}, success {outcome['success']}, crashed {outcome['crashed']})")
+        rate = "" if outcome["accomplish_rate"] is None else f"accomplish rate {outcome['accomplish_rate']:.3f}, "
+        print(f"{path}  ({task}, seed {seed + i}: {outcome['steps']} steps, return {outcome['return']}, {rate}"
+              f"success {outcome['success']}, crashed {outcome['crashed']})")
         paths.append(os.fspath(path))
     return paths
 

@@ -285,13 +285,16 @@ def film_test_episodes(policy: Any, task: str, directory: str | os.PathLike, *, 
 
 
 def describe_rollout(rollout: Any) -> dict[str, Any]:
-    """Steps, outcome flags and progress of a filmed episode (for a one-line report)."""
+    """Steps, return, outcome flags and progress of a filmed episode (for a one-line report; the accomplish
+    rate is ``None`` for a task without a route, e.g. locomotion)."""
     from torchrl_csirl.envs import accomplish_rate_from_rollout, success_from_rollout
 
     keys = rollout.keys(True)
+    has_distance = "distance_to_finish" in keys and ("next", "distance_to_finish") in keys  # none in locomotion
     return {
         "steps": int(rollout.shape[-1]),
-        "accomplish_rate": round(float(accomplish_rate_from_rollout(rollout)), 3),
+        "return": round(float(rollout["next", "reward"].sum()), 1) if ("next", "reward") in keys else None,
+        "accomplish_rate": round(float(accomplish_rate_from_rollout(rollout)), 3) if has_distance else None,
         "success": bool(success_from_rollout(rollout)),
         "crashed": bool(rollout["next", "crashed"].any()) if ("next", "crashed") in keys else False,
     }

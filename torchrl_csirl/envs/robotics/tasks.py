@@ -36,6 +36,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from torchrl_csirl.envs.headless import ensure_headless_gl
 from torchrl_csirl.envs.spec import TaskSpec
 
 __all__ = [
@@ -63,12 +64,6 @@ ANTMAZE_UMAZE_MAP: tuple[tuple[Any, ...], ...] = (
 ANTMAZE_POSITION_NOISE = 0.025
 ANTMAZE_SUCCESS_RADIUS = 0.45  # gymnasium-robotics' (and D4RL's) goal radius [m]
 RELOCATE_SUCCESS_RADIUS = 0.1  # AdroitHandRelocate: object within 0.1 m of the target
-
-
-def _ensure_headless_gl(render_mode: str | None) -> None:
-    """Pick MuJoCo's EGL backend for ``rgb_array`` pictures unless ``MUJOCO_GL`` is set."""
-    if render_mode == "rgb_array":
-        os.environ.setdefault("MUJOCO_GL", "egl")
 
 
 def is_flipped(quaternion: np.ndarray) -> bool:
@@ -205,7 +200,7 @@ class _RoboticsTaskEnv(gym.Env):
     def __init__(self, render_mode: str | None = None) -> None:
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}.")
-        _ensure_headless_gl(render_mode)
+        ensure_headless_gl(render_mode)
         self.render_mode = render_mode
         self._steps = 0
         self._initial_distance = 0.0
