@@ -116,6 +116,18 @@ def test_robotics_table_is_its_records(robotics):
             assert all(agrees(s, e) for s, e in zip(shown, expected)), (method, column, cell)
 
 
+def test_locomotion_results_are_their_records():
+    runs = benchmark.read_runs([os.path.join(ROOT, "docs", "runs", "mujoco")])
+    rows = {(r["method"], r["scenario"]): r for r in benchmark.table_rows(runs)}
+    table = markdown_table("docs/benchmark.md", "| method | HalfCheetah R / R_expert")
+    assert set(table) == {method for method, scenario in rows if scenario == "halfcheetah"}
+    for method, columns in table.items():
+        row = rows[(method, "halfcheetah")]
+        normalised, runs_shown = numbers(columns["HalfCheetah R / R_expert"])
+        assert agrees(normalised, row["normalized_return_mean"]) and runs_shown[0] == row["runs"], (method, columns)
+        assert agrees(numbers(columns["HalfCheetah return"])[0], row["return_mean"]), (method, columns)
+
+
 def test_readme_results_follow_table_one(driving, robotics):
     table = markdown_table("README.md", "| task |")
     for scenario in benchmark.SCENARIO_ORDER:
