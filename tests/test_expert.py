@@ -253,7 +253,7 @@ def test_merge_expert_nudges_past_two_slow_vehicles_side_by_side():
 # ---------------------------------------------------------------------------------------------- shipped data
 def test_all_shipped_datasets_available():
     assert available_expert_datasets() == {**{s: list(CURRICULA) for s in SCENARIO_NAMES}, "antmaze-umaze": ["expert"],
-                                           "relocate": ["expert"], "halfcheetah": ["expert"]}
+                                           "relocate": ["expert"], "halfcheetah": ["expert"], "hopper": ["expert"]}
 
 
 @pytest.mark.parametrize("scenario", SCENARIO_NAMES)

@@ -180,6 +180,7 @@ def test_an_expert_run_can_finish_with_its_best_evaluation(tmp_path):
     assert summary["policy_from"]["env_return"] == pytest.approx(best_return)
     kept = torch.load(f"{run_dir}/best_policy.pt", weights_only=True)["state_dict"]
     shipped = load_policy(run_dir)
+    assert shipped.metadata["frames"] == best_frames
     exported = {k: v for k, v in shipped.state_dict().items() if k in kept}
     assert exported and all(torch.equal(exported[k], kept[k]) for k in exported)
 
@@ -223,17 +224,20 @@ def test_the_benchmark_report_normalises_by_the_expert_row_and_shows_the_publish
     assert "antmaze" not in table and "accomplish rate" not in table
 
 
-@pytest.mark.parametrize("name, published_expert", [("halfcheetah", 5098.3)])
-def test_the_shipped_expert_and_its_demonstrations(tmp_path, name, published_expert):
-    """25 whole episodes above the published table's expert (IQ-Learn's), running forward; the expert row
-    replays the shipped policy on the test episodes and earns what the demonstrations earned."""
+@pytest.mark.parametrize("name, floor", [
+    ("halfcheetah", 5098.3),  # above the published table's expert (IQ-Learn's)
+    ("hopper", 3250.0),  # SAC's best at 924 000 frames, below IQ-Learn's 3 532.7 (docs/experts.md)
+])
+def test_the_shipped_expert_and_its_demonstrations(tmp_path, name, floor):
+    """25 whole episodes above ``floor``, running forward; the expert row replays the shipped policy on the
+    test episodes and earns what the demonstrations earned."""
     from torchrl_csirl.data.shipped import load_expert_demonstrations
 
     spec = resolve_scenario(name)
     demos = load_expert_demonstrations(name, 25)
     episodes = demos.metadata["episodes"]
     assert len(episodes) == 25 and all(e["length"] == spec.max_steps for e in episodes)
-    assert min(e["return"] for e in episodes) > published_expert
+    assert min(e["return"] for e in episodes) > floor
     first = load_expert_demonstrations(name, 1).transitions()
     assert first["observation"].shape == (spec.max_steps, spec.obs_dim)
     assert first["next", "observation"][-1, 0] > first["observation"][0, 0] + 10  # x: metres run forward

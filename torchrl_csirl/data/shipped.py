@@ -57,7 +57,7 @@ def available_expert_datasets() -> dict[str, list[str]]:
 
     Examples:
         >>> sorted(available_expert_datasets())
-        ['antmaze-umaze', 'halfcheetah', 'highway-fast', 'intersection', 'merge', 'relocate', 'roundabout']
+        ['antmaze-umaze', 'halfcheetah', 'highway-fast', 'hopper', 'intersection', 'merge', 'relocate', 'roundabout']
     """
     found: dict[str, list[str]] = {}
     for scenario, task_curricula in TASK_CURRICULA.items():

@@ -689,7 +689,8 @@ def final_summary(run: Run, method: str, title: str) -> dict[str, Any]:
     final = run.evaluate(cfg.eval.final_episodes)
     expert_rate = expert_accomplish_rate(run.demos.metadata) if run.demos is not None else None
     save_policy(run.mirror.policy, os.path.join(run.run_dir, "policy.pt"), obs_dim=run.spec.obs_dim,
-                action_dim=run.spec.action_dim, scenario=run.spec.name, frames=trainer.frames)
+                action_dim=run.spec.action_dim, scenario=run.spec.name,
+                frames=trainer.frames if kept is None else kept["frames"])  # the frames its weights had seen
     throughput = trainer.throughput
     history = run.evaluation.history
     summary = {
