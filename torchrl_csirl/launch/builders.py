@@ -537,7 +537,8 @@ def record_resumed_settings(cfg: DictConfig, run_dir: str, frames: int) -> dict[
     """A resume that changes settings (``key=value`` beside ``checkpoint.resume``) writes them into the run's
     ``config.yaml``, so the next resume keeps them and the file says what the run ran with, and appends
     ``{"frames", "changed": {key: [before, after]}}`` to ``<run dir>/resumes.jsonl``, so the settings of
-    the frames before stay on record. Returns the changes (empty: nothing written).
+    the frames before stay on record. Keys the saved file lacks (settings the schema gained since the run
+    started) hold their defaults and are no change. Returns the changes (empty: nothing written).
 
     Examples:
         >>> import tempfile, os
@@ -549,6 +550,8 @@ def record_resumed_settings(cfg: DictConfig, run_dir: str, frames: int) -> dict[
         {'collector.total_frames': [1000, 5000]}
         >>> OmegaConf.load(os.path.join(run_dir, "config.yaml")).collector.total_frames
         5000
+        >>> record_resumed_settings(OmegaConf.merge(cfg, {"eval": {"keep_best": False}}), run_dir, frames=5000)
+        {}
     """
     path = os.path.join(run_dir, "config.yaml")
     saved = OmegaConf.load(path)
@@ -556,8 +559,8 @@ def record_resumed_settings(cfg: DictConfig, run_dir: str, frames: int) -> dict[
     if "checkpoint" in effective and "resume" in effective.checkpoint:
         effective.checkpoint.resume = None
     before, after = flatten_config(saved), flatten_config(effective)
-    changed = {key: [before.get(key), value] for key, value in after.items()
-               if key != "checkpoint.resume" and before.get(key) != value}
+    changed = {key: [before[key], value] for key, value in after.items()
+               if key != "checkpoint.resume" and key in before and before[key] != value}
     if changed:
         tmp = f"{path}.tmp"
         OmegaConf.save(effective, tmp)
