@@ -159,6 +159,8 @@ def test_an_expert_run_stops_at_its_target_and_keeps_demonstrations_above_a_retu
     assert summary["frames"] == 200 and summary["demos_episodes"] == 2  # the first evaluation: the first batch's 20 updates
     probed = locomotion_probe.probe(summary["run_dir"])["episodes"][0]  # tools/: where the policy goes
     assert probed["seed"] == 1_000_000 and len(probed["x_every_100"]) >= 2 and probed["length"] <= 1000
+    sampled = locomotion_probe.probe(summary["run_dir"], stochastic=True)  # the behaviour that collected the data
+    assert sampled["actions"] == "sampled" and sampled["episodes"][0] != probed, (sampled, probed)
     with pytest.raises(ValueError, match="only 0 of 1 episodes earned at least 1000000.0 in 10 tries"):
         train_expert.main(["env.scenario=hopper", *budget, "collector.total_frames=200", "demos.episodes=1",
                            "demos.min_return=1000000", f"logger.output_dir={tmp_path}"])

@@ -1,11 +1,12 @@
 """Where does a locomotion policy go? The torso's x over deterministic test episodes, the return, and whether it flipped.
 
-``python tools/locomotion_probe.py <run dir> [--episodes 1] [--seed S]``
+``python tools/locomotion_probe.py <run dir> [--episodes 1] [--seed S] [--stochastic]``
 
 Reads a run on ``hopper`` or ``halfcheetah``: its ``policy.pt`` (a finished run) or, before the end, the actor of
 its last checkpoint. For each episode (seeds ``S, S + 1, ...``; default the run's ``eval.seed``, its test
 episodes) it prints the torso's x every 100 steps, the return, the length and the torso angle's range (beyond
-pi / 2 the body is on its back). The last line is JSON. It tells a policy that runs from one that moves a few
+pi / 2 the body is on its back). The actions are the policy's mean (the test's), or with ``--stochastic``
+its samples (the behaviour that collected the training data). The last line is JSON. It tells a policy that runs from one that moves a few
 metres and stops (docs/benchmark.md, MuJoCo locomotion).
 """
 from __future__ import annotations
@@ -45,7 +46,7 @@ def load_actor(run_dir: str, task: str) -> torch.nn.Module:
     return actor
 
 
-def probe(run_dir: str, episodes: int = 1, seed: int | None = None) -> dict:
+def probe(run_dir: str, episodes: int = 1, seed: int | None = None, stochastic: bool = False) -> dict:
     cfg = OmegaConf.load(os.path.join(run_dir, "config.yaml"))
     task = cfg.env.scenario
     spec = resolve_scenario(task)
@@ -57,7 +58,8 @@ def probe(run_dir: str, episodes: int = 1, seed: int | None = None) -> dict:
     out = []
     for i in range(episodes):
         env = make_env(task, seed=seed + i)
-        with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
+        mode = ExplorationType.RANDOM if stochastic else ExplorationType.DETERMINISTIC
+        with torch.no_grad(), set_exploration_type(mode):
             rollout = env.rollout(spec.max_steps, actor, break_when_any_done=True)
         env.close()
         obs = rollout["next", "observation"]
@@ -69,7 +71,7 @@ def probe(run_dir: str, episodes: int = 1, seed: int | None = None) -> dict:
                     "on_its_back": bool(angle.abs().max() > math.pi / 2)})
         print(f"seed {seed + i}: return {out[-1]['return']}, {out[-1]['length']} steps, x {x}, "
               f"angle {out[-1]['angle_range']}")
-    return {"run_dir": run_dir, "task": task, "episodes": out}
+    return {"run_dir": run_dir, "task": task, "actions": "sampled" if stochastic else "mean", "episodes": out}
 
 
 def main() -> None:
@@ -77,9 +79,10 @@ def main() -> None:
     parser.add_argument("run_dir")
     parser.add_argument("--episodes", type=int, default=1)
     parser.add_argument("--seed", type=int, default=None, help="first episode's seed (default: the run's eval.seed)")
+    parser.add_argument("--stochastic", action="store_true", help="sample the actions (default: the policy's mean)")
     args = parser.parse_args()
     torch.set_num_threads(1)
-    print(json.dumps(probe(os.path.abspath(args.run_dir), args.episodes, args.seed)))
+    print(json.dumps(probe(os.path.abspath(args.run_dir), args.episodes, args.seed, args.stochastic)))
 
 
 if __name__ == "__main__":
