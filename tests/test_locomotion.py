@@ -139,6 +139,8 @@ def test_an_expert_its_demonstrations_then_csirl_and_a_baseline_on_the_hopper(tm
                                  "csirl.updates_per_round=10", "csirl.num_qvalue_nets=2", "replay_buffer.batch_size=32",
                                  *TINY, f"logger.output_dir={tmp_path}"])
     assert csirl["scenario"] == "hopper" and csirl["frames"] == 400 and csirl["return"] > 0
+    critic = locomotion_probe.probe(csirl["run_dir"], critic=True)["critic"]  # its critics, against its matching reward
+    assert critic["critics"] == 2 and len(critic["matching_return_to_go_expert"]) == len(critic["q_expert"]) >= 1
     bc = imitation_robotics.main(["method=bc", "env.task=hopper", f"expert.path={demos}", "expert.num_trajectories=2",
                                   *TINY, f"logger.output_dir={tmp_path}"])
     assert bc["updates"] > 0 and bc["success_rate"] == 0.0
@@ -159,8 +161,10 @@ def test_an_expert_run_stops_at_its_target_and_keeps_demonstrations_above_a_retu
     assert summary["frames"] == 200 and summary["demos_episodes"] == 2  # the first evaluation: the first batch's 20 updates
     probed = locomotion_probe.probe(summary["run_dir"])["episodes"][0]  # tools/: where the policy goes
     assert probed["seed"] == 1_000_000 and len(probed["x_every_100"]) >= 2 and probed["length"] <= 1000
-    sampled = locomotion_probe.probe(summary["run_dir"], stochastic=True)  # the behaviour that collected the data
+    sampled = locomotion_probe.probe(summary["run_dir"], stochastic=True, critic=True)  # the behaviour, the critics
     assert sampled["actions"] == "sampled" and sampled["episodes"][0] != probed, (sampled, probed)
+    critic = sampled["critic"]  # SAC's two critics along the shipped demonstration, against its task reward
+    assert critic["critics"] == 2 and list(critic["q_expert"]) == list(critic["task_return_to_go_expert"]) == ["0", "250", "500", "750"]
     with pytest.raises(ValueError, match="only 0 of 1 episodes earned at least 1000000.0 in 10 tries"):
         train_expert.main(["env.scenario=hopper", *budget, "collector.total_frames=200", "demos.episodes=1",
                            "demos.min_return=1000000", f"logger.output_dir={tmp_path}"])

@@ -6,7 +6,12 @@ Reads a run on ``hopper`` or ``halfcheetah``: its ``policy.pt`` (a finished run)
 its last checkpoint. For each episode (seeds ``S, S + 1, ...``; default the run's ``eval.seed``, its test
 episodes) it prints the torso's x every 100 steps, the return, the length and the torso angle's range (beyond
 pi / 2 the body is on its back). The actions are the policy's mean (the test's), or with ``--stochastic``
-its samples (the behaviour that collected the training data). The last line is JSON. It tells a policy that runs from one that moves a few
+its samples (the behaviour that collected the training data). With ``--critic`` it also reads the critics
+of the run's last checkpoint (any SAC-based method: CSIRL's ensemble, SAC, the imitation baselines) and
+prints what they believe: ``Q(s, a)`` along the expert's demonstration, beside the discounted return to go
+of the reward they learn from where it is known (CSIRL's matching reward, SAC's task reward), along the
+policy's own episode, and over random actions at the policy's last state.
+The last line is JSON. It tells a policy that runs from one that moves a few
 metres and stops (docs/benchmark.md, MuJoCo locomotion).
 """
 from __future__ import annotations
@@ -21,7 +26,9 @@ from omegaconf import OmegaConf
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
 from torchrl_csirl.envs import make_env, resolve_scenario
-from torchrl_csirl.modules import load_policy, make_actor, make_input_features
+from torchrl_csirl.launch.builders import load_experts
+from torchrl_csirl.launch.csirl import make_matching
+from torchrl_csirl.modules import load_policy, make_actor, make_input_features, make_qvalue
 
 ACTOR_PREFIXES = ("actor_network_params.", "actor_network.")
 
@@ -46,7 +53,93 @@ def load_actor(run_dir: str, task: str) -> torch.nn.Module:
     return actor
 
 
-def probe(run_dir: str, episodes: int = 1, seed: int | None = None, stochastic: bool = False) -> dict:
+CRITIC_PREFIX = "qvalue_network_params.module."
+#: the expert states at which the critic probe reports Q
+EXPERT_STEPS = (0, 250, 500, 750)
+
+
+def load_critics(run_dir: str, task: str) -> list[torch.nn.Module]:
+    """The critics of the run's last checkpoint (``checkpoints/last/state.pt``), one module per critic."""
+    path = os.path.join(run_dir, "checkpoints", "last", "state.pt")
+    if not os.path.isfile(path):
+        raise SystemExit(f"error: {run_dir}: no checkpoints/last/state.pt, whose critics --critic reads")
+    state = torch.load(path, weights_only=False, map_location="cpu")["states"].get("loss", {})
+    stacked = {k[len(CRITIC_PREFIX):]: v for k, v in state.items() if k.startswith(CRITIC_PREFIX)}
+    if not stacked:
+        raise SystemExit(f"error: {path}: no critic ({CRITIC_PREFIX}*) in its loss state; --critic reads SAC-based runs")
+    spec = resolve_scenario(task)
+    critics = []
+    for k in range(next(iter(stacked.values())).shape[0]):
+        critic = make_qvalue(spec.obs_dim, spec.action_dim, input_features=make_input_features(spec, ego_relative=False))
+        critic.module.load_state_dict({name: value[k] for name, value in stacked.items()})
+        critics.append(critic.module)
+    return critics
+
+
+def ensemble_q(critics: list[torch.nn.Module], observation: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+    """``Q_k(s, a)`` of every critic, ``[K, B]``."""
+    return torch.stack([critic(observation, action).squeeze(-1) for critic in critics])
+
+
+def run_method(cfg) -> str:
+    """The run's method: its ``method`` key (the imitation baselines, SAC), ``csirl`` for a CSIRL recipe's run,
+    ``sac`` for an expert's training run (``recipes/train_expert.py``)."""
+    return str(cfg.get("method") or ("csirl" if "csirl" in cfg else "sac"))
+
+
+def run_demonstrations(cfg):
+    """The run's first demonstration: its ``expert`` settings, or the task's shipped one (an expert's run)."""
+    expert = cfg.expert if "expert" in cfg else OmegaConf.create(
+        {"path": None, "num_trajectories": 1, "curriculum": "expert", "end_at": "recording"})
+    return load_experts(expert, resolve_scenario(cfg.env.scenario)).trajectory(0)
+
+
+def trained_reward(cfg, expert) -> tuple[str, torch.Tensor] | None:
+    """The reward the run's critics learn from, along a demonstration: CSIRL's matching reward (toward the
+    curriculum's last state; ``r_w`` left out), SAC's task reward; None for a learned one (the baselines)."""
+    if run_method(cfg) == "csirl":  # CSIRL or CSIRL-B
+        spec = resolve_scenario(cfg.env.scenario)
+        matching = make_matching(cfg, spec, expert["observation"], len(expert) - 1)
+        return "matching", matching(expert.clone())["next", "matching_reward"].reshape(-1)
+    if run_method(cfg) == "sac":
+        return "task", expert["next", "reward"].reshape(-1).float()
+    return None
+
+
+def discounted_to_go(reward: torch.Tensor, gamma: float) -> torch.Tensor:
+    """``sum_k gamma^k r_{t+k}`` for every ``t``."""
+    out, running = torch.empty_like(reward), 0.0
+    for t in range(len(reward) - 1, -1, -1):
+        running = float(reward[t]) + gamma * running
+        out[t] = running
+    return out
+
+
+def critic_probe(run_dir: str, cfg, rollout) -> dict:
+    """What the critics believe along the expert's first demonstration (against the discounted return to go of
+    the reward they learn from, where it is known) and along the policy's episode."""
+    critics = load_critics(run_dir, cfg.env.scenario)
+    gamma = float((cfg.get(run_method(cfg)) or {}).get("gamma", 0.99))  # the method's own section
+    expert = run_demonstrations(cfg)
+    with torch.no_grad():
+        q_expert = ensemble_q(critics, expert["observation"].float(), expert["action"].float()).mean(0)
+        q_policy = ensemble_q(critics, rollout["observation"], rollout["action"]).mean(0)
+        last = rollout["observation"][-1:].expand(256, -1)
+        q_random = ensemble_q(critics, last, torch.rand(256, rollout["action"].shape[-1]) * 2 - 1).mean(0)
+    steps = [t for t in EXPERT_STEPS if t < len(q_expert)]
+    report = {"critics": len(critics), "gamma": gamma,
+              "q_expert": {str(t): round(float(q_expert[t]), 2) for t in steps},
+              "q_policy": {str(t): round(float(q_policy[t]), 2) for t in (0, len(q_policy) // 2, len(q_policy) - 1)},
+              "q_random_actions_at_last_state": [round(float(q_random.min()), 2), round(float(q_random.max()), 2)]}
+    known = trained_reward(cfg, expert)
+    if known is not None:
+        to_go = discounted_to_go(known[1], gamma)
+        report[f"{known[0]}_return_to_go_expert"] = {str(t): round(float(to_go[t]), 2) for t in steps}
+    return report
+
+
+def probe(run_dir: str, episodes: int = 1, seed: int | None = None, stochastic: bool = False,
+          critic: bool = False) -> dict:
     cfg = OmegaConf.load(os.path.join(run_dir, "config.yaml"))
     task = cfg.env.scenario
     spec = resolve_scenario(task)
@@ -71,7 +164,11 @@ def probe(run_dir: str, episodes: int = 1, seed: int | None = None, stochastic: 
                     "on_its_back": bool(angle.abs().max() > math.pi / 2)})
         print(f"seed {seed + i}: return {out[-1]['return']}, {out[-1]['length']} steps, x {x}, "
               f"angle {out[-1]['angle_range']}")
-    return {"run_dir": run_dir, "task": task, "actions": "sampled" if stochastic else "mean", "episodes": out}
+    report = {"run_dir": run_dir, "task": task, "actions": "sampled" if stochastic else "mean", "episodes": out}
+    if critic:
+        report["critic"] = critic_probe(run_dir, cfg, rollout)
+        print(f"critic: {report['critic']}")
+    return report
 
 
 def main() -> None:
@@ -80,9 +177,10 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=1)
     parser.add_argument("--seed", type=int, default=None, help="first episode's seed (default: the run's eval.seed)")
     parser.add_argument("--stochastic", action="store_true", help="sample the actions (default: the policy's mean)")
+    parser.add_argument("--critic", action="store_true", help="also what the last checkpoint's critics believe")
     args = parser.parse_args()
     torch.set_num_threads(1)
-    print(json.dumps(probe(os.path.abspath(args.run_dir), args.episodes, args.seed, args.stochastic)))
+    print(json.dumps(probe(os.path.abspath(args.run_dir), args.episodes, args.seed, args.stochastic, args.critic)))
 
 
 if __name__ == "__main__":
