@@ -81,6 +81,11 @@ def ensemble_q(critics: list[torch.nn.Module], observation: torch.Tensor, action
     return torch.stack([critic(observation, action).squeeze(-1) for critic in critics])
 
 
+def random_actions(n: int, action_dim: int, seed: int = 0) -> torch.Tensor:
+    """``n`` actions uniform in ``[-1, 1]``, the same on every call (a probe's figures are reproducible)."""
+    return torch.rand(n, action_dim, generator=torch.Generator().manual_seed(seed)) * 2 - 1
+
+
 def run_method(cfg) -> str:
     """The run's method: its ``method`` key (the imitation baselines, SAC), ``csirl`` for a CSIRL recipe's run,
     ``sac`` for an expert's training run (``recipes/train_expert.py``)."""
@@ -125,7 +130,7 @@ def critic_probe(run_dir: str, cfg, rollout) -> dict:
         q_expert = ensemble_q(critics, expert["observation"].float(), expert["action"].float()).mean(0)
         q_policy = ensemble_q(critics, rollout["observation"], rollout["action"]).mean(0)
         last = rollout["observation"][-1:].expand(256, -1)
-        q_random = ensemble_q(critics, last, torch.rand(256, rollout["action"].shape[-1]) * 2 - 1).mean(0)
+        q_random = ensemble_q(critics, last, random_actions(256, rollout["action"].shape[-1])).mean(0)
     steps = [t for t in EXPERT_STEPS if t < len(q_expert)]
     report = {"critics": len(critics), "gamma": gamma,
               "q_expert": {str(t): round(float(q_expert[t]), 2) for t in steps},
