@@ -24,7 +24,9 @@ import os
 import torch
 from omegaconf import OmegaConf
 from torchrl.envs.utils import ExplorationType, set_exploration_type
+from torchrl.objectives.value.functional import reward2go
 
+from torchrl_csirl.data.shipped import load_expert_demonstrations
 from torchrl_csirl.envs import make_env, resolve_scenario
 from torchrl_csirl.launch.builders import load_experts
 from torchrl_csirl.launch.csirl import make_matching
@@ -94,9 +96,9 @@ def run_method(cfg) -> str:
 
 def run_demonstrations(cfg):
     """The run's first demonstration: its ``expert`` settings, or the task's shipped one (an expert's run)."""
-    expert = cfg.expert if "expert" in cfg else OmegaConf.create(
-        {"path": None, "num_trajectories": 1, "curriculum": "expert", "end_at": "recording"})
-    return load_experts(expert, resolve_scenario(cfg.env.scenario)).trajectory(0)
+    if "expert" not in cfg:
+        return load_expert_demonstrations(cfg.env.scenario, 1).trajectory(0)
+    return load_experts(cfg.expert, resolve_scenario(cfg.env.scenario)).trajectory(0)
 
 
 def trained_reward(cfg, expert) -> tuple[str, torch.Tensor] | None:
@@ -112,12 +114,10 @@ def trained_reward(cfg, expert) -> tuple[str, torch.Tensor] | None:
 
 
 def discounted_to_go(reward: torch.Tensor, gamma: float) -> torch.Tensor:
-    """``sum_k gamma^k r_{t+k}`` for every ``t``."""
-    out, running = torch.empty_like(reward), 0.0
-    for t in range(len(reward) - 1, -1, -1):
-        running = float(reward[t]) + gamma * running
-        out[t] = running
-    return out
+    """``sum_k gamma^k r_{t+k}`` for every ``t`` of one episode (TorchRL's ``reward2go``)."""
+    done = torch.zeros(len(reward), 1, dtype=torch.bool)
+    done[-1] = True
+    return reward2go(reward.reshape(-1, 1), done, gamma).reshape(-1)
 
 
 def critic_probe(run_dir: str, cfg, rollout) -> dict:
