@@ -15,6 +15,7 @@ from torchrl_csirl.launch.config import ConfigError
 from torchrl_csirl.modules import make_actor, save_policy
 from torchrl_csirl.scripts import watch
 from torchrl_csirl.visualization import VideoError, write_video
+from torchrl_csirl.visualization.filmstrip import PANEL_PX, filmstrip_steps
 from torchrl_csirl.visualization.video import (
     frame_stride,
     make_render_env,
@@ -91,6 +92,35 @@ def test_watch_films_a_robotics_run_headless(tmp_path, capsys, monkeypatch, task
     with Image.open(paths[0]) as image:
         assert image.n_frames == pictures
     assert f"{task}, seed 7: 8 steps" in capsys.readouterr().out
+
+
+def test_watch_filmstrip_is_a_captioned_still_of_the_episode(tmp_path, capsys):
+    """``--filmstrip 3`` on a hopper run cut at 8 steps: a PNG of the reset, step 4 and step 8 in one row,
+    captioned with the torso's x; its title names the label."""
+    run_dir = _run_dir(tmp_path, "hopper")
+    paths = watch.main([str(run_dir), "--filmstrip", "3", "--max-steps", "8", "--label", "untrained"])
+    assert paths == [str(run_dir / "videos" / "test-episode-0.png")]
+    with Image.open(paths[0]) as image:
+        assert image.size[0] == 3 * PANEL_PX
+    assert "hopper, seed 7: 8 steps" in capsys.readouterr().out
+    assert filmstrip_steps(8, 3) == [0, 4, 8]
+    with pytest.raises(ConfigError, match="--filmstrip=1: a filmstrip shows at least 2 pictures"):
+        watch.main([str(run_dir), "--filmstrip", "1"])
+    with pytest.raises(ConfigError, match="give it or --format, not both"):
+        watch.main([str(run_dir), "--filmstrip", "3", "--format", "gif"])
+
+
+def test_locomotion_pictures_follow_the_body():
+    """gymnasium's default free camera stays at the start; the locomotion tasks render through the
+    model's ``track`` camera."""
+    import mujoco
+
+    from torchrl_csirl.envs import make_env
+
+    env = make_env("halfcheetah", render_mode="rgb_array")
+    renderer = env._env.unwrapped.mujoco_renderer
+    assert renderer.camera_id == mujoco.mj_name2id(renderer.model, mujoco.mjtObj.mjOBJ_CAMERA, "track") != -1
+    env.close()
 
 
 def test_watch_refuses_what_is_not_a_finished_run(tmp_path):

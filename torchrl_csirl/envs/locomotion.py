@@ -74,10 +74,13 @@ LOCOMOTION_TASKS: dict[str, TaskSpec] = {
 def make_locomotion_env(name: str, device: torch.device | str = "cpu", **make_kwargs: Any):
     """The TorchRL environment of a locomotion task: the gymnasium id with x kept in the observation.
 
+    Pictures (``render_mode="rgb_array"``) are taken by the model's ``track`` camera, which follows the
+    body; gymnasium's default, a free camera, stays at the start while the body runs out of the picture.
+
     Args:
         name: ``"hopper"`` or ``"halfcheetah"``.
         device: device of the output TensorDicts.
-        **make_kwargs: keywords of ``gym.make`` (e.g. ``render_mode="rgb_array"``).
+        **make_kwargs: keywords of ``gym.make`` (e.g. ``render_mode="rgb_array"``, ``camera_name=...``).
 
     Examples:
         >>> env = make_locomotion_env("halfcheetah")
@@ -88,6 +91,8 @@ def make_locomotion_env(name: str, device: torch.device | str = "cpu", **make_kw
 
     if name not in LOCOMOTION_GYM_IDS:
         raise ValueError(f"{name!r} is not a locomotion task; expected one of {sorted(LOCOMOTION_GYM_IDS)}.")
+    if make_kwargs.get("render_mode") is not None and "camera_id" not in make_kwargs:
+        make_kwargs.setdefault("camera_name", "track")
     return make_gymnasium_env(LOCOMOTION_GYM_IDS[name], "none", device, **LOCOMOTION_MAKE_KWARGS, **make_kwargs)
 
 

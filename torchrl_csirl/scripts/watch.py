@@ -1,4 +1,4 @@
-"""Watch a trained agent: ``python recipes/watch.py <run dir> [--episodes N] [--format mp4|gif]``.
+"""Watch a trained agent: ``python recipes/watch.py <run dir> [--episodes N] [--format mp4|gif | --filmstrip K]``.
 
 Films the run's policy (``policy.pt``) on the recipe's test episodes: episode ``i`` seeded with the
 run's ``eval.seed + i``, deterministic actions, stopped at the episode's end, exactly as the final
@@ -8,7 +8,9 @@ run (``csirl_highway.py``, ``imitation_highway.py``), a robotics or locomotion r
 ``<run dir>/videos/test-episode-<i>.<format>`` (``--out`` elsewhere) and prints one line per episode.
 
 Formats: ``mp4`` (needs ``imageio-ffmpeg``, the ``video`` extra; the default when installed) or
-``gif`` (Pillow). Bad input (not a run directory, no ``policy.pt``, an unknown format) is one
+``gif`` (Pillow). ``--filmstrip K`` writes a still instead, ``test-episode-<i>.png``: K pictures from
+the reset to the episode's end in one row, captioned with the step (and a locomotion task's torso x,
+which its following camera hides). Bad input (not a run directory, no ``policy.pt``, an unknown format) is one
 ``error:`` line and exit status 2.
 """
 from __future__ import annotations
@@ -72,11 +74,19 @@ def main(argv: list[str] | None = None) -> list[str]:
     parser.add_argument("--seed", type=int, default=None, help="seed of the first episode (default: the run's eval.seed)")
     parser.add_argument("--max-steps", type=int, default=None, help="cut episodes (default: the task's limit)")
     parser.add_argument("--out", default=None, help="where the videos go (default: <run dir>/videos)")
+    parser.add_argument("--filmstrip", type=int, default=None, metavar="K",
+                        help="write a PNG of K pictures of each episode instead of a video")
+    parser.add_argument("--label", default=None, help="the filmstrip's title names this first (default: the run "
+                                                      "directory's name)")
     args = parser.parse_args(argv)
     if args.episodes <= 0:
         raise ConfigError(f"--episodes={args.episodes}: must be positive")
     if args.max_steps is not None and args.max_steps <= 0:
         raise ConfigError(f"--max-steps={args.max_steps}: must be positive")
+    if args.filmstrip is not None and args.filmstrip < 2:
+        raise ConfigError(f"--filmstrip={args.filmstrip}: a filmstrip shows at least 2 pictures")
+    if args.filmstrip is not None and args.format is not None:
+        raise ConfigError("--filmstrip writes a PNG: give it or --format, not both")
     fmt = args.format or default_video_format()
     if fmt not in VIDEO_FORMATS:
         raise ConfigError(f"--format={fmt}: must be one of {', '.join(VIDEO_FORMATS)}")
@@ -85,8 +95,10 @@ def main(argv: list[str] | None = None) -> list[str]:
     out = args.out or os.path.join(os.path.abspath(args.run_dir), "videos")
     torch.set_num_threads(1)  # one observation at a time
     paths = []
-    for i, (path, rollout) in enumerate(film_test_episodes(policy, task, out, episodes=args.episodes, seed=seed,
-                                                           fmt=fmt, max_steps=args.max_steps)):
+    films = film_test_episodes(policy, task, out, episodes=args.episodes, seed=seed, fmt=fmt,
+                               max_steps=args.max_steps, filmstrip=args.filmstrip,
+                               label=args.label or os.path.basename(os.path.abspath(args.run_dir)))
+    for i, (path, rollout) in enumerate(films):
         outcome = describe_rollout(rollout)
         rate = "" if outcome["accomplish_rate"] is None else f"accomplish rate {outcome['accomplish_rate']:.3f}, "
         print(f"{path}  ({task}, seed {seed + i}: {outcome['steps']} steps, return {outcome['return']}, {rate}"

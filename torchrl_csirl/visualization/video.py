@@ -18,12 +18,14 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Iterator
+from collections.abc import Collection, Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
+
+from torchrl_csirl.visualization.filmstrip import caption_steps, filmstrip_steps, plot_filmstrip
 
 __all__ = [
     "VIDEO_FORMATS",
@@ -210,24 +212,33 @@ def frame_stride(dt: float, max_fps: float = MAX_FPS) -> int:
 
 
 @torch.no_grad()
-def film_episode(env: Any, policy: Any, *, seed: int, max_steps: int, stride: int = 1) -> tuple[Any, np.ndarray]:
+def film_episode(env: Any, policy: Any, *, seed: int, max_steps: int, stride: int = 1,
+                 steps: Collection[int] | None = None) -> tuple[Any, np.ndarray]:
     """Plays one seeded episode with the deterministic ``policy`` on a :func:`make_render_env` environment.
 
     The episode is the one :func:`~torchrl_csirl.trainers.evaluate_policy` plays with this seed
     (``env.set_seed(seed)``, reset, rollout stopped at the episode's end).
 
+    Args:
+        env: a :func:`make_render_env` environment.
+        policy: the actor.
+        seed: the episode's seed.
+        max_steps: the episode's limit.
+        stride: keep the picture after every ``stride``-th step.
+        steps: keep the pictures after these steps only (``stride`` is then ignored).
+
     Returns:
         The rollout and its pictures ``[K, H, W, 3]``: after the reset, then after every ``stride``-th
-        step, and after the last step.
+        step (or each of ``steps``), and after the last step.
     """
     from torchrl.envs import ExplorationType, set_exploration_type
 
     frames: list[np.ndarray] = []
-    steps = [0]
+    done = [0]
 
     def take(e: Any, _td: Any) -> None:
-        steps[0] += 1
-        if steps[0] % stride == 0:
+        done[0] += 1
+        if (done[0] in steps) if steps is not None else (done[0] % stride == 0):
             frames.append(e.render())
 
     with set_exploration_type(ExplorationType.DETERMINISTIC):
@@ -242,11 +253,14 @@ def film_episode(env: Any, policy: Any, *, seed: int, max_steps: int, stride: in
 
 def film_test_episodes(policy: Any, task: str, directory: str | os.PathLike, *, episodes: int = 1,
                        seed: int = 1_000_000, fmt: str | None = None, max_steps: int | None = None,
-                       prefix: str = "test-episode") -> Iterator[tuple[Path, Any]]:
+                       prefix: str = "test-episode", filmstrip: int | None = None,
+                       label: str | None = None) -> Iterator[tuple[Path, Any]]:
     """Films the recipe's test episodes of ``task`` into ``directory``, one file each.
 
     Episode ``i`` is seeded with ``seed + i``; files are ``<prefix>-<i>.<fmt>``, played in real time
-    (at most :data:`MAX_FPS` pictures a second: faster tasks keep every k-th step).
+    (at most :data:`MAX_FPS` pictures a second: faster tasks keep every k-th step), or, with
+    ``filmstrip=N``, ``<prefix>-<i>.png``: N pictures from the reset to the episode's end in one row
+    (:mod:`~torchrl_csirl.visualization.filmstrip`).
 
     Args:
         policy: the actor (e.g. :func:`~torchrl_csirl.modules.load_policy`).
@@ -257,6 +271,8 @@ def film_test_episodes(policy: Any, task: str, directory: str | os.PathLike, *, 
         fmt: ``mp4`` or ``gif`` (None: :func:`default_video_format`).
         max_steps: episode limit (None: the task's).
         prefix: file name prefix.
+        filmstrip: write a still of this many pictures (at least 2) instead of a video.
+        label: what the still's title names first (e.g. the run), before the task, seed and return.
 
     Yields:
         ``(path, rollout)`` per episode, as each file is written.
@@ -266,22 +282,42 @@ def film_test_episodes(policy: Any, task: str, directory: str | os.PathLike, *, 
     """
     from torchrl_csirl.envs import resolve_scenario
 
-    fmt = fmt or default_video_format()
-    if fmt not in VIDEO_FORMATS:
-        raise ValueError(f"unknown video format {fmt!r}; expected one of {VIDEO_FORMATS}.")
-    if not video_format_available(fmt):
-        raise VideoError(MP4_HELP)
     spec = resolve_scenario(task)
+    limit = max_steps or spec.max_steps
+    if filmstrip is not None:
+        shown = filmstrip_steps(limit, filmstrip)  # checks the count before anything renders
+    else:
+        fmt = fmt or default_video_format()
+        if fmt not in VIDEO_FORMATS:
+            raise ValueError(f"unknown video format {fmt!r}; expected one of {VIDEO_FORMATS}.")
+        if not video_format_available(fmt):
+            raise VideoError(MP4_HELP)
     stride = frame_stride(spec.dt)
     env = make_render_env(task)
     try:
         for i in range(episodes):
-            rollout, frames = film_episode(env, policy, seed=seed + i, max_steps=max_steps or spec.max_steps,
-                                           stride=stride)
-            path = write_video(frames, Path(directory) / f"{prefix}-{i}.{fmt}", fps=1.0 / (spec.dt * stride))
+            if filmstrip is None:
+                rollout, frames = film_episode(env, policy, seed=seed + i, max_steps=limit, stride=stride)
+                path = write_video(frames, Path(directory) / f"{prefix}-{i}.{fmt}", fps=1.0 / (spec.dt * stride))
+            else:
+                rollout, frames = film_episode(env, policy, seed=seed + i, max_steps=limit, steps=set(shown))
+                path = _write_still(rollout, frames, shown, Path(directory) / f"{prefix}-{i}.png", spec,
+                                    f"{label + ': ' if label else ''}{task}, seed {seed + i}")
             yield path, rollout
     finally:
         env.close()
+
+
+def _write_still(rollout: Any, frames: np.ndarray, shown: list[int], path: Path, spec: Any, title: str) -> Path:
+    """The filmstrip of one filmed episode: the pictures after the reset, the ``shown`` steps it lived
+    through and its last step, captioned; the title ends with the episode's return."""
+    length = int(rollout.shape[-1])
+    steps = [0, *(s for s in shown if 0 < s < length), length]
+    outcome = describe_rollout(rollout)
+    if outcome["return"] is not None:
+        title += f", return {outcome['return']:.0f} in {length} steps"
+    return plot_filmstrip(frames, path, captions=caption_steps(rollout, steps, dict(getattr(spec, "observation_layout", {}))),
+                          title=title)
 
 
 def describe_rollout(rollout: Any) -> dict[str, Any]:
