@@ -3,6 +3,7 @@ matching reward, out of every network's input; the expert script, CSIRL and a ba
 from __future__ import annotations
 
 import json
+import os
 
 import locomotion_probe
 import pytest
@@ -139,8 +140,9 @@ def test_an_expert_its_demonstrations_then_csirl_and_a_baseline_on_the_hopper(tm
                                  "csirl.updates_per_round=10", "csirl.num_qvalue_nets=2", "replay_buffer.batch_size=32",
                                  *TINY, f"logger.output_dir={tmp_path}"])
     assert csirl["scenario"] == "hopper" and csirl["frames"] == 400 and csirl["return"] > 0
-    critic = locomotion_probe.probe(csirl["run_dir"], critic=True)["critic"]  # its critics, against its matching reward
+    critic = locomotion_probe.probe(csirl["run_dir"], critic=True, plot=str(tmp_path / "critic.png"))["critic"]
     assert critic["critics"] == 2 and len(critic["matching_return_to_go_expert"]) == len(critic["q_expert"]) >= 1
+    assert critic["plot"] == str(tmp_path / "critic.png") and os.path.getsize(critic["plot"]) > 0  # its picture
     bc = imitation_robotics.main(["method=bc", "env.task=hopper", f"expert.path={demos}", "expert.num_trajectories=2",
                                   *TINY, f"logger.output_dir={tmp_path}"])
     assert bc["updates"] > 0 and bc["success_rate"] == 0.0

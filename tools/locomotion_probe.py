@@ -1,6 +1,6 @@
 """Where does a locomotion policy go? The torso's x over deterministic test episodes, the return, and whether it flipped.
 
-``python tools/locomotion_probe.py <run dir> [--episodes 1] [--seed S] [--stochastic]``
+``python tools/locomotion_probe.py <run dir> [--episodes 1] [--seed S] [--stochastic] [--critic [--plot PNG]]``
 
 Reads a run on ``hopper`` or ``halfcheetah``: its ``policy.pt`` (a finished run) or, before the end, the actor of
 its last checkpoint. For each episode (seeds ``S, S + 1, ...``; default the run's ``eval.seed``, its test
@@ -10,7 +10,8 @@ its samples (the behaviour that collected the training data). With ``--critic`` 
 of the run's last checkpoint (any SAC-based method: CSIRL's ensemble, SAC, the imitation baselines) and
 prints what they believe: ``Q(s, a)`` along the expert's demonstration, beside the discounted return to go
 of the reward they learn from where it is known (CSIRL's matching reward, SAC's task reward), along the
-policy's own episode, and over random actions at the policy's last state.
+policy's own episode, and over random actions at the policy's last state; ``--plot PNG`` draws the first two
+against the step (the critics' mean and their spread).
 The last line is JSON. It tells a policy that runs from one that moves a few
 metres and stops (docs/benchmark.md, MuJoCo locomotion).
 """
@@ -120,15 +121,38 @@ def discounted_to_go(reward: torch.Tensor, gamma: float) -> torch.Tensor:
     return reward2go(reward.reshape(-1, 1), done, gamma).reshape(-1)
 
 
-def critic_probe(run_dir: str, cfg, rollout) -> dict:
+def plot_critic(path: str, title: str, q_expert: torch.Tensor, q_policy: torch.Tensor,
+                known: tuple[str, torch.Tensor] | None) -> str:
+    """Two panels: ``Q`` along the expert's demonstration (mean and range over the critics, the return to go
+    of the known reward beside it), and along the policy's episode; written as PNG."""
+    from torchrl_csirl.visualization._figure import new_figure, save_png
+
+    fig = new_figure(1000, 360)
+    fig.suptitle(title, fontsize=10)
+    for i, (q, where) in enumerate(((q_expert, "the expert's demonstration"), (q_policy, "the policy's test episode"))):
+        ax = fig.add_subplot(1, 2, i + 1)
+        steps = torch.arange(q.shape[-1])
+        ax.fill_between(steps, q.min(0).values, q.max(0).values, alpha=0.3, label="Q, range over the critics")
+        ax.plot(steps, q.mean(0), label="Q(s, a), mean of the critics")
+        if i == 0 and known is not None:
+            ax.plot(steps, known[1], "k--", label=f"discounted return to go of the {known[0]} reward")
+        ax.set_xlabel(f"step of {where}")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.14, top=0.88, wspace=0.2)
+    return str(save_png(fig, path))
+
+
+def critic_probe(run_dir: str, cfg, rollout, plot: str | None = None) -> dict:
     """What the critics believe along the expert's first demonstration (against the discounted return to go of
-    the reward they learn from, where it is known) and along the policy's episode."""
+    the reward they learn from, where it is known) and along the policy's episode; ``plot``: draw it there."""
     critics = load_critics(run_dir, cfg.env.scenario)
     gamma = float((cfg.get(run_method(cfg)) or {}).get("gamma", 0.99))  # the method's own section
     expert = run_demonstrations(cfg)
     with torch.no_grad():
-        q_expert = ensemble_q(critics, expert["observation"].float(), expert["action"].float()).mean(0)
-        q_policy = ensemble_q(critics, rollout["observation"], rollout["action"]).mean(0)
+        q_experts = ensemble_q(critics, expert["observation"].float(), expert["action"].float())
+        q_policies = ensemble_q(critics, rollout["observation"], rollout["action"])
+        q_expert, q_policy = q_experts.mean(0), q_policies.mean(0)
         last = rollout["observation"][-1:].expand(256, -1)
         q_random = ensemble_q(critics, last, random_actions(256, rollout["action"].shape[-1])).mean(0)
     steps = [t for t in EXPERT_STEPS if t < len(q_expert)]
@@ -138,13 +162,16 @@ def critic_probe(run_dir: str, cfg, rollout) -> dict:
               "q_random_actions_at_last_state": [round(float(q_random.min()), 2), round(float(q_random.max()), 2)]}
     known = trained_reward(cfg, expert)
     if known is not None:
-        to_go = discounted_to_go(known[1], gamma)
-        report[f"{known[0]}_return_to_go_expert"] = {str(t): round(float(to_go[t]), 2) for t in steps}
+        known = (known[0], discounted_to_go(known[1], gamma))
+        report[f"{known[0]}_return_to_go_expert"] = {str(t): round(float(known[1][t]), 2) for t in steps}
+    if plot is not None:
+        title = f"{os.path.basename(run_dir)}: the last checkpoint's {len(critics)} critics (gamma {gamma})"
+        report["plot"] = plot_critic(plot, title, q_experts, q_policies, known)
     return report
 
 
 def probe(run_dir: str, episodes: int = 1, seed: int | None = None, stochastic: bool = False,
-          critic: bool = False) -> dict:
+          critic: bool = False, plot: str | None = None) -> dict:
     cfg = OmegaConf.load(os.path.join(run_dir, "config.yaml"))
     task = cfg.env.scenario
     spec = resolve_scenario(task)
@@ -171,7 +198,7 @@ def probe(run_dir: str, episodes: int = 1, seed: int | None = None, stochastic: 
               f"angle {out[-1]['angle_range']}")
     report = {"run_dir": run_dir, "task": task, "actions": "sampled" if stochastic else "mean", "episodes": out}
     if critic:
-        report["critic"] = critic_probe(run_dir, cfg, rollout)
+        report["critic"] = critic_probe(run_dir, cfg, rollout, plot)
         print(f"critic: {report['critic']}")
     return report
 
@@ -183,9 +210,13 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=None, help="first episode's seed (default: the run's eval.seed)")
     parser.add_argument("--stochastic", action="store_true", help="sample the actions (default: the policy's mean)")
     parser.add_argument("--critic", action="store_true", help="also what the last checkpoint's critics believe")
+    parser.add_argument("--plot", default=None, metavar="PNG", help="with --critic: draw Q along both episodes there")
     args = parser.parse_args()
+    if args.plot is not None and not args.critic:
+        parser.error("--plot draws the critic probe: give --critic too")
     torch.set_num_threads(1)
-    print(json.dumps(probe(os.path.abspath(args.run_dir), args.episodes, args.seed, args.stochastic, args.critic)))
+    print(json.dumps(probe(os.path.abspath(args.run_dir), args.episodes, args.seed, args.stochastic, args.critic,
+                           args.plot)))
 
 
 if __name__ == "__main__":
