@@ -175,6 +175,27 @@ def test_discriminator_separates_expert_from_random(name):
         assert d_expert > d_agent + 0.2
 
 
+def test_gail_gradient_penalty_keeps_the_agent_reward():
+    """Without the penalty the discriminator saturates on separable pairs and the agent's reward
+    ``softplus(logit)`` vanishes (what stalls GAIL on HalfCheetah); the default penalty keeps it, and the gap."""
+    online_data, expert_data = expert_vs_random()
+    rewards = {}
+    for use_grad_penalty in (False, True):
+        method = build("gail", {"discriminator_batch_size": 64, "discriminator_lr": 1e-3,
+                                "use_grad_penalty": use_grad_penalty})
+        online, expert = buffers(method, online_data, expert_data)
+        step, t = method.make_update_step(online, expert), trainer(online)
+        for _ in range(400):
+            out = step.discriminator_step(t)
+        assert ("gp_loss" in out) == use_grad_penalty
+        reward = [tr for tr in method.online_transforms if type(tr).__name__ == "DiscriminatorReward"][0]
+        with torch.no_grad():
+            rewards[use_grad_penalty] = [float(reward(d.clone())["next", "reward"].mean()) for d in (online_data, expert_data)]
+    assert build("gail").hyperparameters.use_grad_penalty
+    assert rewards[False][0] < 0.01 and rewards[False][1] > 3.0
+    assert rewards[True][0] > 0.1 and rewards[True][1] > rewards[True][0] + 0.5
+
+
 @pytest.mark.parametrize("name", ["gail", "dac"])
 def test_discriminator_step_touches_only_the_discriminator(name):
     method = build(name, {"batch_size": 16, "discriminator_batch_size": 16})

@@ -14,7 +14,8 @@ learner would see a handful of batches and learn nothing, so the comparison woul
 learner, not the imitation objective. The generator is therefore SAC on the discriminator reward
 (off-policy, replaying every transition, the same learner as CSIRL's), which is how GAIL is run in
 later off-policy comparisons (e.g. Kostrikov et al. 2019 use an off-policy TD3 generator). The
-discriminator is trained on the replay buffer, not on the current policy's samples.
+discriminator is trained on the replay buffer, not on the current policy's samples, with
+``GAILLoss``'s gradient penalty (a second deviation: :class:`GAILHyperparameters`).
 """
 from __future__ import annotations
 
@@ -39,15 +40,20 @@ class GAILHyperparameters(SACHyperparameters):
             (``sota-implementations/gail/config.yaml``).
         discriminator_batch_size: expert and agent pairs per discriminator step (each).
         discriminator_every: a discriminator step every this many generator updates.
-        use_grad_penalty: the WGAN-GP penalty of ``GAILLoss``; off in the paper (Ho and Ermon do
-            not regularise the discriminator), on in TorchRL's example.
+        use_grad_penalty: the gradient penalty of ``GAILLoss``, ``gp_lambda * (||grad D|| - 1) ** 2`` at
+            mixtures of expert and agent pairs (one mixing weight per element; on ``D``'s probability, so
+            it also pulls ``D`` away from 0 and 1 there). On by default, as in TorchRL's GAIL example; a
+            deviation from the paper (Ho and Ermon do not regularise the discriminator), needed by the
+            off-policy generator: without it the discriminator, one step per SAC update on replayed
+            pairs, separates expert from agent within a few thousand updates and the reward
+            ``softplus(logit)`` vanishes on every agent pair (HalfCheetah: docs/benchmark.md).
         gp_lambda: its weight when on.
     """
 
     discriminator_lr: float = 3e-4
     discriminator_batch_size: int = 256
     discriminator_every: int = 1
-    use_grad_penalty: bool = False
+    use_grad_penalty: bool = True
     gp_lambda: float = 10.0
 
 
