@@ -13,8 +13,9 @@ from torchrl.envs import Compose
 
 from torchrl_csirl.data import ExpertDemonstrations
 from torchrl_csirl.modules import make_actor, make_qvalue
+from torchrl_csirl.objectives import GAILHyperparameters
 from torchrl_csirl.trainers.imitation import IMITATION_METHODS, make_imitation_method
-from torchrl_csirl.transforms import absorbing_self_loops
+from torchrl_csirl.transforms import DiscriminatorReward, absorbing_self_loops
 
 OBS, ACT, HIDDEN = 3, 1, (32, 32)
 
@@ -151,6 +152,11 @@ def expert_vs_random(n: int = 200):
             transitions(n, obs, 0.8))
 
 
+def reward_transform(method):
+    """The method's :class:`~torchrl_csirl.transforms.DiscriminatorReward` (an online-buffer transform)."""
+    return next(tr for tr in method.online_transforms if isinstance(tr, DiscriminatorReward))
+
+
 @pytest.mark.parametrize("name", ["gail", "dac"])
 def test_discriminator_separates_expert_from_random(name):
     method = build(name, {"batch_size": 32, "discriminator_batch_size": 64, "discriminator_lr": 1e-3})
@@ -158,7 +164,7 @@ def test_discriminator_separates_expert_from_random(name):
     online, expert = buffers(method, online_data, expert_data)
     step = method.make_update_step(online, expert)
     t = trainer(online)
-    reward = [tr for tr in method.online_transforms if type(tr).__name__ == "DiscriminatorReward"][0]
+    reward = reward_transform(method)
 
     def reward_gap():
         return float(reward(expert.sample())["next", "reward"].mean() - reward(online.sample())["next", "reward"].mean())
@@ -188,10 +194,10 @@ def test_gail_gradient_penalty_keeps_the_agent_reward():
         for _ in range(400):
             out = step.discriminator_step(t)
         assert ("gp_loss" in out) == use_grad_penalty
-        reward = [tr for tr in method.online_transforms if type(tr).__name__ == "DiscriminatorReward"][0]
+        reward = reward_transform(method)
         with torch.no_grad():
             rewards[use_grad_penalty] = [float(reward(d.clone())["next", "reward"].mean()) for d in (online_data, expert_data)]
-    assert build("gail").hyperparameters.use_grad_penalty
+    assert GAILHyperparameters().use_grad_penalty
     assert rewards[False][0] < 0.01 and rewards[False][1] > 3.0
     assert rewards[True][0] > 0.1 and rewards[True][1] > rewards[True][0] + 0.5
 
