@@ -124,12 +124,17 @@ def test_locomotion_results_are_their_records():
     for method, columns in table.items():
         for task, scenario in (("Hopper", "hopper"), ("HalfCheetah", "halfcheetah")):
             row = rows.get((method, scenario))
+            best = columns[f"{task} best evaluation"]
             if row is None:  # no finished run yet: an empty cell
-                assert columns[f"{task} R / R_expert"] == columns[f"{task} return"] == "", (method, columns)
+                assert columns[f"{task} R / R_expert"] == columns[f"{task} return"] == best == "", (method, columns)
                 continue
             normalised, runs_shown = numbers(columns[f"{task} R / R_expert"])
             assert agrees(normalised, row["normalized_return_mean"]) and runs_shown[0] == row["runs"], (method, columns)
             assert agrees(numbers(columns[f"{task} return"])[0], row["return_mean"]), (method, columns)
+            if row["normalized_best_eval_return_mean"] is None:  # the reference rows: no evaluations during training
+                assert best == "", (method, columns)
+            else:
+                assert agrees(numbers(best)[0], row["normalized_best_eval_return_mean"]), (method, columns)
 
 
 def test_readme_results_follow_table_one(driving, robotics):

@@ -438,6 +438,27 @@ def add_normalized_returns(runs: list[dict[str, Any]]) -> None:
         for run in (r for r in runs if r["scenario"] == task):
             ok = expert is not None and expert > 0 and run.get("return") is not None
             run["normalized_return"] = float(run["return"]) / expert if ok else None
+            best = best_evaluation(run["run_dir"]) if run.get("run_dir") else None
+            run["normalized_best_eval_return"] = best / expert if expert and expert > 0 and best is not None else None
+
+
+def best_evaluation(run_dir: str, key: str = "eval_env_return") -> float | None:
+    """The highest periodic evaluation of a run (``key`` of its ``metrics.jsonl`` rows; none without any): the
+    figure the published locomotion rows report (IQ-Learn's code keeps the best evaluation, SQIL's paper the best
+    10-episode mean). A maximum over noisy evaluations sits above what one evaluation would expect, and the
+    validation episodes that choose it score it too: an optimistic figure, beside the final policy's test return.
+
+    Examples:
+        >>> import tempfile
+        >>> run_dir = tempfile.mkdtemp()
+        >>> with open(os.path.join(run_dir, "metrics.jsonl"), "w") as f:
+        ...     _ = f.write('{"frames": 2, "eval_env_return": 5.0}\\n{"frames": 4, "loss": 1.0}\\n'
+        ...                 '{"frames": 6, "eval_env_return": 3.0}\\n')
+        >>> best_evaluation(run_dir), best_evaluation(tempfile.mkdtemp())
+        (5.0, None)
+    """
+    values = eval_curve(run_dir, key)[1]
+    return max(values) if values else None
 
 
 def table_rows(runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -455,8 +476,8 @@ def table_rows(runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
         row: dict[str, Any] = {"method": method, "scenario": scenario, "seeds": " ".join(
             str(s) for s in sorted(int(r["seed"]) for r in group)), "runs": len(group),
             "frames": " ".join(str(f) for f in sorted({int(r.get("frames") or 0) for r in group}))}
-        for field in ("normalized_accomplish_rate", "accomplish_rate", "return", "normalized_return", "success_rate",
-                      "crash_rate", "total_wall_s", "updates_per_s"):
+        for field in ("normalized_accomplish_rate", "accomplish_rate", "return", "normalized_return",
+                      "normalized_best_eval_return", "success_rate", "crash_rate", "total_wall_s", "updates_per_s"):
             values = [float(r[field]) for r in group if r.get(field) is not None]
             stats = mean_std(values) if values else {"mean": None, "std": None}
             row[f"{field}_mean"], row[f"{field}_std"] = stats["mean"], stats["std"]
@@ -513,6 +534,11 @@ def budget_caption(scenarios: list[str]) -> str:
     else:
         text = ", ".join(f"{s} {b}" for s, b in budgets.items()) + " frames per run"
     return f"every row at {text} (benchmark.py TABLE_BUDGETS; a cell run at another budget says so)"
+
+
+def _has(row: dict[str, Any] | None, field: str) -> bool:
+    """Whether a table row has a mean of ``field`` (some of its runs measured it)."""
+    return row is not None and row.get(f"{field}_mean") is not None
 
 
 def _pm(mean: float | None, std: float | None, fmt: str = ".2f") -> str:
@@ -654,9 +680,11 @@ def _published(method: str, task: str, row: dict[str, Any] | None) -> str:
     if ours is None:
         return text
     gap = f"{ours - value:+.2f}"
+    best = row["normalized_best_eval_return_mean"]
+    best = "" if best is None else f", best evaluation {best - value:+.2f}"
     if off_budget(row):  # a short or longer run is not compared at the table's budget
-        return f"{text}; ours {gap} (at {row['frames']} frames)"
-    return f"{text}; ours {f'**{gap}**' if ours - value < -PUBLISHED_GAP else gap}"
+        return f"{text}; ours {gap}{best} (at {row['frames']} frames)"
+    return f"{text}; ours {f'**{gap}**' if ours - value < -PUBLISHED_GAP else gap}{best}"
 
 
 def locomotion_tables(rows: list[dict[str, Any]]) -> list[str]:
@@ -673,6 +701,14 @@ def locomotion_tables(rows: list[dict[str, Any]]) -> list[str]:
     lines += [""] + _method_table(
         "Test return (gymnasium's own reward), mean ± std over seeds.", methods, scenarios,
         lambda m, s: _score(cell.get((m, s)), None, "return", ".0f"))
+    evaluated = [m for m in methods if any(_has(cell.get((m, s)), "normalized_best_eval_return") for s in scenarios)]
+    if evaluated:
+        lines += [""] + _method_table(
+            "Best evaluation during training, R / R_expert, mean ± std over seeds: the highest of a run's periodic "
+            "evaluations (validation episodes), the figure the published rows report; optimistic (a maximum over "
+            "noisy evaluations, scored on the episodes that chose it).", evaluated, scenarios,
+            lambda m, s: _score(cell[(m, s)], None, "normalized_best_eval_return")
+            if _has(cell.get((m, s)), "normalized_best_eval_return") else "—")
     lines += [""] + _method_table(
         "Cost per run: wall time [min] (start-up and final evaluation included) and updates/s, mean over runs.",
         methods, scenarios, lambda m, s: _cost(cell.get((m, s))))
@@ -681,7 +717,7 @@ def locomotion_tables(rows: list[dict[str, Any]]) -> list[str]:
     return lines + [""] + _method_table(
         "Published expert-normalised results, R / R_expert of the paper's own expert (IQ-Learn's Table 3: one "
         "expert trajectory, as ours; other papers, settings and sources: docs/benchmark.md#published-results), "
-        f"and ours minus it (**bold**: more than {PUBLISHED_GAP} below).",
+        f"and ours minus it (**bold**: more than {PUBLISHED_GAP} below; then our best evaluation minus it).",
         published, scenarios, lambda m, s: _published(m, s, cell.get((m, s))))
 
 
