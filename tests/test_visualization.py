@@ -74,7 +74,7 @@ def test_method_curves_frame_axis(tmp_path, monkeypatch, with_curve):
     monkeypatch.setattr(curves_module, "save_png", lambda fig, path: figures.append(fig) or save_png(fig, path))
     curves = {"sac": [([4000, 8000], [0.2, 0.5])]} if with_curve else {"sac": []}
     out = plot_method_curves(curves, tmp_path / "curves.png", references={"expert": 0.95, "random": 0.04})
-    assert _png_size(out) == (700, 450)
+    assert _png_size(out) == (860, 450)
     ax = figures[0].axes[0]
     if with_curve:
         assert ax.get_xlabel() == "environment frames" and len(ax.get_xticks()) > 0

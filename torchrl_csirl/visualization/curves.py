@@ -86,14 +86,17 @@ def plot_learning_curve(
 
 def _rate_axes(ax, ylabel: str, legend_loc: str, fontsize: int, rate: bool = True) -> None:
     """A rate in [0, 1] (or, ``rate=False``, any value: limits from the data) against environment frames:
-    limits, labels, grid, legend."""
+    limits, labels, grid, legend (``legend_loc="outside"``: right of the axes, clear of the data)."""
     if rate:
         ax.set_ylim(-0.02, 1.05)
     ax.set_ylabel(ylabel)
     ax.set_xlabel("environment frames")
     ax.xaxis.set_major_formatter(EngFormatter(sep=""))
     ax.grid(True, alpha=0.3)
-    ax.legend(loc=legend_loc, fontsize=fontsize)
+    if legend_loc == "outside":
+        ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, fontsize=fontsize)
+    else:
+        ax.legend(loc=legend_loc, fontsize=fontsize)
 
 
 def _draw_rates(ax, records: list[Mapping[str, Any]]) -> None:
@@ -140,7 +143,7 @@ def plot_method_curves(
         rate (bool): the values are rates, drawn on [0, 1]; ``False`` (e.g. returns): the axis follows the data.
 
     Returns:
-        Path: ``path`` (a 700 x 450 px PNG).
+        Path: ``path`` (an 860 x 450 px PNG, the legend right of the curves).
 
     Examples:
         >>> import tempfile, pathlib
@@ -149,7 +152,7 @@ def plot_method_curves(
         >>> plot_method_curves({"csirl": runs}, out, references={"expert": 0.95}) == out
         True
     """
-    fig = new_figure(700, 450)
+    fig = new_figure(860, 450)
     ax = fig.add_subplot(1, 1, 1)
     ax.set_title(title if title is not None else "Learning curves")
     colors = colormaps["tab10"]
@@ -173,7 +176,7 @@ def plot_method_curves(
     if not (curves_drawn or references):
         empty_message(ax, "no finished run")
     else:
-        _rate_axes(ax, ylabel, legend_loc="best", fontsize=8, rate=rate)
+        _rate_axes(ax, ylabel, legend_loc="outside", fontsize=8, rate=rate)
         if not curves_drawn:  # reference lines only: no frame axis to show
             ax.set_xticks([])
             ax.set_xlabel("no evaluation curve recorded")
