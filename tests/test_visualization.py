@@ -201,3 +201,23 @@ def test_render_curriculum_without_subgoals_and_bad_index(tmp_path):
     assert _png_size(out)[0] >= 400
     with pytest.raises(ValueError, match="outside the curriculum"):
         render_curriculum("merge", observations, [1], tmp_path / "bad.png", max_pixels=400)
+
+
+def test_a_method_keeps_its_colour_from_figure_to_figure(tmp_path, monkeypatch):
+    """With ``method_order`` a method's colour is its place in that order, whichever other methods a figure holds."""
+    import torchrl_csirl.visualization.curves as curves_module
+
+    figures = []
+    save_png = curves_module.save_png
+    monkeypatch.setattr(curves_module, "save_png", lambda fig, path: figures.append(fig) or save_png(fig, path))
+    run = [([4000, 8000], [0.2, 0.5])]
+    order = ("sac", "bc", "csirl")
+    plot_method_curves({"sac": run, "csirl": run}, tmp_path / "a.png", method_order=order)
+    plot_method_curves({"csirl": run, "mine": run}, tmp_path / "b.png", method_order=order)
+
+    def colours(fig):
+        return {line.get_label().split(" (")[0]: line.get_color() for line in fig.axes[0].get_lines()}
+
+    first, second = colours(figures[0]), colours(figures[1])
+    assert first["csirl"] == second["csirl"] and first["sac"] != first["csirl"]
+    assert second["mine"] not in (first["sac"], first["csirl"])  # a method outside the order: a colour of its own

@@ -795,6 +795,10 @@ def curve_kinds(scenario: str) -> list[tuple[str, str, str, str, bool]]:
             ("progress", *rate, "evaluation progress", True)]
 
 
+#: the trained rows and CSIRL's variants, in the table's order: each keeps its colour in every figure
+LEARNER_ORDER = tuple(m for m in (*METHOD_ORDER, *ABLATIONS) if m not in REFERENCE_METHODS)
+
+
 def learning_curve_figures(runs: list[dict[str, Any]], out_dir: str) -> list[str]:
     """PNGs per scenario (``curve_kinds``): every trained method's evaluation curve (mean ± std over seeds),
     the reference rows as lines."""
@@ -818,7 +822,7 @@ def learning_curve_figures(runs: list[dict[str, Any]], out_dir: str) -> list[str
                                       references={m: sum(v) / len(v) for m, v in references.items()},
                                       title=f"{scenario}: {label}" + (f"\n{textwrap.fill(schedule, 72)}" if schedule else ""),
                                       ylabel=label,
-                                      rate=rate)
+                                      rate=rate, method_order=LEARNER_ORDER)
             paths.append(os.fspath(path))
     return paths
 

@@ -125,6 +125,7 @@ def plot_method_curves(
     title: str | None = None,
     ylabel: str = "test accomplish rate",
     rate: bool = True,
+    method_order: Sequence[str] | None = None,
 ) -> Path:
     """Learning curves of several methods (the paper's Figures 6 and 7): mean +- std over seeds per method.
 
@@ -141,6 +142,8 @@ def plot_method_curves(
         title (str, optional): figure title.
         ylabel (str): the y axis label.
         rate (bool): the values are rates, drawn on [0, 1]; ``False`` (e.g. returns): the axis follows the data.
+        method_order (sequence of str, optional): every method that may be drawn, in one fixed order: a method keeps
+            its colour (its place in this order) from figure to figure; others follow. Default: the drawn methods sorted.
 
     Returns:
         Path: ``path`` (an 860 x 450 px PNG, the legend right of the curves).
@@ -155,9 +158,11 @@ def plot_method_curves(
     fig = new_figure(860, 450)
     ax = fig.add_subplot(1, 1, 1)
     ax.set_title(title if title is not None else "Learning curves")
-    colors = colormaps["tab10"]
+    palette = [*colormaps["tab10"].colors, *colormaps["Dark2"].colors]  # 18 colours before one repeats
+    order = list(method_order or []) + sorted(m for m in curves if m not in (method_order or []))
     curves_drawn = False
-    for k, (method, runs) in enumerate(sorted(curves.items())):
+    for method, runs in sorted(curves.items()):
+        k = order.index(method)
         runs = [(finite_array(f, "frames"), finite_array(r, "rates")) for f, r in runs]
         runs = [(f, r) for f, r in runs if f.size and f.size == r.size]
         if not runs:
@@ -166,7 +171,7 @@ def plot_method_curves(
         frames = runs[0][0][:length]
         rates = np.stack([r[:length] for _, r in runs])
         mean, std = rates.mean(0), rates.std(0, ddof=1) if len(runs) > 1 else np.zeros(length)
-        color = colors(k % 10)
+        color = palette[k % len(palette)]
         ax.plot(frames, mean, "o-", color=color, markersize=3, label=f"{method} ({len(runs)} run{'s' * (len(runs) > 1)})")
         ax.fill_between(frames, mean - std, mean + std, color=color, alpha=0.2, linewidth=0)
         curves_drawn = True
