@@ -435,11 +435,12 @@ def add_normalized_returns(runs: list[dict[str, Any]]) -> None:
     for task in LOCOMOTION_ORDER:
         values = [float(r["return"]) for r in runs if r["scenario"] == task and r["method"] == "expert"]
         expert = sum(values) / len(values) if values else None
+        expert = expert if expert is not None and expert > 0 else None  # no reference to divide by
         for run in (r for r in runs if r["scenario"] == task):
-            ok = expert is not None and expert > 0 and run.get("return") is not None
+            ok = expert is not None and run.get("return") is not None
             run["normalized_return"] = float(run["return"]) / expert if ok else None
-            best = best_evaluation(run["run_dir"]) if run.get("run_dir") else None
-            run["normalized_best_eval_return"] = best / expert if expert and expert > 0 and best is not None else None
+            best = best_evaluation(run["run_dir"]) if expert is not None and run.get("run_dir") else None
+            run["normalized_best_eval_return"] = None if best is None else best / expert
 
 
 def best_evaluation(run_dir: str, key: str = "eval_env_return") -> float | None:
