@@ -3,10 +3,12 @@ matching reward, out of every network's input; the expert script, CSIRL and a ba
 from __future__ import annotations
 
 import json
+import math
 import os
 
 import locomotion_probe
 import pytest
+import termination_probe
 import torch
 from tensordict import TensorDict
 
@@ -146,6 +148,11 @@ def test_an_expert_its_demonstrations_then_csirl_and_a_baseline_on_the_hopper(tm
     bc = imitation_robotics.main(["method=bc", "env.task=hopper", f"expert.path={demos}", "expert.num_trajectories=2",
                                   *TINY, f"logger.output_dir={tmp_path}"])
     assert bc["updates"] > 0 and bc["success_rate"] == 0.0
+    dac = imitation_robotics.main(["method=dac", "env.task=hopper", f"expert.path={demos}", "expert.num_trajectories=2",
+                                   *TINY, f"logger.output_dir={tmp_path}"])
+    ends = termination_probe.main([dac["run_dir"], "--samples", "64"])  # the locomotion run's own configuration
+    assert ends["method"] == "dac" and ends["scenario"] == "hopper"
+    assert 0.0 <= ends["agent"]["terminal_fraction"] <= 1.0 and math.isfinite(ends["agent"]["step_reward"])
     driver = make_expert("hopper", policy=expert["run_dir"])
     env = make_env("hopper", seed=0)
     env.reset()

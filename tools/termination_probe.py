@@ -2,7 +2,8 @@
 
 ``python tools/termination_probe.py <run dir> [key=value ...] [--samples 4096] [--seed 0]``
 
-Reads a run of ``recipes/imitation_highway.py`` (its last checkpoint, with the replay buffer)
+Reads a run of ``recipes/imitation_highway.py`` or ``recipes/imitation_robotics.py`` (a robotics
+or locomotion task: its last checkpoint, with the replay buffer)
 and samples its replay (the learner's own transitions) and its demonstrations. For each it
 reports the fraction of transitions that end the episode (``terminated``) and the critics'
 value ``Q(s, a)`` (the minimum over the ensemble, as SAC's actor reads it) on the terminating
@@ -33,12 +34,14 @@ import shutil
 import tempfile
 
 import torch
+from omegaconf import OmegaConf
 from tensordict import TensorDictBase
 
 from torchrl_csirl.launch.builders import resume_run
 from torchrl_csirl.launch.config import ConfigError
 from torchrl_csirl.launch.imitation import load_run_config, make_trainer
 from torchrl_csirl.launch.run import run_script
+from torchrl_csirl.scripts import imitation_robotics
 from torchrl_csirl.transforms import absorbing_self_loops
 
 PROBED_METHODS = ("sac", "sqil", "gail", "dac", "iqlearn", "valuedice")
@@ -113,6 +116,12 @@ def probe(run, samples: int) -> dict[str, object]:
     return out
 
 
+def _is_robotics_run(run_dir: str) -> bool:
+    """Whether ``run_dir`` was trained by ``recipes/imitation_robotics.py`` (its ``env`` section names a task)."""
+    saved = OmegaConf.load(os.path.join(run_dir, "config.yaml"))
+    return "task" in (saved.get("env") or {})
+
+
 def open_copy(run_dir: str, workdir: str, overrides: list[str] = ()):
     """The run rebuilt from a copy of its configuration and last checkpoint under ``workdir``."""
     checkpoint = os.path.join(run_dir, "checkpoints", "last")
@@ -122,7 +131,8 @@ def open_copy(run_dir: str, workdir: str, overrides: list[str] = ()):
     os.makedirs(copy)
     shutil.copy(os.path.join(run_dir, "config.yaml"), copy)
     shutil.copytree(checkpoint, os.path.join(copy, "checkpoints", "last"))
-    cfg = load_run_config(copy, [f"checkpoint.resume={copy}", "logger.backend=csv", *overrides])
+    load = imitation_robotics.load_run_config if _is_robotics_run(copy) else load_run_config
+    cfg = load(copy, [f"checkpoint.resume={copy}", "logger.backend=csv", *overrides])
     if cfg.method not in PROBED_METHODS:
         raise ConfigError(f"termination_probe: method {cfg.method!r} has no critic to probe; "
                           f"probed methods: {', '.join(PROBED_METHODS)}")
@@ -131,7 +141,7 @@ def open_copy(run_dir: str, workdir: str, overrides: list[str] = ()):
 
 def main(argv: list[str] | None = None) -> dict[str, object]:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("run_dir", help="a run directory of recipes/imitation_highway.py")
+    parser.add_argument("run_dir", help="a run directory of recipes/imitation_highway.py or imitation_robotics.py")
     parser.add_argument("overrides", nargs="*", help="key=value overrides of the run's configuration")
     parser.add_argument("--samples", type=int, default=4096, help="transitions sampled from each buffer")
     parser.add_argument("--seed", type=int, default=0, help="seed of the sampling")
