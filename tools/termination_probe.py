@@ -42,6 +42,7 @@ from torchrl_csirl.launch.config import ConfigError
 from torchrl_csirl.launch.imitation import load_run_config, make_trainer
 from torchrl_csirl.launch.run import run_script
 from torchrl_csirl.scripts import imitation_robotics
+from torchrl_csirl.scripts.benchmark import is_robotics
 from torchrl_csirl.transforms import absorbing_self_loops
 
 PROBED_METHODS = ("sac", "sqil", "gail", "dac", "iqlearn", "valuedice")
@@ -116,12 +117,6 @@ def probe(run, samples: int) -> dict[str, object]:
     return out
 
 
-def _is_robotics_run(run_dir: str) -> bool:
-    """Whether ``run_dir`` was trained by ``recipes/imitation_robotics.py`` (its ``env`` section names a task)."""
-    saved = OmegaConf.load(os.path.join(run_dir, "config.yaml"))
-    return "task" in (saved.get("env") or {})
-
-
 def open_copy(run_dir: str, workdir: str, overrides: list[str] = ()):
     """The run rebuilt from a copy of its configuration and last checkpoint under ``workdir``."""
     checkpoint = os.path.join(run_dir, "checkpoints", "last")
@@ -131,7 +126,8 @@ def open_copy(run_dir: str, workdir: str, overrides: list[str] = ()):
     os.makedirs(copy)
     shutil.copy(os.path.join(run_dir, "config.yaml"), copy)
     shutil.copytree(checkpoint, os.path.join(copy, "checkpoints", "last"))
-    load = imitation_robotics.load_run_config if _is_robotics_run(copy) else load_run_config
+    scenario = OmegaConf.load(os.path.join(copy, "config.yaml")).env.scenario
+    load = imitation_robotics.load_run_config if is_robotics(scenario) else load_run_config
     cfg = load(copy, [f"checkpoint.resume={copy}", "logger.backend=csv", *overrides])
     if cfg.method not in PROBED_METHODS:
         raise ConfigError(f"termination_probe: method {cfg.method!r} has no critic to probe; "
