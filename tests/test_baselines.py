@@ -429,6 +429,32 @@ def test_valuedice_residual_after_a_termination(absorbing_states):
         assert grad.abs().item() > 0
 
 
+def test_valuedice_placeholder_is_the_zero_standardised_state():
+    """ValueDICE's code standardises the states, then appends its absorbing state (zeros and the indicator): with
+    ``normalize_states`` the placeholder is the raw observation the standardisation maps to zero, on both buffers."""
+    from torchrl_csirl.modules import StandardizeFeatures
+    from torchrl_csirl.objectives._imitation import sample
+
+    torch.manual_seed(0)
+    norm = StandardizeFeatures(torch.tensor([2.0, -1.0, 5.0]), torch.tensor([0.5, 2.0, 4.0]))
+    actor = make_actor(OBS, ACT, hidden=HIDDEN, input_features=copy.deepcopy(norm))
+    method = make_imitation_method("valuedice", actor, lambda: make_qvalue(OBS, ACT, hidden=HIDDEN,
+                                                                           input_features=copy.deepcopy(norm)),
+                                   obs_dim=OBS, action_dim=ACT,
+                                   hyperparameters={"batch_size": 16, "normalize_states": True,
+                                                    "absorbing_observation": "placeholder"})
+    online, expert = buffers(method, transitions(40, 0.0, 0.3, terminated_every=4), transitions(40, 1.0, 0.8, 10))
+    for buffer in (online, expert):
+        batch = sample(buffer, 40)
+        ends = batch["next", "terminated"].squeeze(-1)
+        assert ends.any() and batch["next", "absorbing"].squeeze(-1).eq(ends).all()
+        torch.testing.assert_close(batch["next", "observation"][ends], norm.loc.expand(int(ends.sum()), OBS))
+        torch.testing.assert_close(norm(batch["next", "observation"][ends]), torch.zeros(int(ends.sum()), OBS))
+        torch.testing.assert_close(batch["next", "observation"][~ends], batch["observation"][~ends] + 0.1)
+    unstandardised = build("valuedice", {"absorbing_observation": "placeholder"})
+    assert unstandardised.online_transforms[0].absorbing_observation == 0.0
+
+
 def test_valuedice_update_moves_each_network_by_its_own_objective():
     from torchrl_csirl.objectives._imitation import sample
     from torchrl_csirl.objectives.valuedice import initial_observations

@@ -161,7 +161,8 @@ class AbsorbingStateSettings:
             per terminal state, observed as the terminal observation: our default, since every
             driving demonstration ends in a terminating success while the learner also terminates
             by crashing) or ``"placeholder"`` (the paper's single absorbing state, a zero
-            observation). docs/baselines.md, "DAC's absorbing states", gives the evidence.
+            observation: zero in the standardised states where the networks read them, as ValueDICE's
+            code). docs/baselines.md, "DAC's absorbing states", gives the evidence.
     """
 
     absorbing_states: bool = True
@@ -172,8 +173,10 @@ class AbsorbingStateSettings:
             raise ValueError(f"absorbing_observation must be one of {ABSORBING_OBSERVATIONS}, "
                              f"got {self.absorbing_observation!r}.")
 
-    def absorbing_transforms(self) -> list[AbsorbingStates]:
+    def absorbing_transforms(self, placeholder: float | torch.Tensor = 0.0) -> list[AbsorbingStates]:
         """The replay-buffer transforms of these settings: ``[AbsorbingStates(...)]``, or ``[]`` without them.
+        ``placeholder``: the observation of the ``"placeholder"`` form (ValueDICE's standardised states: the raw
+        observation they map to zero).
 
         Examples:
             >>> AbsorbingStateSettings(absorbing_observation="placeholder").absorbing_transforms()[0].absorbing_observation
@@ -183,7 +186,7 @@ class AbsorbingStateSettings:
         """
         if not self.absorbing_states:
             return []
-        return [AbsorbingStates(absorbing_observation=None if self.absorbing_observation == "terminal" else 0.0)]
+        return [AbsorbingStates(absorbing_observation=None if self.absorbing_observation == "terminal" else placeholder)]
 
 
 class AbsorbingLogit(nn.Module):

@@ -176,9 +176,6 @@ def _make_valuedice(actor, make_qvalue, hp: ValueDICEHyperparameters, device) ->
     if hp.normalize_states and (norms[0] is None or norms[1] is None):
         raise ValueError("normalize_states=True: the actor and nu must read the observation through a "
                          "StandardizeFeatures first (torchrl_csirl.modules.with_standardization).")
-    if hp.normalize_states and hp.absorbing_states and hp.absorbing_observation == "placeholder":
-        raise ValueError("normalize_states=True with absorbing_observation='placeholder': the placeholder is a zero "
-                         "raw observation, not the zero standardised state of the authors' code; use 'terminal'.")
     loss = ValueDICELoss(actor, nu, gamma=hp.gamma, replay_regularization=hp.replay_regularization,
                          orthogonal_regularization=hp.orthogonal_regularization, gp_lambda=hp.gp_lambda,
                          observation_scale=norms[1].scale if hp.normalize_states else None).to(device)
@@ -190,8 +187,10 @@ def _make_valuedice(actor, make_qvalue, hp: ValueDICEHyperparameters, device) ->
                                hp.max_grad_norm)
 
     states = {"loss": loss, "optim_nu": nu_optimizer, "optim_actor": actor_optimizer}  # the loss holds actor and nu
-    return ImitationMethod("valuedice", actor, hp.absorbing_transforms(), hp.absorbing_transforms(), states,
-                           make_update_step, hp)
+    # the authors' code standardises the env's states, then appends the absorbing one: zero in the standardised states
+    placeholder = norms[1].loc if hp.normalize_states else 0.0
+    return ImitationMethod("valuedice", actor, hp.absorbing_transforms(placeholder), hp.absorbing_transforms(placeholder),
+                           states, make_update_step, hp)
 
 
 _BUILDERS: dict[str, tuple[type, Callable[..., ImitationMethod]]] = {

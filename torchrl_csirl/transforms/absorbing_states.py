@@ -35,8 +35,9 @@ class AbsorbingStates(Transform):
     successor observation of terminal transitions to the observation of the absorbing state
     entered:
 
-    * ``absorbing_observation=0.0`` (a number): the paper's single absorbing state, the same
-      placeholder observation after every termination;
+    * ``absorbing_observation=0.0`` (a number, or an observation-sized tensor): the paper's single
+      absorbing state, the same placeholder observation after every termination (a tensor: e.g. the
+      raw observation a standardisation maps to zero, ValueDICE's code's placeholder);
     * ``absorbing_observation=None``: one absorbing state per terminal state, observed as the
       terminal observation itself (the successor observation is left as recorded). Use it where
       demonstrations end in a terminal *success* (a goal reached) and the learner can also
@@ -58,8 +59,9 @@ class AbsorbingStates(Transform):
     Keyword Args:
         absorbing_key (NestedKey): the indicator entry. Defaults to ``"absorbing"``.
         observation_key (NestedKey): Defaults to ``"observation"``.
-        absorbing_observation (float, optional): the placeholder observation of the single
-            ``s_a``, or ``None`` for one absorbing state per terminal observation. Defaults to ``0.0``.
+        absorbing_observation (float or tensor, optional): the placeholder observation of the single
+            ``s_a`` (a number for every entry, or a vector of the observation's size), or ``None`` for one
+            absorbing state per terminal observation. Defaults to ``0.0``.
 
     Examples:
         >>> import torch
@@ -77,11 +79,18 @@ class AbsorbingStates(Transform):
     """
 
     def __init__(self, *, absorbing_key: NestedKey = "absorbing", observation_key: NestedKey = "observation",
-                 absorbing_observation: float | None = 0.0) -> None:
+                 absorbing_observation: float | torch.Tensor | None = 0.0) -> None:
         super().__init__(in_keys=[observation_key], out_keys=[absorbing_key])
         self.absorbing_key = absorbing_key
         self.observation_key = observation_key
-        self.absorbing_observation = None if absorbing_observation is None else float(absorbing_observation)
+        if isinstance(absorbing_observation, torch.Tensor):
+            if absorbing_observation.ndim != 1 or not bool(torch.isfinite(absorbing_observation).all()):
+                raise ValueError("absorbing_observation: a tensor placeholder must be a finite observation-sized "
+                                 f"vector, got shape {tuple(absorbing_observation.shape)}.")
+            absorbing_observation = absorbing_observation.detach().clone()
+        elif absorbing_observation is not None:
+            absorbing_observation = float(absorbing_observation)
+        self.absorbing_observation = absorbing_observation
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         missing = [key for key in (self.observation_key, ("next", self.observation_key), ("next", "terminated"))
@@ -94,9 +103,17 @@ class AbsorbingStates(Transform):
         if self.absorbing_observation is None:  # one absorbing state per terminal observation
             return tensordict
         next_obs = tensordict.get(("next", self.observation_key))
-        placeholder = torch.full_like(next_obs, self.absorbing_observation)
+        placeholder = self._placeholder_like(next_obs)
         tensordict.set(("next", self.observation_key), torch.where(terminated, placeholder, next_obs))
         return tensordict
+
+    def _placeholder_like(self, next_obs: torch.Tensor) -> torch.Tensor:
+        if not isinstance(self.absorbing_observation, torch.Tensor):
+            return torch.full_like(next_obs, self.absorbing_observation)
+        if self.absorbing_observation.shape[-1] != next_obs.shape[-1]:
+            raise ValueError(f"AbsorbingStates: the placeholder has {self.absorbing_observation.shape[-1]} entries, "
+                             f"the observations {next_obs.shape[-1]}.")
+        return self.absorbing_observation.to(next_obs).expand_as(next_obs)
 
     def _call(self, next_tensordict: TensorDictBase) -> TensorDictBase:  # pragma: no cover
         raise RuntimeError("AbsorbingStates works on whole transitions: use it as a replay-buffer transform.")
