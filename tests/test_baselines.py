@@ -531,3 +531,44 @@ def test_baselines_page_example_runs():
 
     namespace = _run_python_blocks("docs/baselines.md")
     assert {"loss_discriminator", "loss_gradient_penalty", "loss_qvalue", "loss_actor"} <= set(namespace["losses"])
+
+
+# ------------------------------------------------------------------------------ exploration
+def test_mean_action_noise_explores_around_the_deterministic_action_within_bounds():
+    """ValueDICE's code acts with the mean action plus N(0, 0.1) noise, clipped: through TorchRL's collector the
+    actions sit around the deterministic ones with that spread; evaluation (deterministic) gets no noise."""
+    from torchrl.collectors import Collector
+    from torchrl.envs.utils import ExplorationType, set_exploration_type
+    from torchrl.testing.mocking_classes import ContinuousActionVecMockEnv
+
+    from torchrl_csirl.modules import MeanActionGaussianNoise
+
+    torch.manual_seed(0)
+    env = ContinuousActionVecMockEnv()
+    obs_dim, act_dim = env.observation_spec["observation"].shape[-1], env.action_spec.shape[-1]
+    actor = make_actor(obs_dim, act_dim, hidden=(16,))
+    explorer = MeanActionGaussianNoise(actor, sigma=0.1)
+    assert explorer.sigma == pytest.approx(0.1) and set(actor.parameters()) == set(explorer.parameters())
+    collector = Collector(env, explorer, frames_per_batch=400, total_frames=400, auto_register_policy_transforms=False)
+    batch = next(iter(collector))
+    collector.shutdown()
+    with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
+        mean = actor(batch.select("observation").clone())["action"]
+        torch.testing.assert_close(explorer(batch.select("observation").clone())["action"], mean)
+    action = batch["action"]
+    assert bool((action.abs() <= 1).all())
+    inside = (mean.abs() < 0.7)  # away from the bounds the projection leaves the noise as drawn
+    assert 0.08 < float((action - mean)[inside].std()) < 0.12
+    with pytest.raises(ValueError, match="sigma must be > 0"):
+        MeanActionGaussianNoise(actor, sigma=0.0)
+
+
+def test_valuedice_exploration_noise_wraps_the_acting_policy_only():
+    method = build("valuedice", {"exploration_noise": 0.1})
+    from torchrl_csirl.modules import MeanActionGaussianNoise
+
+    acting = method.behaviour(method.policy)
+    assert isinstance(acting, MeanActionGaussianNoise) and acting.policy is method.policy
+    assert build("valuedice").behaviour is None  # the harness's default: the policy samples
+    with pytest.raises(ValueError, match="exploration_noise must be > 0 or None"):
+        build("valuedice", {"exploration_noise": -0.1})

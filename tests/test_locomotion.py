@@ -290,3 +290,19 @@ def test_the_shipped_expert_and_its_demonstrations(tmp_path, name, floor):
     row = imitation_robotics.main(["method=expert", f"env.task={name}", "eval.final_episodes=1", "eval.video=false",
                                    "logger.backend=csv", f"logger.output_dir={tmp_path}"])
     assert row["return"] == pytest.approx(sum(e["return"] for e in episodes) / 25, rel=0.05)
+
+
+def test_valuedice_exploration_noise_reaches_the_collector_not_the_evaluation(tmp_path):
+    from torchrl_csirl.launch.imitation import load_baseline_config, make_trainer
+    from torchrl_csirl.modules import MeanActionGaussianNoise
+
+    cfg = load_baseline_config(imitation_robotics.ImitationRoboticsConfig, [
+        "method=valuedice", "env.scenario=hopper", "valuedice.exploration_noise=0.1", *TINY,
+        f"logger.output_dir={tmp_path}"])
+    run = make_trainer(cfg, str(tmp_path / "run"))
+    try:
+        acting = [m for m in run.collector.policy.modules() if isinstance(m, MeanActionGaussianNoise)]
+        assert len(acting) == 1 and acting[0].policy is run.mirror.policy and acting[0].sigma == pytest.approx(0.1)
+        assert not any(isinstance(m, MeanActionGaussianNoise) for m in run.mirror.policy.modules())
+    finally:
+        run.close()

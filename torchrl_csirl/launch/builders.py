@@ -435,6 +435,7 @@ def assemble_trainer(
     frames_done: int = 0,
     resume_frames: int | None = None,
     parts: dict[str, Any] | None = None,
+    behaviour: Callable[[nn.Module], nn.Module] | None = None,
 ) -> Run:
     """The trainer with the shared hooks: evaluation and any ``round_hooks`` at each round end,
     checkpoints, metrics logging, and the CPU policy mirror for a learner on another device.
@@ -455,12 +456,15 @@ def assemble_trainer(
         frames_done: frames already collected (resume).
         resume_frames: the resumed run's frames (the logger drops rows past them).
         parts: the method's own pieces, reachable as attributes of the :class:`Run`.
+        behaviour: wraps the (mirrored) policy for the collector only, e.g. exploration noise
+            (:class:`~torchrl_csirl.modules.MeanActionGaussianNoise`); the evaluation acts with the policy.
     """
     mirror = PolicyMirror(policy, device)
     logger = make_logger(cfg, run_dir, resume_frames)
     eval_env = make_eval_env(spec.name)
     # last: the worker processes start here
-    collector = make_collector(spec.name, cfg.collector, mirror.policy, frames_done)
+    acting = mirror.policy if behaviour is None else behaviour(mirror.policy)
+    collector = make_collector(spec.name, cfg.collector, acting, frames_done)
     trainer = CSIRLTrainer(
         collector=collector,
         online_buffer=online_buffer,

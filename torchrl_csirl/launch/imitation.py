@@ -339,7 +339,7 @@ def make_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume_fra
         cfg, spec, run_dir, device=device, demos=demos, policy=method.policy, online_buffer=online,
         update_step=method.make_update_step(online, expert), total_frames=cfg.collector.total_frames,
         updates_per_round=cfg.updates_per_round, states=method.states, frames_done=frames_done,
-        resume_frames=resume_frames, parts={"method": method, "expert_buffer": expert},
+        resume_frames=resume_frames, parts={"method": method, "expert_buffer": expert}, behaviour=method.behaviour,
     )
 
 

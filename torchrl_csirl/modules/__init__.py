@@ -9,6 +9,7 @@ from torchrl_csirl.modules.actor_critic import (
     make_qvalue,
 )
 from torchrl_csirl.modules.ensemble import FusedCriticEnsemble, fused_critic_ensemble
+from torchrl_csirl.modules.exploration import MeanActionGaussianNoise
 from torchrl_csirl.modules.export import load_policy, save_policy
 from torchrl_csirl.modules.features import (
     DropFeatures,
@@ -38,6 +39,7 @@ __all__ = [
     "FusedTanhNormalActor",
     "LaneFeatures",
     "MaskedReLU",
+    "MeanActionGaussianNoise",
     "REWARD_ACTIVATIONS",
     "fused_critic_ensemble",
     "fused_tanh_normal_actor",

@@ -81,6 +81,11 @@ class ValueDICEHyperparameters(AbsorbingStateSettings):
             turn it on (``TASK_OVERRIDES`` of :mod:`torchrl_csirl.scripts.benchmark`). Read by the recipes' network
             builder (:func:`~torchrl_csirl.modules.with_standardization`).
         max_grad_norm: gradient-norm clipping (None: none).
+        exploration_noise: how the collector acts. None (default): it samples from the policy, as every
+            method of the harness; a float ``sigma``: the policy's deterministic action plus ``N(0, sigma^2)``
+            noise, clipped to the action bounds (:class:`~torchrl_csirl.modules.MeanActionGaussianNoise`),
+            the authors' code's exploration at 0.1 (its policy has no entropy term, so the scale it would
+            sample with is not trained to explore).
     """
 
     actor_lr: float = 1e-5
@@ -93,11 +98,14 @@ class ValueDICEHyperparameters(AbsorbingStateSettings):
     initial_states: str = "expert"
     normalize_states: bool = False
     max_grad_norm: float | None = None
+    exploration_noise: float | None = None
 
     def __post_init__(self) -> None:
         super().__post_init__()
         if self.initial_states not in INITIAL_STATES:
             raise ValueError(f"initial_states must be one of {INITIAL_STATES}, got {self.initial_states!r}.")
+        if self.exploration_noise is not None and not self.exploration_noise > 0:
+            raise ValueError(f"exploration_noise must be > 0 or None, got {self.exploration_noise}.")
 
 
 INITIAL_STATES = ("expert", "episode_starts")

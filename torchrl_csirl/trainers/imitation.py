@@ -13,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from functools import partial
 from typing import Any
 
 import torch
@@ -23,6 +24,7 @@ from torchrl.envs.transforms import Transform
 from torchrl.objectives import GAILLoss, SoftUpdate
 
 from torchrl_csirl.data.mixing import DemonstrationMixer
+from torchrl_csirl.modules.exploration import MeanActionGaussianNoise
 from torchrl_csirl.modules.features import find_standardization
 from torchrl_csirl.objectives._imitation import SACHyperparameters, logit_network, make_sac_learner, sample
 from torchrl_csirl.objectives.dac import DACDiscriminatorLoss, DACHyperparameters, make_dac_discriminator
@@ -55,6 +57,8 @@ class ImitationMethod:
         make_update_step: ``(online_buffer, expert_buffer) -> update_step``; the update step is
             ``update_step(trainer) -> dict`` of detached losses, one call per update.
         hyperparameters: the method's hyperparameter dataclass, as used.
+        behaviour: wraps the policy for the collector only (the evaluation acts with the policy itself):
+            a method's own exploration (ValueDICE's ``exploration_noise``); None: the policy samples.
     """
 
     name: str
@@ -64,6 +68,7 @@ class ImitationMethod:
     states: dict[str, Any]
     make_update_step: Callable[[TensorDictReplayBuffer, TensorDictReplayBuffer], UpdateStep]
     hyperparameters: Any = None
+    behaviour: Callable[[nn.Module], nn.Module] | None = None
 
 
 def _adam(module: nn.Module, lr: float, lr_by_prefix: dict[str, float] | None = None) -> torch.optim.Optimizer:
@@ -189,8 +194,10 @@ def _make_valuedice(actor, make_qvalue, hp: ValueDICEHyperparameters, device) ->
     states = {"loss": loss, "optim_nu": nu_optimizer, "optim_actor": actor_optimizer}  # the loss holds actor and nu
     # the authors' code standardises the env's states, then appends the absorbing one: zero in the standardised states
     placeholder = norms[1].loc if hp.normalize_states else 0.0
+    behaviour = (None if hp.exploration_noise is None
+                 else partial(MeanActionGaussianNoise, sigma=hp.exploration_noise))
     return ImitationMethod("valuedice", actor, hp.absorbing_transforms(placeholder), hp.absorbing_transforms(placeholder),
-                           states, make_update_step, hp)
+                           states, make_update_step, hp, behaviour)
 
 
 _BUILDERS: dict[str, tuple[type, Callable[..., ImitationMethod]]] = {
