@@ -466,11 +466,13 @@ def test_valuedice_update_moves_each_network_by_its_own_objective():
                      "initial": TensorDict({"observation": initial_observations(expert.storage[:])}, [1])}, [])
     out = loss(td)
     torch.testing.assert_close(out["loss_actor"], -out["loss_nu"])  # min over nu, max over pi
+    assert not out["policy_scale"].requires_grad and float(out["policy_scale"]) > 0  # a metric, logged by the step
     nu_params = list(loss.nu_network.parameters())
     assert all(g is None for g in torch.autograd.grad(out["loss_gradient_penalty"], list(loss.actor_network.parameters()),
                                                       allow_unused=True, retain_graph=True))
     assert all(g is None for g in torch.autograd.grad(out["loss_orthogonal"], nu_params, allow_unused=True))
     step = method.make_update_step(online, expert)
+    assert set(step(trainer(online))) == {"loss_nu", "loss_gradient_penalty", "loss_actor", "loss_orthogonal", "policy_scale"}
     batch = step.batch()  # default: every expert state is an initial state (the authors' code)
     assert step.initial_observations is None and torch.equal(batch["initial", "observation"], batch["expert", "observation"])
     starts = build("valuedice", {"batch_size": 16, "initial_states": "episode_starts"}).make_update_step(online, expert)

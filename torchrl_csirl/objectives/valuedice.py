@@ -168,7 +168,8 @@ class ValueDICELoss(LossModule):
 
     * ``loss_nu``: ``J`` (:func:`valuedice_objective`), and ``loss_gradient_penalty``, for ``nu``;
     * ``loss_actor``: ``-J``, and ``loss_orthogonal`` (on the actor's hidden layers, as the
-      authors' code regularises the actor's trunk), for the policy.
+      authors' code regularises the actor's trunk), for the policy;
+    * ``policy_scale``: a metric, the mean scale the policy samples with at the replay's next states.
 
     ``loss_nu`` and ``loss_actor`` share one graph and reach both networks: the update applies
     the gradient of the ``nu`` terms to ``nu`` only and of the actor terms to the actor only
@@ -253,10 +254,11 @@ class ValueDICELoss(LossModule):
     def _forward_value_estimator_keys(self, **kwargs) -> None:
         pass
 
-    def _policy_action(self, observation: torch.Tensor) -> torch.Tensor:
+    def _policy_sample(self, observation: torch.Tensor) -> TensorDictBase:
+        """``a ~ pi(s)``, re-parameterised, beside the distribution's parameters (``"loc"``, ``"scale"``)."""
         td = TensorDict({self.tensor_keys.observation: observation}, observation.shape[:1])
         with set_exploration_type(ExplorationType.RANDOM):
-            return self.actor_network.get_dist(td).rsample()
+            return td.set(self.tensor_keys.action, self.actor_network.get_dist(td).rsample())
 
     @property
     def reads_absorbing(self) -> bool:
@@ -277,8 +279,7 @@ class ValueDICELoss(LossModule):
         and the successor pairs ``(s', i', a')`` with ``a' ~ pi(s')`` (zero in the absorbing state)."""
         keys = self.tensor_keys
         next_obs = transitions.get(("next", keys.observation))
-        successor = TensorDict({keys.observation: next_obs, keys.action: self._policy_action(next_obs)},
-                               next_obs.shape[:1])
+        successor = self._policy_sample(next_obs)
         if not self.reads_absorbing:
             not_terminated = 1.0 - transitions.get(("next", keys.terminated)).float().reshape(-1)
             residual = (self.nu(transitions.get(keys.observation), transitions.get(keys.action))
@@ -322,7 +323,7 @@ class ValueDICELoss(LossModule):
         expert_residual, expert_successor = self._residual(expert)
         replay_residual, replay_successor = self._residual(replay)
         initial_obs = initial.get(keys.observation)
-        initial_nu = self.nu(initial_obs, self._policy_action(initial_obs))
+        initial_nu = self.nu(initial_obs, self._policy_sample(initial_obs).get(keys.action))
         objective = valuedice_objective(expert_residual, replay_residual, initial_nu, self.gamma,
                                         self.replay_regularization)
         return TensorDict({
@@ -331,4 +332,12 @@ class ValueDICELoss(LossModule):
             "loss_actor": -objective,
             "loss_orthogonal": self.orthogonal_regularization * orthogonal_regularization(self.actor_network,
                                                                                           skip_last=True),
+            **self._sampling_scale(replay_successor),
         }, [])
+
+    @staticmethod
+    def _sampling_scale(successor: TensorDictBase) -> dict[str, torch.Tensor]:
+        """``policy_scale``: the mean scale the policy samples with at the replay's next states (a metric,
+        detached; nothing trains it but ``-J``, the policy having no entropy term), when the actor writes one."""
+        scale = successor.get("scale", None)
+        return {} if scale is None else {"policy_scale": scale.detach().mean()}

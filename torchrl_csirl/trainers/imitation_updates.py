@@ -110,7 +110,7 @@ class ValueDICEUpdate:
 
     The gradients of ``loss_nu + loss_gradient_penalty`` are applied to ``nu``'s parameters only
     and those of ``loss_actor + loss_orthogonal`` (``-J`` plus the regulariser) to the actor's only;
-    both come from one forward pass.
+    both come from one forward pass. A step returns the four losses and ``policy_scale`` (detached).
 
     Args:
         loss: the :class:`~torchrl_csirl.objectives.ValueDICELoss`.
@@ -126,6 +126,7 @@ class ValueDICEUpdate:
 
     NU_KEYS = ("loss_nu", "loss_gradient_penalty")
     ACTOR_KEYS = ("loss_actor", "loss_orthogonal")
+    METRIC_KEYS = ("policy_scale",)
 
     def __init__(self, loss: nn.Module, nu_optimizer: torch.optim.Optimizer, actor_optimizer: torch.optim.Optimizer,
                  online: Any, expert: Any, batch_size: int, initial_observations: torch.Tensor | None = None,
@@ -165,4 +166,5 @@ class ValueDICEUpdate:
         actor_grads = _gradients(actor_loss, self.actor_optimizer)
         for grads, optimizer in ((nu_grads, self.nu_optimizer), (actor_grads, self.actor_optimizer)):
             _step(grads, optimizer, self.max_grad_norm)
-        return {key: value.detach() for key, value in losses.items()}
+        metrics = {key: out.get(key) for key in self.METRIC_KEYS if key in out.keys()}
+        return {key: value.detach() for key, value in {**losses, **metrics}.items()}
