@@ -137,6 +137,22 @@ def test_locomotion_results_are_their_records():
                 assert agrees(numbers(best)[0], row["normalized_best_eval_return_mean"]), (method, columns)
 
 
+def test_locomotion_differences_are_their_records():
+    runs = benchmark.read_runs([os.path.join(ROOT, "docs", "runs", "mujoco")])
+    rows = {(r["method"], r["scenario"]): r for r in benchmark.table_rows(runs)}
+    table = markdown_table("docs/benchmark.md", "| − csirl, test return |")
+    assert set(table) == {m for m, _ in rows} - {"expert", "random", "csirl"}
+    for method, columns in table.items():
+        for task, scenario in (("Hopper", "hopper"), ("HalfCheetah", "halfcheetah")):
+            row, cell = rows.get((method, scenario)), columns[task]
+            if row is None or row["vs_csirl"] is None:  # fewer than two seeds on a side
+                assert cell == "—", (method, task, cell)
+                continue
+            difference, t = numbers(cell)
+            assert agrees(difference, row["vs_csirl"]) and agrees(t, row["vs_csirl_t"]), (method, task, cell)
+            assert cell.startswith("**") == row["vs_csirl_beyond_noise"], (method, task, cell)
+
+
 def test_readme_results_follow_table_one(driving, robotics):
     table = markdown_table("README.md", "| task |")
     for scenario in benchmark.SCENARIO_ORDER:
