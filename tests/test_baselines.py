@@ -429,6 +429,48 @@ def test_valuedice_residual_after_a_termination(absorbing_states):
         assert grad.abs().item() > 0
 
 
+@pytest.mark.parametrize("name", ["dac", "valuedice"])
+def test_self_loops_per_termination_weights_the_learners_absorbing_state(name):
+    """``self_loops_per_termination=k`` (the authors' later code: 10): k absorbing self-loop samples per learner
+    transition entering the absorbing state, one per expert one, in the objective the method trains on."""
+    from torchrl_csirl.objectives import dac_discriminator_loss, valuedice_objective
+    from torchrl_csirl.objectives._imitation import sample
+
+    with pytest.raises(ValueError, match="self_loops_per_termination must be an integer >= 1, got 0"):
+        build(name, {"self_loops_per_termination": 0})
+    k = 10
+    method = build(name, {"self_loops_per_termination": k, "absorbing_observation": "placeholder"})
+    online, expert = buffers(method, transitions(40, 0.0, 0.3, terminated_every=4), transitions(40, 1.0, 0.8, 10))
+    agent, demos = sample(online, 40), sample(expert, 40)
+    into = [int(td["next", "absorbing"].sum()) for td in (demos, agent)]
+    assert all(into)
+    if name == "dac":
+        loss = method.make_update_step(online, expert).discriminator_step.loss
+        assert loss.self_loops_per_termination == k
+        sides = [loss._with_self_loops(demos), loss._with_self_loops(agent, k)]
+        assert [s.numel() for s in sides] == [40 + into[0], 40 + k * into[1]]
+        assert sides[1]["absorbing"][40:].all()
+        expected = dac_discriminator_loss(*(loss._logit(s) for s in sides))
+        out = loss(TensorDict({"expert": demos, "collector": agent}, []))
+        torch.testing.assert_close(out["loss_discriminator"], expected)
+        return
+    loss = method.states["loss"]
+    assert loss.self_loops_per_termination == k
+    initial = TensorDict({"observation": torch.zeros(4, OBS)}, [4])
+    with torch.no_grad():
+        torch.manual_seed(1)
+        expert_residual, _ = loss._residual(demos)
+        replay_residual, _ = loss._residual(agent, k)
+        initial_nu = loss.nu(initial["observation"], loss._policy_sample(initial["observation"])["action"])
+        expected = valuedice_objective(expert_residual, replay_residual, initial_nu, loss.gamma,
+                                       loss.replay_regularization)
+    torch.manual_seed(1)
+    out = loss(TensorDict({"expert": demos, "collector": agent, "initial": initial}, []))
+    assert expert_residual.numel() == 40 + into[0] and replay_residual.numel() == 40 + k * into[1]
+    torch.testing.assert_close(replay_residual[40:], replay_residual[40:40 + into[1]].repeat(k))
+    torch.testing.assert_close(out["loss_nu"].detach(), expected)
+
+
 def test_valuedice_placeholder_is_the_zero_standardised_state():
     """ValueDICE's code standardises the states, then appends its absorbing state (zeros and the indicator): with
     ``normalize_states`` the placeholder is the raw observation the standardisation maps to zero, on both buffers."""

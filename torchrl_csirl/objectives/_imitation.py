@@ -11,7 +11,7 @@ from tensordict.nn import TensorDictModule
 from tensordict.utils import NestedKey
 from torch import nn
 
-from torchrl_csirl.transforms.absorbing_states import AbsorbingStates
+from torchrl_csirl.transforms.absorbing_states import AbsorbingStates, check_self_loop_count
 
 __all__ = [
     "ABSORBING_OBSERVATIONS",
@@ -163,12 +163,19 @@ class AbsorbingStateSettings:
             by crashing) or ``"placeholder"`` (the paper's single absorbing state, a zero
             observation: zero in the standardised states where the networks read them, as ValueDICE's
             code). docs/baselines.md, "DAC's absorbing states", gives the evidence.
+        self_loops_per_termination: absorbing self-loop samples per learner transition entering the
+            absorbing state, i.e. the absorbing state's weight in the learner's side of a batch: 1 (default) as
+            the DAC paper's replay buffer, 10 as the authors' later code (ValueDICE's, which also runs DAC:
+            ``absorbing_per_episode``); the expert's side keeps one, as that code's demonstrations
+            (:func:`~torchrl_csirl.transforms.absorbing_states.absorbing_self_loops`).
     """
 
     absorbing_states: bool = True
     absorbing_observation: str = "terminal"
+    self_loops_per_termination: int = 1
 
     def __post_init__(self) -> None:
+        check_self_loop_count(self.self_loops_per_termination, "self_loops_per_termination")
         if self.absorbing_observation not in ABSORBING_OBSERVATIONS:
             raise ValueError(f"absorbing_observation must be one of {ABSORBING_OBSERVATIONS}, "
                              f"got {self.absorbing_observation!r}.")

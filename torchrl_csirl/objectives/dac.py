@@ -36,7 +36,7 @@ from torchrl_csirl.objectives._imitation import (
     logit_network,
     require_keys,
 )
-from torchrl_csirl.transforms.absorbing_states import absorbing_self_loops
+from torchrl_csirl.transforms.absorbing_states import absorbing_self_loops, check_self_loop_count
 
 __all__ = ["AbsorbingLogit", "DACDiscriminatorLoss", "DACHyperparameters", "dac_discriminator_loss", "make_dac_discriminator"]
 
@@ -109,6 +109,8 @@ class DACDiscriminatorLoss(LossModule):
 
     Keyword Args:
         gp_lambda (float): penalty weight. Defaults to ``10``.
+        self_loops_per_termination (int): absorbing self-loop samples per agent transition entering the
+            absorbing state (the expert's: one), the absorbing state's weight on the agent's side. Defaults to ``1``.
 
     Examples:
         >>> import torch
@@ -149,10 +151,13 @@ class DACDiscriminatorLoss(LossModule):
     default_keys = _AcceptedKeys
     out_keys = ["loss_discriminator", "loss_gradient_penalty", "expert_probability", "agent_probability"]
 
-    def __init__(self, discriminator_network: TensorDictModule, *, gp_lambda: float = 10.0) -> None:
+    def __init__(self, discriminator_network: TensorDictModule, *, gp_lambda: float = 10.0,
+                 self_loops_per_termination: int = 1) -> None:
         super().__init__()
         if gp_lambda < 0:
             raise ValueError(f"gp_lambda must be >= 0, got {gp_lambda}.")
+        check_self_loop_count(self_loops_per_termination, "self_loops_per_termination")
+        self.self_loops_per_termination = int(self_loops_per_termination)
         self.discriminator_network = discriminator_network
         self.gp_lambda = float(gp_lambda)
 
@@ -172,15 +177,15 @@ class DACDiscriminatorLoss(LossModule):
     def _reads_absorbing(self) -> bool:
         return self.tensor_keys.absorbing in self.discriminator_network.in_keys
 
-    def _with_self_loops(self, samples: TensorDictBase) -> TensorDictBase:
-        """The samples (the discriminator's inputs) followed by one absorbing sample per entry into ``s_a``."""
+    def _with_self_loops(self, samples: TensorDictBase, copies: int = 1) -> TensorDictBase:
+        """The samples (the discriminator's inputs) followed by ``copies`` absorbing samples per entry into ``s_a``."""
         real = samples.select(*self.discriminator_network.in_keys)
         if not self._reads_absorbing:
             return real
         require_keys(samples, [("next", self.tensor_keys.absorbing), ("next", self.tensor_keys.observation)],
                      "DAC discriminator (absorbing states)")
         keys = (self.tensor_keys.observation, self.tensor_keys.action)
-        loops = absorbing_self_loops(samples, absorbing_key=self.tensor_keys.absorbing, keys=keys)
+        loops = absorbing_self_loops(samples, absorbing_key=self.tensor_keys.absorbing, keys=keys, copies=copies)
         return torch.cat([real, loops.select(*real.keys(True, True))], 0)
 
     def _penalty(self, expert: TensorDictBase, agent: TensorDictBase) -> torch.Tensor:
@@ -211,7 +216,7 @@ class DACDiscriminatorLoss(LossModule):
         agent = tensordict.get(self.tensor_keys.collector)
         require_keys(expert, self.discriminator_network.in_keys, "DAC discriminator, expert samples")
         require_keys(agent, self.discriminator_network.in_keys, "DAC discriminator, agent samples")
-        expert, agent = self._with_self_loops(expert), self._with_self_loops(agent)
+        expert, agent = self._with_self_loops(expert), self._with_self_loops(agent, self.self_loops_per_termination)
         expert_logit, agent_logit = self._logit(expert), self._logit(agent)
         return TensorDict({
             "loss_discriminator": dac_discriminator_loss(expert_logit, agent_logit),

@@ -53,6 +53,7 @@ from torchrl_csirl.objectives._imitation import (
     orthogonal_regularization,
     require_keys,
 )
+from torchrl_csirl.transforms.absorbing_states import check_self_loop_count
 
 __all__ = ["ValueDICEHyperparameters", "ValueDICELoss", "initial_observations", "valuedice_objective"]
 
@@ -188,6 +189,9 @@ class ValueDICELoss(LossModule):
             (:class:`~torchrl_csirl.modules.StandardizeFeatures` first in their input map), its scale:
             the gradient penalty is then measured in the standardised states, as in the authors' code,
             whose networks read them directly. Defaults to ``None`` (the raw observation).
+        self_loops_per_termination (int): absorbing self-loop samples per replay transition entering the
+            absorbing state (the expert's: one, as the authors' code stores them): their weight in the replay
+            terms (:func:`~torchrl_csirl.transforms.absorbing_states.absorbing_self_loops`). Defaults to ``1``.
 
     Examples:
         >>> import torch
@@ -235,8 +239,11 @@ class ValueDICELoss(LossModule):
 
     def __init__(self, actor_network: TensorDictModule, nu_network: TensorDictModule, *, gamma: float = 0.99,
                  replay_regularization: float = 0.1, orthogonal_regularization: float = 1e-4,
-                 gp_lambda: float = 10.0, observation_scale: torch.Tensor | None = None) -> None:
+                 gp_lambda: float = 10.0, observation_scale: torch.Tensor | None = None,
+                 self_loops_per_termination: int = 1) -> None:
         super().__init__()
+        check_self_loop_count(self_loops_per_termination, "self_loops_per_termination")
+        self.self_loops_per_termination = int(self_loops_per_termination)
         if not 0.0 <= replay_regularization < 1.0:
             raise ValueError(f"replay_regularization must be in [0, 1), got {replay_regularization}.")
         if not 0.0 <= gamma < 1.0:
@@ -274,9 +281,9 @@ class ValueDICELoss(LossModule):
                    if absorbing is None else absorbing)
         return self.nu_network(td).get(keys.nu).squeeze(-1)
 
-    def _residual(self, transitions: TensorDictBase) -> tuple[torch.Tensor, TensorDictBase]:
-        """``(nu - B^pi nu)(s, a)`` on the transitions (then on the absorbing self-loops they enter),
-        and the successor pairs ``(s', i', a')`` with ``a' ~ pi(s')`` (zero in the absorbing state)."""
+    def _residual(self, transitions: TensorDictBase, self_loops: int = 1) -> tuple[torch.Tensor, TensorDictBase]:
+        """``(nu - B^pi nu)(s, a)`` on the transitions (then on the absorbing self-loops they enter, ``self_loops``
+        each), and the successor pairs ``(s', i', a')`` with ``a' ~ pi(s')`` (zero in the absorbing state)."""
         keys = self.tensor_keys
         next_obs = transitions.get(("next", keys.observation))
         successor = self._policy_sample(next_obs)
@@ -292,7 +299,8 @@ class ValueDICELoss(LossModule):
         residual = (self.nu(transitions.get(keys.observation), transitions.get(keys.action),
                             transitions.get(keys.absorbing)) - self.gamma * next_nu)
         # the self-loops (s_a, 0) -> (s_a, 0): their nu is the successor's where the transition enters s_a
-        return torch.cat([residual, (1.0 - self.gamma) * next_nu[into.reshape(-1)]]), successor
+        loops = (1.0 - self.gamma) * next_nu[into.reshape(-1)]
+        return torch.cat([residual, loops.repeat(self_loops)]), successor
 
     def _penalty(self, expert: TensorDictBase, replay: TensorDictBase, expert_successor: TensorDictBase,
                  replay_successor: TensorDictBase) -> torch.Tensor:
@@ -321,7 +329,7 @@ class ValueDICELoss(LossModule):
         initial = tensordict.get(keys.initial)
         require_keys(initial, [keys.observation], "ValueDICE initial states")
         expert_residual, expert_successor = self._residual(expert)
-        replay_residual, replay_successor = self._residual(replay)
+        replay_residual, replay_successor = self._residual(replay, self.self_loops_per_termination)
         initial_obs = initial.get(keys.observation)
         initial_nu = self.nu(initial_obs, self._policy_sample(initial_obs).get(keys.action))
         objective = valuedice_objective(expert_residual, replay_residual, initial_nu, self.gamma,

@@ -142,7 +142,8 @@ def _dac_input(expert, online):
 def _make_dac(actor, make_qvalue, hp: DACHyperparameters, device) -> ImitationMethod:
     loss, sac_optimizer, target_updater = _sac(actor, make_qvalue, hp, device)
     discriminator = make_dac_discriminator(make_qvalue(), hp.absorbing_states).to(device)
-    discriminator_loss = DACDiscriminatorLoss(discriminator, gp_lambda=hp.gp_lambda)
+    discriminator_loss = DACDiscriminatorLoss(discriminator, gp_lambda=hp.gp_lambda,
+                                              self_loops_per_termination=hp.self_loops_per_termination)
     optimizer = _adam(discriminator, hp.discriminator_lr)
     loss_keys = {"loss_discriminator": "loss_discriminator", "loss_gradient_penalty": "loss_gradient_penalty"}
     online_transforms, expert_transforms = hp.absorbing_transforms(), hp.absorbing_transforms()
@@ -183,7 +184,8 @@ def _make_valuedice(actor, make_qvalue, hp: ValueDICEHyperparameters, device) ->
                          "StandardizeFeatures first (torchrl_csirl.modules.with_standardization).")
     loss = ValueDICELoss(actor, nu, gamma=hp.gamma, replay_regularization=hp.replay_regularization,
                          orthogonal_regularization=hp.orthogonal_regularization, gp_lambda=hp.gp_lambda,
-                         observation_scale=norms[1].scale if hp.normalize_states else None).to(device)
+                         observation_scale=norms[1].scale if hp.normalize_states else None,
+                         self_loops_per_termination=hp.self_loops_per_termination).to(device)
     nu_optimizer, actor_optimizer = _adam(nu, hp.nu_lr), _adam(actor, hp.actor_lr)
 
     def make_update_step(online: TensorDictReplayBuffer, expert: TensorDictReplayBuffer) -> UpdateStep:

@@ -46,7 +46,7 @@ class AbsorbingStates(Transform):
       (docs/baselines.md, "DAC's absorbing states").
 
     The batch keeps its size (TorchRL's replay buffers need that): the absorbing state's self-loop
-    transitions, one per terminal transition as in the paper's replay buffer, are built where
+    transitions, one per terminal transition as in the paper's replay buffer (or more: ``copies``), are built where
     they are used (:func:`absorbing_self_loops`, by
     :class:`~torchrl_csirl.objectives.DACDiscriminatorLoss`), and since their value is the
     constant ``gamma r_a / (1 - gamma)`` (:func:`absorbing_value`), the critic target of a
@@ -119,14 +119,32 @@ class AbsorbingStates(Transform):
         raise RuntimeError("AbsorbingStates works on whole transitions: use it as a replay-buffer transform.")
 
 
+def check_self_loop_count(count: int, name: str = "copies") -> None:
+    """Refuses a self-loop count that is not an integer >= 1, naming the setting ``name``.
+
+    Examples:
+        >>> check_self_loop_count(10)
+        >>> check_self_loop_count(0, "self_loops_per_termination")
+        Traceback (most recent call last):
+        ...
+        ValueError: self_loops_per_termination must be an integer >= 1, got 0.
+    """
+    if isinstance(count, bool) or not isinstance(count, int) or count < 1:
+        raise ValueError(f"{name} must be an integer >= 1, got {count!r}.")
+
+
 def absorbing_self_loops(transitions: TensorDictBase, *, absorbing_key: NestedKey = "absorbing",
-                         keys: tuple[NestedKey, ...] = ("observation", "action")) -> TensorDictBase:
-    """One self-loop sample ``(s_a, 0)`` with indicator ``True`` per transition entering ``s_a``.
+                         keys: tuple[NestedKey, ...] = ("observation", "action"), copies: int = 1) -> TensorDictBase:
+    """``copies`` self-loop samples ``(s_a, 0)`` with indicator ``True`` per transition entering ``s_a``.
 
     Reads ``("next", absorbing_key)`` and the absorbing state's observation, the successor
     observation ``("next", keys[0])``, both as written by :class:`AbsorbingStates` (the
     placeholder, or the terminal observation); returns the entries ``keys`` (that observation,
-    zero for the others, the action) and ``absorbing_key``.
+    zero for the others, the action) and ``absorbing_key``. ``copies`` sets the absorbing state's
+    weight in a batch: one per termination is the DAC paper's replay buffer, whose text adds the
+    transition ``(s_a, ., s_a)`` to each terminated episode; the authors' later code (ValueDICE's,
+    which also runs DAC) stores up to ten per termination (``absorbing_per_episode``). The copies
+    are the same sample (the absorbing state's action is zero here), so they reweight it.
 
     Examples:
         >>> import torch
@@ -137,7 +155,10 @@ def absorbing_self_loops(transitions: TensorDictBase, *, absorbing_key: NestedKe
         >>> loops = absorbing_self_loops(td)
         >>> loops.batch_size, loops["absorbing"].all().item(), loops["observation"].abs().sum().item()
         (torch.Size([2]), True, 0.0)
+        >>> absorbing_self_loops(td, copies=10).batch_size
+        torch.Size([20])
     """
+    check_self_loop_count(copies)
     into = transitions.get(("next", absorbing_key)).reshape(transitions.batch_size).bool()
     entering = transitions.select(*keys, ("next", keys[0]))[into]
     loops = entering.select(*keys)
@@ -145,4 +166,4 @@ def absorbing_self_loops(transitions: TensorDictBase, *, absorbing_key: NestedKe
     for key in keys[1:]:
         loops.set(key, torch.zeros_like(loops.get(key)))
     loops.set(absorbing_key, torch.ones(*loops.batch_size, 1, dtype=torch.bool, device=loops.device))
-    return loops
+    return loops if copies == 1 else torch.cat([loops] * copies, 0)
