@@ -125,7 +125,8 @@ def test_valuedice_reads_standardised_states_where_asked_and_says_where_it_canno
 
 def test_the_hopper_cells_of_dac_and_valuedice_enter_the_papers_single_absorbing_state(tmp_path):
     """The benchmark's Hopper cells run DAC and ValueDICE with the papers' placeholder (the expert never falls);
-    ValueDICE's, on standardised states, is the raw observation its standardisation maps to zero."""
+    ValueDICE's, on standardised states, is the raw observation its standardisation maps to zero, with its code's
+    10 self-loops per learner termination."""
     from torchrl_csirl.launch.imitation import load_baseline_config, make_trainer
     from torchrl_csirl.modules import find_standardization
     from torchrl_csirl.scripts.benchmark import split_overrides, table_overrides
@@ -133,12 +134,16 @@ def test_the_hopper_cells_of_dac_and_valuedice_enter_the_papers_single_absorbing
     hopper = split_overrides(table_overrides("hopper"), ["dac", "valuedice", "gail"], "hopper")
     assert "dac.absorbing_observation=placeholder" in hopper["dac"]
     assert "valuedice.absorbing_observation=placeholder" in hopper["valuedice"]
+    # ValueDICE's code's absorbing_per_episode; DAC keeps its paper's one per termination
+    assert "valuedice.self_loops_per_termination=10" in hopper["valuedice"]
+    assert not any("self_loops" in o for o in hopper["dac"])
     assert not any("absorbing" in o for o in hopper["gail"])
     cheetah = split_overrides(table_overrides("halfcheetah"), ["dac", "valuedice"], "halfcheetah")
     assert not any("absorbing" in o for o in cheetah["dac"] + cheetah["valuedice"])
     cfg = load_baseline_config(imitation_robotics.ImitationRoboticsConfig, [
         "method=valuedice", "env.scenario=hopper", *hopper["valuedice"], *TINY, f"logger.output_dir={tmp_path}"])
     method = make_trainer(cfg, str(tmp_path / "run")).parts["method"]
+    assert method.states["loss"].self_loops_per_termination == 10
     norm = find_standardization(method.states["loss"].nu_network)
     for transform in (*method.online_transforms, *method.expert_transforms):
         torch.testing.assert_close(transform.absorbing_observation, norm.loc)
