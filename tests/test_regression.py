@@ -32,8 +32,10 @@ ROW_KEYS = ("frames", "updates", "round", "loss_qvalue", "loss_actor", "loss_alp
             "loss_imitation", "loss_reward_l1", "eval_accomplish_rate", "eval_env_return", "subgoal")
 SUMMARY_KEYS = ("accomplish_rate", "success_rate", "crash_rate", "return", "frames", "updates", "rounds", "auc",
                 "final_subgoal", "curriculum_length")
-#: same machine, same threads: the numbers repeat exactly; the margin only absorbs a last-bit difference
-RTOL = 1e-6
+#: same machine, same threads: the numbers repeat exactly. Another CPU's kernels round differently in the last
+#: bits and a few updates amplify that (measured: up to 8e-5 relative, an AMD EPYC against the recording machine);
+#: a change in what is computed moves them by far more
+RTOL = 1e-3
 
 
 def run_job(job: str, out: str, command: list[str] | None = None) -> dict:
