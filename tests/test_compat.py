@@ -148,9 +148,12 @@ def test_multi_process_collector_keeps_weight_sync_schemes_and_exits_after_their
     try:
         next(iter(collector))
         assert _compat.collector_weight_sync_schemes(collector)  # what shutdown_collector stops
+        procs = _compat.collector_worker_processes(collector)  # what WorkerErrorLog inspects
+        assert len(procs) == 2 and all(p.is_alive() and p.pid for p in procs)
     finally:
         shutdown_collector(collector)
     assert _compat.collector_weight_sync_schemes(object()) == {}
+    assert _compat.collector_worker_processes(object()) == []
 
 
 def _one_serial_env():

@@ -12,6 +12,7 @@ import time
 
 import pytest
 import torch
+from run_logs import metrics_rows
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RECIPE = os.path.join("recipes", "csirl_highway.py")
@@ -27,20 +28,12 @@ TINY = [
 ENV = {**os.environ, "WANDB_MODE": "offline", "MPLBACKEND": "Agg", "RL_WARNINGS": "0"}
 
 
-def _rows(run_dir: str) -> list[dict]:
-    path = os.path.join(run_dir, "metrics.jsonl")
-    if not os.path.exists(path):
-        return []
-    with open(path) as f:
-        return [json.loads(line) for line in f if line.strip()]
-
-
 def _start_and_wait_for_a_row(command: list[str], run_dir: str, timeout_s: float) -> subprocess.Popen:
     """Starts ``command`` and waits until ``run_dir`` logs its first metrics row (the process still running)."""
     proc = subprocess.Popen(command, cwd=ROOT, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + timeout_s
-        while not _rows(run_dir) and proc.poll() is None and time.monotonic() < deadline:
+        while not metrics_rows(run_dir) and proc.poll() is None and time.monotonic() < deadline:
             time.sleep(0.2)
         assert proc.poll() is None, f"it ended before it could be stopped:\n{proc.stderr.read()[-2000:]}"
     except BaseException:
@@ -62,7 +55,7 @@ def test_sigterm_in_the_first_round_checkpoints_and_prints_the_resume_command(tm
     state = torch.load(os.path.join(run_dir, "checkpoints", "last", "state.pt"), weights_only=False)
     counters = state["counters"]
     frames = counters["frames"]
-    assert 100 <= frames < 400 and counters["rounds"] == 0 and frames == _rows(run_dir)[-1]["frames"]
+    assert 100 <= frames < 400 and counters["rounds"] == 0 and frames == metrics_rows(run_dir)[-1]["frames"]
     resume = [line for line in err.splitlines() if line.startswith("resume with: ")]
     assert resume, err[-2000:]
     command = shlex.split(resume[-1].removeprefix("resume with: "))
@@ -74,7 +67,7 @@ def test_sigterm_in_the_first_round_checkpoints_and_prints_the_resume_command(tm
     assert f"resumed {run_dir} at {frames} frames" in done.stderr
     summary = json.loads(done.stdout.strip().splitlines()[-1])
     assert summary["frames"] == 400 and summary["run_dir"] == run_dir
-    assert [r["frames"] for r in _rows(run_dir) if "round" in r] == [100, 200, 300, 400]  # each batch once
+    assert [r["frames"] for r in metrics_rows(run_dir) if "round" in r] == [100, 200, 300, 400]  # each batch once
 
 
 def test_sigterm_to_a_sweep_checkpoints_its_running_cell_before_the_sweep_exits(tmp_path):

@@ -63,6 +63,35 @@ def test_a_machine_that_cannot_render_says_what_to_install(monkeypatch):
         make_render_env("relocate")
 
 
+def _pendulum_without_render_mode(**overrides):
+    """A user's env factory that takes no ``render_mode`` (what a plain ``gym.Env`` subclass often is)."""
+    if overrides:
+        raise TypeError(f"_pendulum_without_render_mode() got an unexpected keyword argument {next(iter(overrides))!r}")
+    from torchrl_csirl.envs import make_gymnasium_env
+
+    return make_gymnasium_env("Pendulum-v1", "none")
+
+
+def test_an_env_without_render_mode_is_named_as_the_cause_and_its_run_has_videos_off(tmp_path, capsys):
+    from types import SimpleNamespace
+
+    from torchrl_csirl.envs import TaskSpec, register_task
+    from torchrl_csirl.launch.video import film_final_episode
+
+    spec = TaskSpec(name="pendulum-no-render", obs_dim=3, action_dim=1, max_steps=200, finish_position=None,
+                    ego_feature_indices=(0, 1, 2), position_feature_indices=(0, 1), matching_scale=1.0)
+    register_task(spec, _pendulum_without_render_mode, replace=True)
+    with pytest.raises(VideoError, match="takes no render_mode argument") as err:
+        make_render_env(spec.name)
+    assert "EGL" not in str(err.value) and "MuJoCo" not in str(err.value)
+    run = SimpleNamespace(mirror=SimpleNamespace(sync=lambda: None, policy=make_actor(3, 1)), run_dir=str(tmp_path),
+                          spec=spec, cfg=SimpleNamespace(eval=SimpleNamespace(seed=0)))
+    assert film_final_episode(run) == []
+    warning = capsys.readouterr().err.strip()
+    assert warning.startswith("warning: videos are off for this run") and "takes no render_mode" in warning
+    assert "\n" not in warning
+
+
 def _run_dir(tmp_path, task="relocate", policy=True):
     from torchrl_csirl.scripts import csirl_robotics
 

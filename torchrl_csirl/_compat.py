@@ -13,6 +13,7 @@ Everything else in the package uses TorchRL's public API.
 from __future__ import annotations
 
 import inspect
+import sys
 from typing import Any
 
 import torch
@@ -25,12 +26,15 @@ __all__ = [
     "check_parallel_env_internals",
     "check_sac_internals",
     "collector_weight_sync_schemes",
+    "collector_worker_processes",
     "detached_qvalue_params",
     "gym_env_of",
+    "replay_buffer_prefetch",
     "sac_alpha",
     "sac_reduce_loss",
     "sac_reduced_alpha_loss",
     "safe_tanh",
+    "sampling_replay_buffer",
     "set_qvalue_ensemble_evaluator",
     "vmap_qvalue_networks",
 ]
@@ -120,6 +124,42 @@ def collector_weight_sync_schemes(collector: Any) -> dict[str, Any]:
     :func:`~torchrl_csirl.trainers.shutdown_collector`.
     """
     return dict(getattr(collector, "_weight_sync_schemes", None) or {})
+
+
+def collector_worker_processes(collector: Any) -> list[Any]:
+    """The worker processes of a multi-process collector (``procs``; empty for others), in worker order.
+
+    TorchRL 0.14.1 checks them only for a non-zero exit (``At least one process failed: worker i``),
+    without the worker's own error; :class:`~torchrl_csirl.trainers.WorkerErrorLog` names it.
+    """
+    return list(getattr(collector, "procs", None) or [])
+
+
+# ------------------------------------------------------------------------------ replay buffers
+def sampling_replay_buffer(max_frames: int = 16) -> Any:
+    """The replay buffer whose sampling runs the caller (a buffer transform's ``forward``), or None.
+
+    TorchRL 0.14.1 applies a buffer's transform in ``ReplayBuffer._sample``, which a buffer with
+    ``prefetch`` runs ahead of time on its prefetch thread; the transform itself is not told which
+    buffer calls it. The caller's stack is searched for that ``_sample`` frame (``max_frames`` up).
+    """
+    from torchrl.data import ReplayBuffer
+
+    frame = sys._getframe(1)
+    for _ in range(max_frames):
+        frame = frame.f_back
+        if frame is None:
+            return None
+        if frame.f_code.co_name == "_sample":
+            owner = frame.f_locals.get("self")
+            if isinstance(owner, ReplayBuffer):
+                return owner
+    return None
+
+
+def replay_buffer_prefetch(buffer: Any) -> int:
+    """How many batches a replay buffer prefetches on its threads (``prefetch``; 0: none)."""
+    return int(getattr(buffer, "_prefetch_cap", 0) or 0)
 
 
 _PARALLEL_ENV_NAMES = ("_wait_for_workers", "_shutdown_workers")

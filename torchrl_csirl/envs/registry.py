@@ -7,11 +7,16 @@ Worker processes (collectors, ``ParallelEnv``) are started with the spawn method
 this process's registry: they receive the environment factory itself (:func:`env_factory`), so the
 factory must be picklable, a top-level function of an importable module or a ``functools.partial``
 of one, as for any TorchRL ``ParallelEnv``. From the command line, ``env.module=<module>`` imports
-a module that registers tasks (:func:`import_task_module`) before the configuration is checked.
+a module that registers tasks (:func:`import_task_module`) before the configuration is checked: from
+the working directory (as ``python -m`` would, also under ``python script.py``) or ``PYTHONPATH``.
+Such a module may register gymnasium ids rather than tasks (``gymnasium.register``): the factories
+:func:`env_factory` hands to workers import it again there, before they build an environment.
 """
 from __future__ import annotations
 
 import importlib
+import os
+import sys
 from collections.abc import Callable
 from functools import partial
 
@@ -21,12 +26,16 @@ from torchrl_csirl.envs.locomotion import locomotion_factories
 from torchrl_csirl.envs.scenarios import TASKS
 from torchrl_csirl.envs.spec import TaskSpec
 
-__all__ = ["env_factory", "import_task_module", "register_task", "registered_factory", "task_names"]
+__all__ = ["env_factory", "import_task_module", "imported_task_modules", "register_task", "registered_factory",
+           "task_names"]
 
 #: the paper's tasks, ``ant-goal`` and the locomotion tasks: never replaced by :func:`register_task`
 BUILTIN_TASKS: frozenset[str] = frozenset(TASKS)
 
 _FACTORIES: dict[str, Callable[..., EnvBase]] = dict(locomotion_factories())
+
+#: the modules :func:`import_task_module` imported, in order, and the folders it searched them in
+_TASK_MODULES: dict[str, str] = {}
 
 
 def register_task(spec: TaskSpec, make_env: Callable[..., EnvBase], *, replace: bool = False) -> TaskSpec:
@@ -83,7 +92,9 @@ def env_factory(name: str | TaskSpec, **overrides) -> Callable[[], EnvBase]:
     """A picklable zero-argument factory of the task's TorchRL environment, for worker processes.
 
     Built-in tasks give ``partial(make_env, name, **overrides)`` (resolved by name in the worker);
-    registered ones their own factory, so a spawned worker needs no registry.
+    registered ones their own factory, so a spawned worker needs no registry. After
+    :func:`import_task_module`, the factory imports those modules first in the worker (a module that
+    registers a gymnasium id must have run there before ``gymnasium.make`` finds the id).
 
     Examples:
         >>> env_factory("merge")().batch_size
@@ -94,8 +105,36 @@ def env_factory(name: str | TaskSpec, **overrides) -> Callable[[], EnvBase]:
     name = name.name if isinstance(name, TaskSpec) else name
     factory = registered_factory(name)
     if factory is None:
-        return partial(make_env, name, **overrides)
-    return partial(factory, **overrides) if overrides else factory
+        factory = partial(make_env, name, **overrides)
+    elif overrides:
+        factory = partial(factory, **overrides)
+    if not _TASK_MODULES:
+        return factory
+    return partial(_build_after_importing, dict(_TASK_MODULES), factory)
+
+
+def _build_after_importing(modules: dict[str, str], factory: Callable[[], EnvBase]) -> EnvBase:
+    """In a worker process: the task modules imported (from the folders they were found in), then the env."""
+    for module, folder in modules.items():
+        _search_in(folder)
+        importlib.import_module(module)
+    return factory()
+
+
+def _search_in(folder: str) -> None:
+    """``folder`` on ``sys.path`` (after the script's own folder, before the installed packages)."""
+    if folder not in (os.path.abspath(p or os.curdir) for p in sys.path):
+        sys.path.insert(1 if sys.path else 0, folder)
+
+
+def imported_task_modules() -> tuple[str, ...]:
+    """The modules :func:`import_task_module` imported in this process, in order.
+
+    Examples:
+        >>> isinstance(imported_task_modules(), tuple)
+        True
+    """
+    return tuple(_TASK_MODULES)
 
 
 def task_names(*, driving: bool | None = None) -> tuple[str, ...]:
@@ -110,13 +149,27 @@ def task_names(*, driving: bool | None = None) -> tuple[str, ...]:
 
 
 def import_task_module(module: str) -> None:
-    """Imports ``module`` (a dotted name on ``sys.path``) for the tasks it registers.
+    """Imports ``module`` (a dotted name) for the tasks or gymnasium ids it registers.
+
+    The module is looked for in the working directory first, then on ``sys.path`` (``PYTHONPATH``,
+    the installed packages): ``python recipes/<script>.py env.module=my_tasks`` run from the folder
+    holding ``my_tasks.py`` finds it, as ``python -m`` would. Worker processes started afterwards
+    find and import it too (:func:`env_factory`).
 
     Raises:
         ValueError: one line naming the module when it cannot be imported.
+
+    Examples:
+        >>> import_task_module("no_such_task_module")  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        ValueError: env.module=no_such_task_module: cannot import it (ModuleNotFoundError: ...
     """
+    folder = os.getcwd()
+    _search_in(folder)
     try:
         importlib.import_module(module)
     except Exception as err:  # noqa: BLE001 - any import failure is the user's module's
         raise ValueError(f"env.module={module}: cannot import it ({type(err).__name__}: {err}); "
-                         "it must be importable from the working directory or PYTHONPATH") from None
+                         f"it must be importable from the working directory ({folder}) or PYTHONPATH") from None
+    _TASK_MODULES.setdefault(module, folder)

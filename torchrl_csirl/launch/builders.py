@@ -9,6 +9,7 @@ to :func:`assemble_trainer`, which wires the shared hooks. Library code below ta
 from __future__ import annotations
 
 import atexit
+import contextlib
 import copy
 import json
 import os
@@ -39,16 +40,26 @@ from torchrl_csirl.data import (
 from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, TaskSpec, env_factory, make_serial_env, resolve_scenario  # noqa: F401
 from torchrl_csirl.envs import make_env as make_scenario_env
 from torchrl_csirl.launch.config import ConfigError, flatten_config, override_strings
-from torchrl_csirl.launch.run import ExpertDataError, default_run_name, make_run_dir, resolve_resume, stop_with_checkpoint
+from torchrl_csirl.launch.run import (
+    ExpertDataError,
+    default_run_name,
+    make_run_dir,
+    resolve_resume,
+    resume_command,
+    stop_with_checkpoint,
+)
 from torchrl_csirl.modules import make_input_features
 from torchrl_csirl.trainers import (
     CheckpointHook,
+    CollectorWorkerError,
     CSIRLTrainer,
     EvaluationHook,
     MetricsLogger,
+    WorkerErrorLog,
     evaluate_policy,
     ignoring_interrupts,
     shutdown_collector,
+    start_collector,
 )
 
 __all__ = [
@@ -266,7 +277,8 @@ def make_eval_env(scenario: str) -> EnvBase:
     return make_scenario_env(scenario)
 
 
-def make_collector(scenario: str, collector: DictConfig, policy: nn.Module, frames_done: int = 0) -> BaseCollector:
+def make_collector(scenario: str, collector: DictConfig, policy: nn.Module, frames_done: int = 0,
+                   worker_errors: WorkerErrorLog | None = None) -> BaseCollector:
     """A synchronous collector of ``collector.num_workers`` worker processes (unbounded; the trainer stops it).
 
     Each worker process holds ``envs_per_worker`` environments *and a copy of the policy* (TorchRL's
@@ -284,6 +296,8 @@ def make_collector(scenario: str, collector: DictConfig, policy: nn.Module, fram
         collector: the ``collector`` section.
         policy: the acting policy (CPU); with one worker it runs in this process.
         frames_done: frames collected before (resume): uniform-random frames are not collected again.
+        worker_errors: where the workers write the error that ends them (:class:`WorkerErrorLog`);
+            a worker that fails to start is then one :class:`CollectorWorkerError` line.
 
     Examples:
         >>> from omegaconf import OmegaConf
@@ -307,8 +321,11 @@ def make_collector(scenario: str, collector: DictConfig, policy: nn.Module, fram
     if workers == 1:
         torch.set_num_threads(main_threads)
         return Collector(env_fn(), policy=policy, **common)
-    made = Collector([env_fn] * workers, policy, num_collectors=workers, sync=True,
-                     num_threads=main_threads, num_sub_threads=1, **common)
+    if worker_errors is not None:
+        env_fn = worker_errors.wrap(env_fn)
+    made = start_collector(partial(Collector, [env_fn] * workers, policy, num_collectors=workers, sync=True,
+                                   num_threads=main_threads, num_sub_threads=1, **common),
+                           worker_errors)
     # whatever path the process leaves by (see shutdown_collector); a weak reference, so that
     # collectors dropped earlier (tests) are not kept alive
     atexit.register(_shutdown_if_alive, weakref.ref(made))
@@ -400,6 +417,7 @@ class Run:
     evaluation: EvaluationHook
     checkpoint: CheckpointHook
     parts: dict[str, Any] = field(default_factory=dict)
+    worker_errors: WorkerErrorLog | None = None
 
     def __getattr__(self, name: str) -> Any:
         parts = self.__dict__.get("parts", {})
@@ -416,6 +434,8 @@ class Run:
     def close(self) -> None:
         shutdown_collector(self.collector)
         self.eval_env.close()
+        if self.worker_errors is not None:
+            self.worker_errors.close()
 
 
 def assemble_trainer(
@@ -464,7 +484,8 @@ def assemble_trainer(
     eval_env = make_eval_env(spec.name)
     # last: the worker processes start here
     acting = mirror.policy if behaviour is None else behaviour(mirror.policy)
-    collector = make_collector(spec.name, cfg.collector, acting, frames_done)
+    worker_errors = WorkerErrorLog()
+    collector = make_collector(spec.name, cfg.collector, acting, frames_done, worker_errors)
     trainer = CSIRLTrainer(
         collector=collector,
         online_buffer=online_buffer,
@@ -501,7 +522,7 @@ def assemble_trainer(
         trainer.register_state(name, obj)
     trainer.register_state("evaluation", evaluation)
     return Run(cfg, spec, run_dir, device, demos, online_buffer, mirror, collector, eval_env, logger, trainer,
-               evaluation, checkpoint, dict(parts or {}))
+               evaluation, checkpoint, dict(parts or {}), worker_errors)
 
 
 # ---------------------------------------------------------------------------------------- starting and resuming
@@ -609,9 +630,12 @@ def train(run: Run) -> None:
 
     SIGTERM or Ctrl-C stops at the end of the current batch, writes a checkpoint there and exits
     (130 / 143) with the command that resumes the run (:func:`torchrl_csirl.launch.run.stop_with_checkpoint`).
+    A collector worker that dies (an exception in its environment, a killed process) stops the run at
+    once: the other workers are stopped, the last checkpoint is kept, and one line names the worker's error.
 
     Raises:
         TrainingDivergedError: with where the last good checkpoint is and how to resume.
+        CollectorWorkerError: a worker died; with its error, the last checkpoint and how to resume.
     """
     from torchrl_csirl.trainers import StopOnSignals, TrainingDivergedError, TrainingInterrupted
 
@@ -623,16 +647,32 @@ def train(run: Run) -> None:
         stop_with_checkpoint(run.checkpoint.save(run.trainer), run.run_dir, stop.signum)
     except TrainingDivergedError as err:
         run.logger.close()
-        last = run.checkpoint.path if os.path.exists(run.checkpoint.path) else "none yet"
         raise TrainingDivergedError(
-            f"{err}. Training stopped; the last good checkpoint is kept at {last} "
-            f"(resume with checkpoint.resume={run.run_dir}, e.g. with a smaller optim.lr)."
+            f"{err}. Training stopped; {_last_checkpoint(run)} (resume with checkpoint.resume={run.run_dir}, "
+            "e.g. with a smaller optim.lr)."
         ) from None
-    except BaseException:  # Ctrl-C, SIGTERM, errors: keep the logs (checkpoints are already on disk)
+    except Exception as err:  # a dead collector worker: one line; anything else as it is
+        run.logger.close()
+        failure = run.worker_errors.describe(run.collector, err) if run.worker_errors is not None else None
+        if failure is None:
+            raise
+        raise CollectorWorkerError(f"{failure}. Training stopped; {_last_checkpoint(run)}; "
+                                   f"resume with: {resume_command(run.run_dir)}") from None
+    except BaseException:  # Ctrl-C, SIGTERM: keep the logs (checkpoints are already on disk)
         run.logger.close()
         raise
     finally:
-        shutdown_collector(run.collector)
+        with contextlib.suppress(Exception):  # a collector whose workers died may fail to shut down cleanly
+            shutdown_collector(run.collector)
+        if run.worker_errors is not None:
+            run.worker_errors.close()
+
+
+def _last_checkpoint(run: Run) -> str:
+    """Where the run's last checkpoint is kept, in words."""
+    if os.path.exists(run.checkpoint.path):
+        return f"the last checkpoint is kept at {run.checkpoint.path}"
+    return "no checkpoint was written yet"
 
 
 def train_and_finish(run: Run, finish: Callable[[Run], dict[str, Any]]) -> dict[str, Any]:

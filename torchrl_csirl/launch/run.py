@@ -29,6 +29,7 @@ __all__ = [
     "resolve_device",
     "resolve_resume",
     "resume_command",
+    "running_command",
     "run_script",
     "stop_with_checkpoint",
     "write_summary",
@@ -108,6 +109,23 @@ def resolve_resume(path: str) -> tuple[str, str]:
     return run_dir, checkpoint
 
 
+def running_command(default_script: str = "recipes/<recipe>.py") -> list[str]:
+    """How this process was started, to print a command that runs it again: ``["python", "-m", <module>]``
+    or ``["python", <script>]`` (relative to the working directory when it is inside it).
+
+    Examples:
+        >>> running_command()[0]
+        'python'
+    """
+    main_module = sys.modules.get("__main__")
+    spec = getattr(main_module, "__spec__", None)
+    if spec is not None and spec.name and spec.name != "__main__":  # python -m torchrl_csirl.scripts.<name>
+        return ["python", "-m", spec.name]
+    script = getattr(main_module, "__file__", None) or default_script
+    relative = os.path.relpath(script)
+    return ["python", script if relative.startswith("..") else relative]
+
+
 def resume_command(run_dir: str) -> str:
     """The command that continues the run of ``run_dir`` with the running recipe script.
 
@@ -115,14 +133,7 @@ def resume_command(run_dir: str) -> str:
         >>> resume_command("/tmp/runs/merge-csirl-s0").endswith(" checkpoint.resume=/tmp/runs/merge-csirl-s0")
         True
     """
-    main_module = sys.modules.get("__main__")
-    spec = getattr(main_module, "__spec__", None)
-    if spec is not None and spec.name and spec.name != "__main__":  # python -m torchrl_csirl.scripts.<name>
-        return f"python -m {spec.name} checkpoint.resume={shlex.quote(run_dir)}"
-    script = getattr(main_module, "__file__", None) or "recipes/<recipe>.py"
-    relative = os.path.relpath(script)
-    script = script if relative.startswith("..") else relative
-    return f"python {shlex.quote(script)} checkpoint.resume={shlex.quote(run_dir)}"
+    return shlex.join([*running_command(), f"checkpoint.resume={run_dir}"])
 
 
 def stop_with_checkpoint(checkpoint: str, run_dir: str, signum: int | None) -> None:
@@ -175,11 +186,13 @@ def write_summary(summary: dict[str, Any], run_dir: str) -> dict[str, Any]:
 def run_script(main: Callable[[], Any], known_errors: tuple[type[BaseException], ...] = ()) -> None:
     """Runs a recipe's ``main`` as a script: SIGTERM unwinds like Ctrl-C (workers shut down, logs
     and checkpoints kept); a known error is one ``error:`` line and exit status 2 (3 for a
-    diverged training). ``CSIRL_TRACEBACK=1`` shows the traceback too."""
-    from torchrl_csirl.trainers import CheckpointError, TrainingDivergedError
+    diverged training; a collector worker's failure is a known error). ``CSIRL_TRACEBACK=1`` shows the
+    traceback too."""
+    from torchrl_csirl.trainers import CheckpointError, CollectorWorkerError, TrainingDivergedError
 
     signal.signal(signal.SIGTERM, lambda signum, frame: sys.exit(128 + signum))
-    errors = (ConfigError, ExpertDataError, TrainingDivergedError, CheckpointError, FileNotFoundError, *known_errors)
+    errors = (ConfigError, ExpertDataError, TrainingDivergedError, CheckpointError, CollectorWorkerError,
+              FileNotFoundError, *known_errors)
     try:
         main()
     except errors as error:

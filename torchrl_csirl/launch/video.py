@@ -21,7 +21,7 @@ def film_final_episode(run: Any) -> list[str]:
         paths = [os.fspath(path) for path, _ in film_test_episodes(run.mirror.policy, run.spec.name, directory,
                                                                     episodes=1, seed=run.cfg.eval.seed)]
     except VideoError as err:
-        print(f"warning: no video of the final evaluation: {err}", file=sys.stderr)
+        print(f"warning: videos are off for this run (its results are kept): {err}", file=sys.stderr)
         return []
     for path in paths:
         run.logger.log_video(path, step=run.trainer.frames)

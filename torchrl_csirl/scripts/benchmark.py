@@ -17,10 +17,10 @@ go to every cell; ``<method>:key=value`` or ``<recipe>:key=value`` (``csirl_high
 ``imitation_highway``, ``csirl_robotics``, ``imitation_robotics``) to that method's or that
 recipe's cells only. ``--address`` joins an
 existing Ray cluster (``ray start --head`` on it first); ``--max-concurrent`` and
-``--cpus-per-trial`` size the trials. SIGTERM to the sweep (its pid: ``<output-dir>/logs/sweep.pid``) stops it
-without losing work: each running cell gets SIGTERM too (it checkpoints at its next batch boundary) and the sweep
-exits (status 143) once they have (local Ray, Linux: :mod:`torchrl_csirl.launch.processes`); run the same command
-again to continue.
+``--cpus-per-trial`` size the trials. Ctrl-C or SIGTERM to the sweep (its pid: ``<output-dir>/logs/sweep.pid``)
+stops it without losing work: each running cell gets SIGTERM (it checkpoints at its next batch boundary) and the
+sweep exits (status 130, 143) once they have, naming the command that continues it: the same one (local Ray, Linux:
+:mod:`torchrl_csirl.launch.processes`).
 
 Write the table (method rows x scenario columns, expert-normalised accomplish rate mean +- std over
 seeds, the paper's Table I beside it; on the robotics tasks the test return, the paper's metric
@@ -38,6 +38,7 @@ import contextlib
 import csv
 import json
 import os
+import shlex
 import sys
 import textwrap
 from collections import defaultdict
@@ -49,7 +50,8 @@ from omegaconf import OmegaConf
 
 from torchrl_csirl.envs import TASKS, task_names
 from torchrl_csirl.launch.config import SCENARIO_NAMES, EvalConfig
-from torchrl_csirl.launch.processes import StopCellsOnSigterm, SweepBusyError, run_cell_process
+from torchrl_csirl.launch.processes import StopCellsOnSigterm, SweepBusyError, run_cell_process, tune_sigint_handler_off
+from torchrl_csirl.launch.run import running_command
 from torchrl_csirl.launch.summaries import find_summaries, mean_std, welch_test
 
 #: the table's rows, in the paper's order, and the recipe of each
@@ -329,9 +331,21 @@ def run_cell(config: dict[str, Any]) -> None:
     tune.report({**metrics, "run_dir": summary["run_dir"]})
 
 
+def sweep_command(argv: list[str]) -> str:
+    """The command line that runs the sweep of ``argv`` again (it continues the unfinished cells), with the
+    running script (``python recipes/benchmark.py``) or module (``python -m ...``).
+
+    Examples:
+        >>> sweep_command(["--seeds", "0", "1", "eval.tag=a b"]).endswith(" --seeds 0 1 'eval.tag=a b'")
+        True
+    """
+    return shlex.join([*running_command(os.path.join("recipes", "benchmark.py")), *argv])
+
+
 def run_sweep(cells: list[Cell], output_dir: str, *, address: str | None, max_concurrent: int,
-              cpus_per_trial: float) -> list[str]:
-    """Runs ``cells`` as Ray Tune trials; returns the names of the failed cells."""
+              cpus_per_trial: float, command: str | None = None) -> list[str]:
+    """Runs ``cells`` as Ray Tune trials; returns the names of the failed cells. On local Ray, SIGTERM or
+    Ctrl-C checkpoints the running cells and exits, naming ``command`` to continue (:class:`StopCellsOnSigterm`)."""
     import ray
     from ray import tune
 
@@ -346,8 +360,9 @@ def run_sweep(cells: list[Cell], output_dir: str, *, address: str | None, max_co
              # when nothing else wants it (on a shared machine, 6 frames/s instead of ~1 000)
              runtime_env={"env_vars": worker_env})
     local = address is None and not os.environ.get("RAY_ADDRESS")  # the cells run here: SIGTERM stops them first
-    try:  # the stopper after ray.init, which installs a SIGTERM handler of its own
-        with StopCellsOnSigterm(output_dir, shutdown=ray.shutdown) if local else contextlib.nullcontext():
+    try:  # the stopper after ray.init, which installs a SIGTERM handler of its own; Tune's SIGINT handler off
+        with (StopCellsOnSigterm(output_dir, shutdown=ray.shutdown, command=command) if local else contextlib.nullcontext(),
+              tune_sigint_handler_off() if local else contextlib.nullcontext()):
             space = [{"name": c.name, "command": list(c.command), "cwd": os.getcwd(),
                       "log": os.path.join(output_dir, "logs", f"{c.name}.log")} for c in cells]
             tuner = tune.Tuner(
@@ -385,7 +400,7 @@ def sweep_main(argv: list[str]) -> int:
             print(" ".join(cell.command[1:]))
         return 0
     failed = run_sweep(cells, output_dir, address=args.address, max_concurrent=args.max_concurrent,
-                       cpus_per_trial=args.cpus_per_trial) if cells else []
+                       cpus_per_trial=args.cpus_per_trial, command=sweep_command(argv)) if cells else []
     print(json.dumps({"output_dir": output_dir, "ran": len(cells), "already_done": len(done), "failed": failed}))
     return 1 if failed else 0
 

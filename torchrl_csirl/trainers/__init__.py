@@ -7,7 +7,7 @@ from torchrl_csirl.trainers.checkpoint import (
     load_checkpoint,
     read_checkpoint_state,
 )
-from torchrl_csirl.trainers.collection import shutdown_collector
+from torchrl_csirl.trainers.collection import CollectorWorkerError, WorkerErrorLog, shutdown_collector, start_collector
 from torchrl_csirl.trainers.evaluation import evaluate_policy
 from torchrl_csirl.trainers.hooks import EvaluationHook, KeepBestPolicy, StopAtTarget, SubgoalSelectionHook
 from torchrl_csirl.trainers.imitation import (
@@ -38,6 +38,7 @@ __all__ = [
     "CSIRLTrainer",
     "CheckpointError",
     "CheckpointHook",
+    "CollectorWorkerError",
     "DiscriminatorStep",
     "EvaluationHook",
     "ImitationMethod",
@@ -51,6 +52,7 @@ __all__ = [
     "TrainingDivergedError",
     "TrainingInterrupted",
     "ValueDICEUpdate",
+    "WorkerErrorLog",
     "check_finite_losses",
     "evaluate_policy",
     "hyperparameters_class",
@@ -59,4 +61,5 @@ __all__ = [
     "make_imitation_method",
     "read_checkpoint_state",
     "shutdown_collector",
+    "start_collector",
 ]

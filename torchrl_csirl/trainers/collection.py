@@ -1,13 +1,29 @@
-"""Collector life cycle helpers."""
+"""Collector life cycle helpers: shutting a collector down, and saying in one line why a worker failed.
+
+* :func:`shutdown_collector`: a TorchRL collector shut down so that the process can exit.
+* :class:`WorkerErrorLog` / :func:`start_collector`: a worker that dies (an exception in its
+  environment's factory, ``reset`` or ``step``, or a killed process) becomes one
+  :class:`CollectorWorkerError` line in the main process, naming the worker and its error.
+"""
 from __future__ import annotations
 
+import contextlib
+import functools
+import os
+import shutil
+import signal
+import tempfile
+import traceback
 import warnings
+from collections.abc import Callable
+from typing import Any
 
 from torchrl.collectors import BaseCollector
+from torchrl.envs import EnvBase
 
-from torchrl_csirl._compat import collector_weight_sync_schemes
+from torchrl_csirl._compat import collector_weight_sync_schemes, collector_worker_processes
 
-__all__ = ["shutdown_collector"]
+__all__ = ["CollectorWorkerError", "WorkerErrorLog", "shutdown_collector", "start_collector"]
 
 
 def shutdown_collector(collector: BaseCollector) -> None:
@@ -42,3 +58,167 @@ def shutdown_collector(collector: BaseCollector) -> None:
                 scheme.shutdown()
             except Exception as error:  # keep shutting the others down
                 warnings.warn(f"weight-sync scheme {name!r} failed to shut down: {error}", stacklevel=2)
+
+
+class CollectorWorkerError(RuntimeError):
+    """A collector worker process failed: an exception in its environment (at start or in a step), or
+    the process was killed. The message is one line naming the worker and its error."""
+
+
+def _write_error_line(folder: str, error: BaseException) -> None:
+    """In a worker: ``<folder>/<pid>.txt`` gets the error's one-line description, then its traceback."""
+    text = f"{type(error).__name__}: {str(error).strip().splitlines()[0] if str(error).strip() else ''}".rstrip(": ")
+    with contextlib.suppress(OSError):
+        with open(os.path.join(folder, f"{os.getpid()}.txt"), "w") as f:
+            f.write(text + "\n" + "".join(traceback.format_exception(error)))
+
+
+def _reporting(folder: str, method: Callable[..., Any]) -> Callable[..., Any]:
+    @functools.wraps(method)
+    def call(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return method(*args, **kwargs)
+        except Exception as error:
+            _write_error_line(folder, error)
+            raise
+    return call
+
+
+def _build_reporting_errors(folder: str, factory: Callable[[], EnvBase]) -> EnvBase:
+    """In a worker process: ``factory()``, with the errors of the build, of ``reset`` and of ``step``
+    written to ``folder`` before they end the worker."""
+    try:
+        env = factory()
+    except Exception as error:
+        _write_error_line(folder, error)
+        raise
+    # the instance's own _step / _reset (EnvBase.step and reset call these): no subclass, no copy
+    env._step = _reporting(folder, env._step)
+    env._reset = _reporting(folder, env._reset)
+    return env
+
+
+class WorkerErrorLog:
+    """Where a multi-process collector's workers write the error that ends them, so that the main
+    process can say it in one line.
+
+    TorchRL 0.14.1 reports a worker that died while collecting as ``At least one process failed:
+    worker 0 (exit code 1)``, its error only in the worker's traceback. :meth:`wrap` makes a worker's
+    environment factory write the error (of the build, ``reset`` or ``step``) into a file named by
+    the worker's process id, and :meth:`describe` turns the collector's failure into one line: the
+    worker, its error, or the signal that killed it.
+
+    Examples:
+        >>> from torchrl_csirl.envs import env_factory
+        >>> log = WorkerErrorLog()
+        >>> env = log.wrap(env_factory("merge"))()  # in a worker process, as the collector calls it
+        >>> env.rollout(2, break_when_any_done=False)["observation"].shape
+        torch.Size([2, 25])
+        >>> log.errors()
+        {}
+        >>> log.close()
+    """
+
+    def __init__(self) -> None:
+        self.folder = tempfile.mkdtemp(prefix="csirl-worker-errors-")
+
+    def wrap(self, factory: Callable[[], EnvBase]) -> Callable[[], EnvBase]:
+        """``factory`` (picklable), building its environment so that its errors are written here."""
+        return functools.partial(_build_reporting_errors, self.folder, factory)
+
+    def errors(self) -> dict[int, str]:
+        """process id -> the one-line error its worker wrote."""
+        found = {}
+        for name in os.listdir(self.folder) if os.path.isdir(self.folder) else ():
+            with contextlib.suppress(OSError, ValueError):
+                with open(os.path.join(self.folder, name)) as f:
+                    found[int(name.split(".")[0])] = f.readline().strip()
+        return found
+
+    def describe(self, collector: BaseCollector | None, error: BaseException | None = None) -> str | None:
+        """One line on the failed worker of ``collector``, or None when no worker failed.
+
+        Args:
+            collector: the collector (None: it failed while starting, ``error`` says how).
+            error: the exception the collector raised.
+        """
+        written = self.errors()
+        dead = []
+        for index, proc in enumerate(collector_worker_processes(collector)):
+            try:
+                alive, code, pid = proc.is_alive(), proc.exitcode, proc.pid
+            except ValueError:  # closed: TorchRL terminated it after another worker failed
+                continue
+            if not alive and code not in (None, 0):
+                dead.append((index, pid, code))
+        for index, pid, code in dead:
+            if pid in written:
+                return f"collector worker {index} (pid {pid}) failed: {written[pid]}"
+            if code < 0:
+                return (f"collector worker {index} (pid {pid}) was killed by {signal.Signals(-code).name}; "
+                        "no error of its own")
+            return f"collector worker {index} (pid {pid}) exited with status {code} (its traceback is above)"
+        if collector is None and error is not None:  # failed to start: TorchRL re-raises the worker's error
+            first = (str(error).strip().splitlines() or [""])[0]
+            line = sorted(written.items())[0][1] if written else f"{type(error).__name__}: {first}"
+            return f"a collector worker failed to start: {line}"
+        if written:
+            pid, line = sorted(written.items())[0]
+            return f"a collector worker (pid {pid}) failed: {line}"
+        return None
+
+    def close(self) -> None:
+        """Removes the folder."""
+        shutil.rmtree(self.folder, ignore_errors=True)
+
+
+def _collector_being_built(error: BaseException) -> BaseCollector | None:
+    """The collector whose ``__init__`` raised ``error`` (found in the traceback's frames), if any."""
+    tb, found = error.__traceback__, None
+    while tb is not None:
+        candidate = tb.tb_frame.f_locals.get("self")
+        if isinstance(candidate, BaseCollector):
+            found = candidate
+        tb = tb.tb_next
+    return found
+
+
+def start_collector(make: Callable[[], BaseCollector], errors: WorkerErrorLog | None = None) -> BaseCollector:
+    """``make()``, a multi-process collector whose workers may fail to start: then the half-built
+    collector is shut down (its weight-sync schemes would otherwise hang the process at exit) and a
+    :class:`CollectorWorkerError` names the worker's error in one line (read from ``errors``, when the
+    workers' factories were wrapped by it, or from the error TorchRL re-raises).
+
+    Examples:
+        >>> from functools import partial
+        >>> from torchrl.collectors import Collector
+        >>> def broken():
+        ...     raise ValueError("no such track")
+        >>> log = WorkerErrorLog()
+        >>> start_collector(partial(Collector, log.wrap(broken), None, frames_per_batch=10, total_frames=10), log)
+        Traceback (most recent call last):
+        ...
+        torchrl_csirl.trainers.collection.CollectorWorkerError: a collector worker failed to start: ValueError: no such track
+        >>> log.close()
+    """
+    try:
+        return make()
+    except Exception as error:
+        half_built = _collector_being_built(error)
+        if half_built is not None:
+            with contextlib.suppress(Exception):
+                shutdown_collector(half_built)
+        line = (errors or _NO_LOG).describe(None, error)
+        if line is None:
+            raise
+        raise CollectorWorkerError(line) from None
+
+
+class _NoWorkerErrorLog(WorkerErrorLog):
+    """A log no worker writes to (a collector built without :meth:`WorkerErrorLog.wrap`)."""
+
+    def __init__(self) -> None:
+        self.folder = ""
+
+
+_NO_LOG = _NoWorkerErrorLog()

@@ -46,6 +46,27 @@ def _detached(out: TensorDictBase, keys: tuple[str, ...]) -> dict[str, torch.Ten
     return {key: out.get(key).detach() for key in keys if key in out.keys()}
 
 
+#: the rewards of a training batch whose means an update logs (``<key>_mean``): what the learner was paid
+BATCH_REWARD_KEYS = ("matching_reward", "reward")
+
+
+def batch_reward_means(batch: TensorDictBase) -> dict[str, torch.Tensor]:
+    """``{"<key>_mean": ...}`` of the batch's ``("next", key)`` rewards (:data:`BATCH_REWARD_KEYS`) it holds.
+
+    Examples:
+        >>> from tensordict import TensorDict
+        >>> batch = TensorDict({"next": {"matching_reward": torch.tensor([[1.0], [3.0]])}}, [2])
+        >>> batch_reward_means(batch)
+        {'matching_reward_mean': tensor(2.)}
+    """
+    found = {}
+    for key in BATCH_REWARD_KEYS:
+        value = batch.get(("next", key), None)
+        if value is not None:
+            found[f"{key}_mean"] = value.detach().float().mean()
+    return found
+
+
 class SACUpdate:
     """One ensemble-SAC step: sample a batch, critic + actor losses, Adam, Polyak.
 
@@ -100,10 +121,12 @@ class SACUpdate:
         self.target_updater.step()
 
     def __call__(self, trainer: CSIRLTrainer) -> dict[str, torch.Tensor]:
-        out = self.loss(self.sample(trainer))
+        batch = self.sample(trainer)
+        out = self.loss(batch)
         losses, logs = self.with_actor_bc({key: out.get(key) for key in self.LOSS_KEYS if key in out.keys()})
         self.step(losses, trainer)
-        return {**{key: value.detach() for key, value in losses.items()}, **_detached(out, self.LOG_KEYS), **logs}
+        return {**{key: value.detach() for key, value in losses.items()}, **_detached(out, self.LOG_KEYS), **logs,
+                **batch_reward_means(batch)}
 
 
 class MetaRewardUpdate:
@@ -152,7 +175,7 @@ class MetaRewardUpdate:
         self.sac_update.step({**sac_losses, "loss_meta": meta}, trainer)
         self.reward_optimizer.step()
         return {**{k: v.detach() for k, v in sac_losses.items()}, **_detached(out, SACUpdate.LOG_KEYS + self.META_KEYS),
-                **logs}
+                **logs, **batch_reward_means(online)}
 
 
 class BCUpdate:

@@ -35,6 +35,7 @@ __all__ = [
     "film_episode",
     "film_test_episodes",
     "make_render_env",
+    "render_failure_hint",
     "video_format_available",
     "write_video",
 ]
@@ -182,23 +183,47 @@ def make_render_env(task: str) -> Any:
     rendering, checked with one picture.
 
     Raises:
-        VideoError: when the task cannot be rendered here (e.g. no EGL for MuJoCo), saying what to install.
+        VideoError: when the task cannot be rendered here, saying why (:func:`render_failure_hint`):
+            an environment that takes no ``render_mode``, no EGL for MuJoCo, ...
     """
-    from torchrl_csirl.envs import ScenarioSpec, make_env, resolve_scenario
+    from torchrl_csirl.envs import make_env, resolve_scenario
 
-    robotics = not isinstance(resolve_scenario(task), ScenarioSpec)
+    spec = resolve_scenario(task)
     try:
         env = make_env(task, render_mode="rgb_array")
         env.reset()
         _lighten_mujoco(env)
         picture = env.render()
     except Exception as err:  # noqa: BLE001 - whatever the GL stack raises, said in one line
-        what = f"{type(err).__name__}: {err}".strip()
-        hint = MUJOCO_GL_HELP if robotics else "highway-env renders with pygame offscreen (SDL_VIDEODRIVER=dummy)"
-        raise VideoError(f"cannot render {task} headless here ({what}). {hint}.") from None
+        what = " ".join(f"{type(err).__name__}: {err}".split())
+        raise VideoError(f"cannot render {task} headless here ({what}). {render_failure_hint(err, spec.family)}.") from None
     if not isinstance(picture, np.ndarray) or picture.ndim != 3:
         raise VideoError(f"{task}: render() gave {type(picture).__name__}, not an RGB picture.")
     return env
+
+
+#: words of an error raised by MuJoCo's OpenGL back-ends
+_GL_WORDS = ("EGL", "OpenGL", "OSMesa", "GLFW", "MUJOCO_GL", "mujoco")
+
+
+def render_failure_hint(error: BaseException, family: str) -> str:
+    """What to do about an environment that could not render, from its error and its task family.
+
+    Examples:
+        >>> render_failure_hint(TypeError("__init__() got an unexpected keyword argument 'render_mode'"), "custom")[:55]
+        "the task's environment takes no render_mode argument, s"
+        >>> render_failure_hint(RuntimeError("cannot initialize EGL"), "gymnasium").startswith("MuJoCo renders headless")
+        True
+    """
+    text = str(error)
+    if isinstance(error, TypeError) and "render_mode" in text:
+        return ("the task's environment takes no render_mode argument, so it cannot draw pictures: give its "
+                "constructor a render_mode and make render() return an RGB array")
+    if family == "driving":
+        return "highway-env renders with pygame offscreen (SDL_VIDEODRIVER=dummy)"
+    if family in ("robotics", "locomotion") or any(word in text for word in _GL_WORDS):
+        return MUJOCO_GL_HELP
+    return "the task's environment could not draw an rgb_array picture (its render() failed)"
 
 
 def frame_stride(dt: float, max_fps: float = MAX_FPS) -> int:
