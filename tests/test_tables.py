@@ -153,6 +153,29 @@ def test_locomotion_differences_are_their_records():
             assert cell.startswith("**") == row["vs_csirl_beyond_noise"], (method, task, cell)
 
 
+def test_published_comparison_is_its_data_and_its_records_in_raw_returns():
+    """The published table: the papers' raw returns and experts as :data:`benchmark.PUBLISHED_LOCOMOTION` holds
+    them, ours the records' raw mean returns (final and best evaluation), each gap divided by the paper's expert."""
+    runs = benchmark.read_runs([os.path.join(ROOT, "docs", "runs", "mujoco")])
+    rows = {(r["method"], r["scenario"]): r for r in benchmark.table_rows(runs)}
+    table = markdown_table("docs/benchmark.md", "| method | Hopper: paper")
+    assert set(table) == {m for m in benchmark.PUBLISHED_LOCOMOTION if any((m, s) in rows for s in ("hopper", "halfcheetah"))}
+    for method, columns in table.items():
+        for task, scenario in (("Hopper", "hopper"), ("HalfCheetah", "halfcheetah")):
+            published = benchmark.PUBLISHED_LOCOMOTION[method][scenario]
+            (header,) = [c for c in columns if c.startswith(f"{task}: paper")]
+            assert agrees(numbers(header)[0], published["expert"]), header
+            assert agrees(numbers(columns[header])[0], published["return"]), (method, task, columns[header])
+            assert published["expert"] == benchmark.PUBLISHED_EXPERTS[scenario]
+            for column, field in (("ours, final", "return_mean"), ("ours, best evaluation", "best_eval_return_mean")):
+                cell, ours = columns[f"{task}: {column}"], rows[(method, scenario)][field]
+                shown, gap = numbers(cell)[:2]
+                assert agrees(shown, ours), (method, task, column, cell)
+                want = (ours - published["return"]) / published["expert"]
+                assert agrees(gap, want), (method, task, column, cell)
+                assert ("**" in cell) == (want < -benchmark.PUBLISHED_GAP), (method, task, column, cell)
+
+
 def test_readme_results_follow_table_one(driving, robotics):
     table = markdown_table("README.md", "| task |")
     for scenario in benchmark.SCENARIO_ORDER:

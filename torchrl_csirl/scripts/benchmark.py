@@ -82,6 +82,8 @@ ROBOTICS_ORDER = ("antmaze-umaze", "relocate")
 #: the locomotion table's columns (beyond the paper: gymnasium's MuJoCo tasks, where the baselines' own papers
 #: published their results), scored by the test return and the expert-normalised return
 LOCOMOTION_ORDER = ("hopper", "halfcheetah")
+#: the locomotion tasks' names on the pages
+LOCOMOTION_TITLES = {"hopper": "Hopper", "halfcheetah": "HalfCheetah"}
 #: the methods of the paper's robotics comparison (Figure 7: curves, no table; SPEC section 4)
 PAPER_ROBOTICS_METHODS = ("sqil", "dac", "valuedice", "iqlearn", "csirl")
 
@@ -136,12 +138,14 @@ PAPER_TABLE: dict[str, dict[str, float]] = {
 
 #: published results on the locomotion tasks, one protocol (one full expert trajectory, gym v2): Garg et al. 2021,
 #: "IQ-Learn", Table 3 (raw returns; its experts Hopper 3532.7, HalfCheetah 5098.3), which ran GAIL, DAC and
-#: ValueDICE beside IQ-Learn. method -> task -> {"normalized": R / R_expert, "source"}. Other papers' own
-#: figures (other protocols and budgets) and the notes: docs/benchmark.md#published-results
-_IQ_EXPERT = {"hopper": 3532.7, "halfcheetah": 5098.3}
+#: ValueDICE beside IQ-Learn. method -> task -> {"return": the raw return, "expert": the paper's expert's return,
+#: "normalized": R / R_expert of the paper's expert, "source"}. Other papers' own figures (other protocols and
+#: budgets) and the notes: docs/benchmark.md#published-results
+PUBLISHED_EXPERTS = {"hopper": 3532.7, "halfcheetah": 5098.3}
 _IQ_TABLE3 = {"gail": (3252.5, 3080.0), "dac": (3305.1, 4080.6), "valuedice": (3312.1, 3835.6), "iqlearn": (3546.4, 5076.6)}
 PUBLISHED_LOCOMOTION: dict[str, dict[str, dict[str, Any]]] = {
-    method: {task: {"normalized": value / _IQ_EXPERT[task], "source": "IQ-Learn Tab. 3"}
+    method: {task: {"return": value, "expert": PUBLISHED_EXPERTS[task], "normalized": value / PUBLISHED_EXPERTS[task],
+                    "source": "IQ-Learn Tab. 3"}
              for task, value in zip(("hopper", "halfcheetah"), values)}
     for method, values in _IQ_TABLE3.items()}
 
@@ -460,8 +464,9 @@ def add_normalized_returns(runs: list[dict[str, Any]]) -> None:
         for run in (r for r in runs if r["scenario"] == task):
             ok = expert is not None and run.get("return") is not None
             run["normalized_return"] = float(run["return"]) / expert if ok else None
-            best = best_evaluation(run["run_dir"]) if expert is not None and run.get("run_dir") else None
-            run["normalized_best_eval_return"] = None if best is None else best / expert
+            best = best_evaluation(run["run_dir"]) if run.get("run_dir") else None
+            run["best_eval_return"] = best
+            run["normalized_best_eval_return"] = None if best is None or expert is None else best / expert
 
 
 def best_evaluation(run_dir: str, key: str = "eval_env_return") -> float | None:
@@ -499,7 +504,8 @@ def table_rows(runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
             str(s) for s in sorted(int(r["seed"]) for r in group)), "runs": len(group),
             "frames": " ".join(str(f) for f in sorted({int(r.get("frames") or 0) for r in group}))}
         for field in ("normalized_accomplish_rate", "accomplish_rate", "return", "normalized_return",
-                      "normalized_best_eval_return", "success_rate", "crash_rate", "total_wall_s", "updates_per_s"):
+                      "normalized_best_eval_return", "best_eval_return", "success_rate", "crash_rate", "total_wall_s",
+                      "updates_per_s"):
             values = [float(r[field]) for r in group if r.get(field) is not None]
             stats = mean_std(values) if values else {"mean": None, "std": None}
             row[f"{field}_mean"], row[f"{field}_std"] = stats["mean"], stats["std"]
@@ -621,7 +627,8 @@ def _comparison_table(rows: list[dict[str, Any]], scenarios: list[str], cell: di
     if not compared:
         return []
     return [""] + _method_table(
-        f"Difference from csirl ({what}; Welch's t over seeds; **bold**: beyond seed noise, two-sided 5 %).",
+        f"Difference from csirl ({what}; Welch's t over seeds; **bold**: beyond seed noise, two-sided 5 % at the "
+        "Welch-Satterthwaite degrees of freedom).",
         compared, scenarios, lambda m, s: _difference(cell.get((m, s)), fmt))
 
 
@@ -680,33 +687,61 @@ def robotics_tables(rows: list[dict[str, Any]]) -> list[str]:
 PUBLISHED_GAP = 0.2
 
 
-def published_normalized(method: str, task: str) -> float | None:
-    """The published expert-normalised figure of ``method`` on ``task`` (:data:`PUBLISHED_LOCOMOTION`), if any.
+def published_gap(method: str, task: str, ours: float | None) -> float | None:
+    """Our raw return ``ours`` minus the published one of ``method`` on ``task``, as a fraction of the paper's
+    expert's return: both sides divided by the same expert (ours differs from the paper's), ``None`` without
+    a published figure or a return of ours.
 
     Examples:
-        >>> round(published_normalized("dac", "hopper"), 3), published_normalized("sqil", "hopper")
-        (0.936, None)
+        >>> round(published_gap("gail", "hopper", 3160.0), 3), published_gap("sqil", "hopper", 3160.0)
+        (-0.026, None)
     """
     entry = PUBLISHED_LOCOMOTION.get(method, {}).get(task)
-    return None if entry is None else entry["normalized"]
+    if entry is None or ours is None:
+        return None
+    return (ours - entry["return"]) / entry["expert"]
 
 
-def _published(method: str, task: str, row: dict[str, Any] | None) -> str:
-    """A published figure of :data:`PUBLISHED_LOCOMOTION`: ``value (source)``, then ours minus it (**bold**
-    beyond :data:`PUBLISHED_GAP` below, never for a run at another budget), ``—`` where there is none."""
-    value = published_normalized(method, task)
-    if value is None:
+def _thousands(value: float, fmt: str = ".0f") -> str:
+    """``3 252.5``: thousands apart by a space, a minus sign as on the pages."""
+    return f"{value:,{fmt}}".replace(",", " ").replace("-", "−")
+
+
+def _ours_against_published(method: str, task: str, ours: float | None) -> str:
+    """``return (gap)`` of ours against the published figure, **bold** more than :data:`PUBLISHED_GAP` below."""
+    gap = published_gap(method, task, ours)
+    if gap is None:
         return "—"
-    text = f"{value:.2f} ({PUBLISHED_LOCOMOTION[method][task]['source']})"
-    ours = None if row is None else row["normalized_return_mean"]
-    if ours is None:
-        return text
-    gap = f"{ours - value:+.2f}"
-    best = row["normalized_best_eval_return_mean"]
-    best = "" if best is None else f", best evaluation {best - value:+.2f}"
-    if off_budget(row):  # a short or longer run is not compared at the table's budget
-        return f"{text}; ours {gap}{best} (at {row['frames']} frames)"
-    return f"{text}; ours {f'**{gap}**' if ours - value < -PUBLISHED_GAP else gap}{best}"
+    text = f"{gap:+.2f}".replace("-", "−")
+    return f"{_thousands(ours)} ({f'**{text}**' if gap < -PUBLISHED_GAP else text})"
+
+
+def published_table(rows: list[dict[str, Any]]) -> list[str]:
+    """The published locomotion results (:data:`PUBLISHED_LOCOMOTION`, raw returns) beside ours, task by task:
+    the paper's return, our final test return and our best evaluation (mean over seeds), each of ours with its
+    gap to the paper as a fraction of the paper's expert's return (both sides divided by the same expert);
+    **bold** more than :data:`PUBLISHED_GAP` below. No lines without a locomotion row of a published method."""
+    scenarios, _, cell = _columns(rows, LOCOMOTION_ORDER)
+    methods = [m for m in METHOD_ORDER if m in PUBLISHED_LOCOMOTION and any((m, s) in cell for s in scenarios)]
+    if not methods:
+        return []
+    header, rule = ["method"], ["---"]
+    for task in scenarios:
+        name = LOCOMOTION_TITLES.get(task, task)
+        header += [f"{name}: paper (expert {_thousands(PUBLISHED_EXPERTS[task], '.1f')})", f"{name}: ours, final",
+                   f"{name}: ours, best evaluation"]
+        rule += ["---"] * 3
+    lines = [f"| {' | '.join(header)} |", f"|{'|'.join(rule)}|"]
+    for method in methods:
+        cells = [method]
+        for task in scenarios:
+            row = cell.get((method, task))
+            cells.append(_thousands(PUBLISHED_LOCOMOTION[method][task]["return"], ".1f"))
+            final = _ours_against_published(method, task, None if row is None else row["return_mean"])
+            cells.append(f"{final} (at {row['frames']} frames)" if row is not None and off_budget(row) else final)
+            cells.append(_ours_against_published(method, task, None if row is None else row["best_eval_return_mean"]))
+        lines.append(f"| {' | '.join(cells)} |")
+    return lines
 
 
 def locomotion_tables(rows: list[dict[str, Any]]) -> list[str]:
@@ -718,8 +753,9 @@ def locomotion_tables(rows: list[dict[str, Any]]) -> list[str]:
         return []
     lines = _method_table(
         "Expert-normalised test return R / R_expert, mean ± std over seeds, R_expert the expert row's mean on the "
-        f"same 50 test episodes (the published figure in brackets: below); {budget_caption(scenarios)}.",
-        methods, scenarios, lambda m, s: _score(cell.get((m, s)), published_normalized(m, s), "normalized_return"))
+        f"same 50 test episodes (ours: the papers' figures are compared in raw returns, below); "
+        f"{budget_caption(scenarios)}.",
+        methods, scenarios, lambda m, s: _score(cell.get((m, s)), None, "normalized_return"))
     lines += [""] + _method_table(
         "Test return (gymnasium's own reward), mean ± std over seeds.", methods, scenarios,
         lambda m, s: _score(cell.get((m, s)), None, "return", ".0f"))
@@ -735,12 +771,13 @@ def locomotion_tables(rows: list[dict[str, Any]]) -> list[str]:
         "Cost per run: wall time [min] (start-up and final evaluation included) and updates/s, mean over runs.",
         methods, scenarios, lambda m, s: _cost(cell.get((m, s))))
     lines += _comparison_table(rows, scenarios, cell, "test return", "+.0f")
-    published = [m for m in METHOD_ORDER if m in PUBLISHED_LOCOMOTION]
-    return lines + [""] + _method_table(
-        "Published expert-normalised results, R / R_expert of the paper's own expert (IQ-Learn's Table 3: one "
-        "expert trajectory, as ours; other papers, settings and sources: docs/benchmark.md#published-results), "
-        f"and ours minus it (**bold**: more than {PUBLISHED_GAP} below; then our best evaluation minus it).",
-        published, scenarios, lambda m, s: _published(m, s, cell.get((m, s))))
+    published = published_table(rows)
+    if not published:
+        return lines
+    return lines + ["", "Published results in raw returns (IQ-Learn's Table 3: one expert trajectory, as ours; other "
+                    "papers, settings and sources: docs/benchmark.md#published-results) beside ours, mean over seeds; "
+                    "in brackets ours minus the paper's, divided by the paper's expert's return (**bold**: more than "
+                    f"{PUBLISHED_GAP} below).", "", *published]
 
 
 def markdown_table(rows: list[dict[str, Any]]) -> str:
