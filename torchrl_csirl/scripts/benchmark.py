@@ -720,11 +720,11 @@ def published_table(rows: list[dict[str, Any]]) -> list[str]:
     """The published locomotion results (:data:`PUBLISHED_LOCOMOTION`, raw returns) beside ours, task by task:
     the paper's return, our final test return and our best evaluation (mean over seeds), each of ours with its
     gap to the paper as a fraction of the paper's expert's return (both sides divided by the same expert);
-    **bold** more than :data:`PUBLISHED_GAP` below. No lines without a locomotion row of a published method."""
+    **bold** more than :data:`PUBLISHED_GAP` below; ``—`` where we have no run. No lines without a locomotion row."""
     scenarios, _, cell = _columns(rows, LOCOMOTION_ORDER)
-    methods = [m for m in METHOD_ORDER if m in PUBLISHED_LOCOMOTION and any((m, s) in cell for s in scenarios)]
-    if not methods:
+    if not scenarios:
         return []
+    methods = [m for m in METHOD_ORDER if m in PUBLISHED_LOCOMOTION]
     header, rule = ["method"], ["---"]
     for task in scenarios:
         name = LOCOMOTION_TITLES.get(task, task)
