@@ -31,7 +31,7 @@ from torchrl_csirl.envs.metrics import (
     success_from_rollout,
 )
 from torchrl_csirl.envs.parallel import YieldingParallelEnv
-from torchrl_csirl.envs.registry import env_factory, import_task_module, imported_task_modules, register_task, task_names
+from torchrl_csirl.envs.registry import env_factory, import_task_module, register_task, task_names
 from torchrl_csirl.envs.scenarios import (
     SCENARIOS,
     TASKS,
@@ -63,7 +63,6 @@ __all__ = [
     "gym_env_of",
     "env_factory",
     "import_task_module",
-    "imported_task_modules",
     "info_spec",
     "make_env",
     "make_gymnasium_env",

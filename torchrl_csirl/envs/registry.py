@@ -26,8 +26,7 @@ from torchrl_csirl.envs.locomotion import locomotion_factories
 from torchrl_csirl.envs.scenarios import TASKS
 from torchrl_csirl.envs.spec import TaskSpec
 
-__all__ = ["env_factory", "import_task_module", "imported_task_modules", "register_task", "registered_factory",
-           "task_names"]
+__all__ = ["env_factory", "import_task_module", "register_task", "registered_factory", "task_names"]
 
 #: the paper's tasks, ``ant-goal`` and the locomotion tasks: never replaced by :func:`register_task`
 BUILTIN_TASKS: frozenset[str] = frozenset(TASKS)
@@ -125,16 +124,6 @@ def _search_in(folder: str) -> None:
     """``folder`` on ``sys.path`` (after the script's own folder, before the installed packages)."""
     if folder not in (os.path.abspath(p or os.curdir) for p in sys.path):
         sys.path.insert(1 if sys.path else 0, folder)
-
-
-def imported_task_modules() -> tuple[str, ...]:
-    """The modules :func:`import_task_module` imported in this process, in order.
-
-    Examples:
-        >>> isinstance(imported_task_modules(), tuple)
-        True
-    """
-    return tuple(_TASK_MODULES)
 
 
 def task_names(*, driving: bool | None = None) -> tuple[str, ...]:

@@ -139,13 +139,11 @@ PAPER_TABLE: dict[str, dict[str, float]] = {
 #: published results on the locomotion tasks, one protocol (one full expert trajectory, gym v2): Garg et al. 2021,
 #: "IQ-Learn", Table 3 (raw returns; its experts Hopper 3532.7, HalfCheetah 5098.3), which ran GAIL, DAC and
 #: ValueDICE beside IQ-Learn. method -> task -> {"return": the raw return, "expert": the paper's expert's return,
-#: "normalized": R / R_expert of the paper's expert, "source"}. Other papers' own figures (other protocols and
-#: budgets) and the notes: docs/benchmark.md#published-results
+#: "source"}. Other papers' own figures (other protocols and budgets) and the notes: docs/benchmark.md#published-results
 PUBLISHED_EXPERTS = {"hopper": 3532.7, "halfcheetah": 5098.3}
 _IQ_TABLE3 = {"gail": (3252.5, 3080.0), "dac": (3305.1, 4080.6), "valuedice": (3312.1, 3835.6), "iqlearn": (3546.4, 5076.6)}
 PUBLISHED_LOCOMOTION: dict[str, dict[str, dict[str, Any]]] = {
-    method: {task: {"return": value, "expert": PUBLISHED_EXPERTS[task], "normalized": value / PUBLISHED_EXPERTS[task],
-                    "source": "IQ-Learn Tab. 3"}
+    method: {task: {"return": value, "expert": PUBLISHED_EXPERTS[task], "source": "IQ-Learn Tab. 3"}
              for task, value in zip(("hopper", "halfcheetah"), values)}
     for method, values in _IQ_TABLE3.items()}
 

@@ -65,12 +65,17 @@ class CollectorWorkerError(RuntimeError):
     the process was killed. The message is one line naming the worker and its error."""
 
 
+def _one_line(error: BaseException) -> str:
+    """``Type: first line of the message`` (``Type`` alone without a message)."""
+    lines = str(error).strip().splitlines()
+    return f"{type(error).__name__}: {lines[0]}" if lines else type(error).__name__
+
+
 def _write_error_line(folder: str, error: BaseException) -> None:
     """In a worker: ``<folder>/<pid>.txt`` gets the error's one-line description, then its traceback."""
-    text = f"{type(error).__name__}: {str(error).strip().splitlines()[0] if str(error).strip() else ''}".rstrip(": ")
     with contextlib.suppress(OSError):
         with open(os.path.join(folder, f"{os.getpid()}.txt"), "w") as f:
-            f.write(text + "\n" + "".join(traceback.format_exception(error)))
+            f.write(_one_line(error) + "\n" + "".join(traceback.format_exception(error)))
 
 
 def _reporting(folder: str, method: Callable[..., Any]) -> Callable[..., Any]:
@@ -159,9 +164,7 @@ class WorkerErrorLog:
                         "no error of its own")
             return f"collector worker {index} (pid {pid}) exited with status {code} (its traceback is above)"
         if collector is None and error is not None:  # failed to start: TorchRL re-raises the worker's error
-            first = (str(error).strip().splitlines() or [""])[0]
-            line = sorted(written.items())[0][1] if written else f"{type(error).__name__}: {first}"
-            return f"a collector worker failed to start: {line}"
+            return _failed_to_start(error, written)
         if written:
             pid, line = sorted(written.items())[0]
             return f"a collector worker (pid {pid}) failed: {line}"
@@ -170,6 +173,11 @@ class WorkerErrorLog:
     def close(self) -> None:
         """Removes the folder."""
         shutil.rmtree(self.folder, ignore_errors=True)
+
+
+def _failed_to_start(error: BaseException, written: dict[int, str]) -> str:
+    """The line of workers that failed to start: the error a worker wrote, else the one TorchRL re-raised."""
+    return f"a collector worker failed to start: {sorted(written.items())[0][1] if written else _one_line(error)}"
 
 
 def _collector_being_built(error: BaseException) -> BaseCollector | None:
@@ -208,17 +216,5 @@ def start_collector(make: Callable[[], BaseCollector], errors: WorkerErrorLog | 
         if half_built is not None:
             with contextlib.suppress(Exception):
                 shutdown_collector(half_built)
-        line = (errors or _NO_LOG).describe(None, error)
-        if line is None:
-            raise
+        line = errors.describe(None, error) if errors is not None else _failed_to_start(error, {})
         raise CollectorWorkerError(line) from None
-
-
-class _NoWorkerErrorLog(WorkerErrorLog):
-    """A log no worker writes to (a collector built without :meth:`WorkerErrorLog.wrap`)."""
-
-    def __init__(self) -> None:
-        self.folder = ""
-
-
-_NO_LOG = _NoWorkerErrorLog()
