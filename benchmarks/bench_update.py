@@ -20,12 +20,17 @@ meta-gradient with ``MetaRewardLoss(meta_gradient="jvp")`` and also times, inter
 CSIRL iteration of the same learner on the double backward (``against_*`` keys and
 ``jvp_over_double_backward``, the median of the per-round ratios); ``--against M`` sets the
 compared path (``--meta-gradient double_backward --against double_backward``: the noise).
+``--precision bf16`` runs the losses' forward passes under bfloat16 autocast
+(:class:`~torchrl_csirl.modules.LearnerPrecision`, ``optim.precision``) and also times, interleaved,
+the same learner in float32 (``fp32_*`` keys; ``bf16_speedup_sac`` / ``bf16_speedup_csirl``, the
+medians of the per-round ratios fp32 / bf16).
 
 Usage::
 
     python benchmarks/bench_update.py [--batch 256] [--iters 30] [--warmup 5] [--reference]
     python benchmarks/bench_update.py --device cuda     # the learner on a GPU
     python benchmarks/bench_update.py --meta-gradient jvp --iters 60   # jvp against the double backward
+    python benchmarks/bench_update.py --precision bf16 --iters 60      # bf16 against fp32, alternated
 
 Prints one final JSON line.
 """
@@ -40,7 +45,7 @@ import torch
 from tensordict import TensorDict
 from torchrl.objectives import SoftUpdate
 
-from torchrl_csirl.modules import make_actor, make_qvalue, make_reward_network
+from torchrl_csirl.modules import LearnerPrecision, make_actor, make_qvalue, make_reward_network
 from torchrl_csirl.objectives import EnsembleSACLoss, MetaRewardLoss
 
 OBS_DIM, ACTION_DIM, EXPERT_BATCH = 25, 2, 32
@@ -73,8 +78,10 @@ class _Learner:
         device: torch.device,
         fused: bool | None = None,
         meta_gradient: str = "double_backward",
+        precision: LearnerPrecision | None = None,
     ) -> None:
         torch.manual_seed(0)
+        self.precision = precision or LearnerPrecision(device_type=device.type)
         self.sac = sac = EnsembleSACLoss(
             make_actor(OBS_DIM, ACTION_DIM), make_qvalue(OBS_DIM, ACTION_DIM), fused_qvalue=fused_qvalue, fused=fused
         ).to(device)
@@ -98,7 +105,8 @@ class _Learner:
         )
 
     def _sac_update(self, td: TensorDict) -> None:
-        losses = self.sac(td)
+        with self.precision.autocast():
+            losses = self.sac(td)
         self.optim_q.zero_grad(set_to_none=True)
         self.optim_pi.zero_grad(set_to_none=True)
         (losses["loss_qvalue"] + losses["loss_actor"]).backward()
@@ -117,13 +125,15 @@ class _Learner:
             r_w = self.meta.intrinsic_reward(td)
         td["next", "reward"] = td["next", "matching_reward"] + r_w
         self._sac_update(td)
-        losses = self.meta(self.online, self.expert, self.regularizer)
+        with self.precision.autocast():
+            losses = self.meta(self.online, self.expert, self.regularizer)
         self.optim_w.zero_grad(set_to_none=True)
         losses["loss_meta"].backward()
         self.optim_w.step()
 
     def csirl_step(self) -> None:
-        losses = self.joint(self.online, self.expert, self.regularizer)
+        with self.precision.autocast():
+            losses = self.joint(self.online, self.expert, self.regularizer)
         optims = (self.optim_q, self.optim_pi, self.optim_w)
         for optim in optims:
             optim.zero_grad(set_to_none=True)
@@ -144,6 +154,9 @@ def _timed(fn, device: torch.device) -> float:
 def _summary(prefix: str, times: dict[str, list[float]]) -> dict[str, float]:
     if set(times) == {"csirl"}:
         return {f"{prefix}csirl_iteration_ms": round(statistics.median(times["csirl"]), 2)}
+    if set(times) == {"plain", "csirl"}:
+        return {f"{prefix}sac_update_ms": round(statistics.median(times["plain"]), 2),
+                f"{prefix}csirl_iteration_ms": round(statistics.median(times["csirl"]), 2)}
     sac_ms, csirl_ms, seq_ms = times["plain"], times["csirl"], times["sequential"]
     return {
         f"{prefix}sac_update_ms": round(statistics.median(sac_ms), 2),
@@ -191,12 +204,22 @@ def main() -> None:
              "when --meta-gradient is jvp)",
     )
     parser.add_argument("--device", default="cpu", help="where the learner runs (cpu, cuda, cuda:1...)")
+    parser.add_argument(
+        "--precision", default="fp32", choices=("fp32", "bf16", "auto"),
+        help="optim.precision of the learner; bf16 also times the fp32 learner, interleaved (fp32_* keys)",
+    )
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     device = torch.device(args.device)
+    precision = LearnerPrecision.from_setting(args.precision, device)
 
-    learners = {"": _Learner(args.fused_qvalue, args.fused_adam, args.batch, device, args.fused, args.meta_gradient)}
+    learners = {"": _Learner(args.fused_qvalue, args.fused_adam, args.batch, device, args.fused, args.meta_gradient,
+                             precision)}
     steps = {"": ("plain", "csirl", "sequential")}
+    if precision.dtype != torch.float32:  # the same learner (same seed) in float32
+        learners["fp32_"] = _Learner(args.fused_qvalue, args.fused_adam, args.batch, device, args.fused,
+                                     args.meta_gradient)
+        steps["fp32_"] = ("plain", "csirl")
     if args.reference:
         learners["reference_"] = _Learner(False, args.fused_adam, args.batch, device, meta_gradient=args.meta_gradient)
         steps["reference_"] = steps[""]
@@ -222,6 +245,8 @@ def main() -> None:
         "fused_qvalue": learners[""].sac.fused_qvalue,
         "fused_losses": learners[""].sac.fused,
         "meta_gradient": args.meta_gradient,
+        "precision": precision.name,
+        "cpu": torch.cpu.get_capabilities().get("cpu_name") if device.type == "cpu" else None,
     }
     for prefix in learners:
         result.update(_summary(prefix, times[prefix]))
@@ -229,6 +254,10 @@ def main() -> None:
         for name, step in (("sac_update", "plain"), ("csirl_iteration", "csirl")):
             pairs = zip(times[""][step], times["reference_"][step])
             result[f"{name}_speedup"] = round(statistics.median(ref / new for new, ref in pairs), 3)
+    if "fp32_" in learners:
+        for name, step in (("sac", "plain"), ("csirl", "csirl")):
+            pairs = zip(times[""][step], times["fp32_"][step])
+            result[f"bf16_speedup_{name}"] = round(statistics.median(ref / new for new, ref in pairs), 3)
     if against is not None:
         pairs = zip(times[""]["csirl"], times["against_"]["csirl"])
         result[f"{args.meta_gradient}_over_{against}"] = round(statistics.median(new / old for new, old in pairs), 3)

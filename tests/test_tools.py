@@ -14,7 +14,7 @@ SCRIPTS = sorted(name for name in os.listdir(TOOLS) if name.endswith(".py") and 
 
 
 def test_the_analysis_scripts_live_in_tools_and_recipes_holds_what_users_run():
-    assert SCRIPTS == ["locomotion_probe.py", "meta_gradient_balance.py", "policy_outcomes.py",
+    assert SCRIPTS == ["compare_runs.py", "locomotion_probe.py", "meta_gradient_balance.py", "policy_outcomes.py",
                        "record_runs.py", "robotics_outcomes.py", "summarize_runs.py", "termination_probe.py"]
     assert not set(SCRIPTS) & set(os.listdir(os.path.join(ROOT, "recipes")))
 
@@ -26,3 +26,25 @@ def test_a_tool_runs_from_another_directory(script, tmp_path):
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.startswith(f"usage: {script}")
+
+
+def test_compare_runs_sets_two_seed_sets_side_by_side_with_welchs_test(capsys):
+    """The recorded CSIRL and CSIRL-B runs on merge: each side's mean over its 3 seeds, Welch's t of B - A."""
+    import json
+
+    import compare_runs
+
+    from torchrl_csirl.launch.summaries import find_summaries, welch_test
+
+    runs = os.path.join(ROOT, "docs", "runs")
+    first = [os.path.join(runs, "csirl", f"merge-csirl-s{s}") for s in range(3)]
+    second = [os.path.join(runs, "csirl-b", f"merge-b-s{s}") for s in range(3)]
+    result = compare_runs.main([*first, "--against", *second, "--labels", "csirl", "csirl-b",
+                                "--metrics", "normalized_accomplish_rate"])
+    last, table = capsys.readouterr()
+    row = result["rows"][0]
+    values = [[json.load(open(p))["normalized_accomplish_rate"] for p in find_summaries(side)] for side in (first, second)]
+    assert row["n"] == [3, 3] and row["methods"] == ["csirl", "csirl-b"]
+    assert row["first"]["mean"] == pytest.approx(sum(values[0]) / 3)
+    assert row["test"]["t"] == pytest.approx(welch_test(values[1], values[0])["t"])
+    assert "| merge" in table.splitlines()[-1] and json.loads(last.splitlines()[-1])["labels"] == ["csirl", "csirl-b"]

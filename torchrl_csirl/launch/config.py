@@ -169,6 +169,16 @@ class OptimConfig:
     utd_ratio: float = option(0.5, above=0.0, help="updates per collected frame")
     tau: float = option(0.005, above=0.0, below=1.0, help="Polyak factor of the target critics")
     max_grad_norm: Optional[float] = option(None, above=0.0, help="clip the gradient norm (null: no clipping)")
+    precision: str = option(
+        "fp32", choices=lambda: _precisions(),
+        help="the learner's matmuls: fp32, bf16 (bfloat16 hidden layers, float32 weights, outputs and losses; "
+             "needs native bf16) or auto (bf16 where native); docs/performance.md#bfloat16")
+
+
+def _precisions() -> tuple[str, ...]:
+    from torchrl_csirl.modules.precision import PRECISIONS  # torch stays out of the configuration's import
+
+    return PRECISIONS
 
 
 @dataclass

@@ -52,7 +52,12 @@ from torchrl_csirl.launch.config import (
 from torchrl_csirl.launch.registry import register_recipe
 from torchrl_csirl.launch.robotics import RoboticsExpertConfig, RoboticsSections, check_driving_task
 from torchrl_csirl.launch.run import ExpertDataError, resolve_device
-from torchrl_csirl.modules import REWARD_ACTIVATIONS, expert_reference_states
+from torchrl_csirl.modules import (
+    REWARD_ACTIVATIONS,
+    LearnerPrecision,
+    PrecisionUnsupported,
+    expert_reference_states,
+)
 from torchrl_csirl.objectives import CSIRL_DEFAULTS, ActorBehaviourCloning, CSIRLLearner, make_csirl_learner
 from torchrl_csirl.objectives.meta_reward import GRADIENT_BALANCES, META_GRADIENTS
 from torchrl_csirl.trainers import MetaRewardUpdate, SACUpdate, SubgoalSelectionHook
@@ -146,7 +151,7 @@ def load_config(overrides: list[str] | None = None) -> DictConfig:
     check_driving_task(overrides, "recipes/csirl_robotics.py")
     cfg = config_lib.load_config(CSIRLHighwayConfig, overrides, CONFIG_DIR)
     check_collector(cfg.collector)
-    resolve_device(cfg.device)
+    learner_precision(cfg)
     return cfg
 
 
@@ -154,8 +159,21 @@ def load_run_config(run_dir: str, overrides: list[str] | None = None) -> DictCon
     """The configuration saved in ``run_dir/config.yaml``, updated by ``overrides`` (resume)."""
     cfg = config_lib.load_run_config(CSIRLHighwayConfig, run_dir, overrides)
     check_collector(cfg.collector)
-    resolve_device(cfg.device)
+    learner_precision(cfg)
     return cfg
+
+
+def learner_precision(cfg: DictConfig) -> LearnerPrecision:
+    """``optim.precision`` on ``device`` (:class:`~torchrl_csirl.modules.LearnerPrecision`).
+
+    Raises:
+        ConfigError: one line, for ``bf16`` on a device without native bfloat16 matmuls.
+    """
+    device = resolve_device(cfg.device)
+    try:
+        return LearnerPrecision.from_setting(cfg.optim.precision, device)
+    except PrecisionUnsupported as err:
+        raise ConfigError(str(err)) from None
 
 
 register_recipe(("csirl", "csirl-b"), load_config)
@@ -256,7 +274,8 @@ def make_update_step(cfg: DictConfig, modules: CSIRLLearner, optimizers: dict, o
                      expert: TensorDictReplayBuffer) -> SACUpdate | MetaRewardUpdate:
     """CSIRL's update: a joint SAC + meta-gradient step every ``csirl.meta_every`` updates; CSIRL-B's: SAC."""
     sac_update = SACUpdate(modules.sac, optimizers["optim_sac"], modules.target_updater, cfg.optim.max_grad_norm,
-                           sample=make_sampler(cfg, online, expert), actor_bc=make_actor_bc(cfg, modules, expert))
+                           sample=make_sampler(cfg, online, expert), actor_bc=make_actor_bc(cfg, modules, expert),
+                           precision=learner_precision(cfg))
     if modules.meta is None:
         return sac_update
     return MetaRewardUpdate(modules.meta, sac_update, optimizers["optim_reward"], expert,

@@ -22,6 +22,7 @@ from torchrl_csirl.modules.features import (
 )
 from torchrl_csirl.modules.fused_actor import FusedTanhNormalActor, fused_tanh_normal_actor
 from torchrl_csirl.modules.lane_features import LaneFeatures
+from torchrl_csirl.modules.precision import LearnerPrecision, PrecisionUnsupported, has_native_bf16
 from torchrl_csirl.modules.reward import (
     REWARD_ACTIVATIONS,
     ExpertCenteredReward,
@@ -38,11 +39,14 @@ __all__ = [
     "FusedCriticEnsemble",
     "FusedTanhNormalActor",
     "LaneFeatures",
+    "LearnerPrecision",
     "MaskedReLU",
     "MeanActionGaussianNoise",
+    "PrecisionUnsupported",
     "REWARD_ACTIVATIONS",
     "fused_critic_ensemble",
     "fused_tanh_normal_actor",
+    "has_native_bf16",
     "load_policy",
     "expert_reference_states",
     "make_actor",

@@ -9,6 +9,8 @@ from torch import nn
 from torchrl.data import Bounded
 from torchrl.modules import MLP, ProbabilisticActor, TanhNormal
 
+from torchrl_csirl.modules.precision import mlp_forward
+
 __all__ = ["BoundedLogStdNormalParams", "ConcatMLP", "MaskedReLU", "make_actor", "make_qvalue", "masked_relu"]
 
 
@@ -41,6 +43,8 @@ class BoundedLogStdNormalParams(nn.Module):
         self.log_std_max = float(log_std_max)
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        if x.dtype in (torch.bfloat16, torch.float16):  # a stock MLP under autocast: the head in float32
+            x = x.float()
         loc, log_std = x.chunk(2, dim=-1)
         half_range = 0.5 * (self.log_std_max - self.log_std_min)
         log_std = self.log_std_min + half_range * (torch.tanh(log_std) + 1.0)
@@ -244,7 +248,7 @@ class ConcatMLP(nn.Module):
     def forward(self, *inputs: torch.Tensor) -> torch.Tensor:
         if self.input_features is not None:
             inputs = (self.input_features(inputs[0]), *inputs[1:])
-        return self.mlp(torch.cat(inputs, dim=-1))
+        return mlp_forward(self.mlp, torch.cat(inputs, dim=-1))
 
 
 def make_qvalue(

@@ -20,6 +20,7 @@ from tensordict.utils import NestedKey
 from torch import nn
 
 from torchrl_csirl.modules.actor_critic import ConcatMLP, MaskedReLU
+from torchrl_csirl.modules.precision import cast_weight, low_precision_dtype
 
 __all__ = ["FusedCriticEnsemble", "fused_critic_ensemble", "mlp_layer_keys", "parameter_free"]
 
@@ -101,6 +102,9 @@ class FusedCriticEnsemble:
         ``activations``, if given, receives the detached ``(pre-activation, output)`` pair of every
         hidden layer, which :meth:`jvp` can reuse instead of running the forward pass again.
         """
+        low = low_precision_dtype(x)
+        if low is not None:
+            return self._values_low_precision(x, params, low, activations)
         batch_shape = x.shape[:-1]
         x = x.reshape(-1, x.shape[-1])
         h = None
@@ -117,6 +121,37 @@ class FusedCriticEnsemble:
                     activations.append((z.detach(), h.detach()))
         return h.reshape(h.shape[0], *batch_shape, h.shape[-1])
 
+    def _values_low_precision(
+        self, x: torch.Tensor, params: TensorDictBase, dtype: torch.dtype,
+        activations: list[tuple[torch.Tensor, torch.Tensor]] | None,
+    ) -> torch.Tensor:
+        """:meth:`values` under low-precision autocast (:mod:`~torchrl_csirl.modules.precision`): the
+        hidden layers in ``dtype`` with the bias fused into the matmul, the output layer in float32."""
+        batch_shape = x.shape[:-1]
+        last = len(self.linear_keys) - 1
+        with torch.autocast(x.device.type, enabled=False):
+            h = x.reshape(-1, x.shape[-1]).to(dtype)
+            for index, (weight_key, bias_key) in enumerate(self.linear_keys):
+                weight = params.get(weight_key)
+                bias = None if bias_key is None else params.get(bias_key)
+                if index == last:
+                    h = h.float()
+                else:
+                    weight = cast_weight(weight, dtype)
+                    bias = None if bias is None else cast_weight(bias, dtype)
+                if index == 0:
+                    h = h.expand(weight.shape[0], *h.shape)
+                if bias is None:
+                    h = torch.bmm(h, weight.transpose(1, 2))
+                else:
+                    h = torch.baddbmm(bias.unsqueeze(1), h, weight.transpose(1, 2))
+                if index < len(self.activations):
+                    z = h
+                    h = self.activations[index](h)
+                    if activations is not None:
+                        activations.append((z.detach().float(), h.detach().float()))
+        return h.reshape(h.shape[0], *batch_shape, h.shape[-1])
+
     def jvp(
         self,
         x: torch.Tensor,
@@ -128,7 +163,8 @@ class FusedCriticEnsemble:
 
         ``J_phi Q_k(x; phi_k) . t_k`` for every critic ``k``: the linear layers by hand
         (``dz = h dW^T + dh W^T + db``), the activations' derivatives by their masks (ReLU) or
-        :func:`torch.func.jvp`. Nothing is differentiable: the result is computed without a graph.
+        :func:`torch.func.jvp`. Nothing is differentiable: the result is computed without a graph, in
+        float32 even under autocast (:mod:`~torchrl_csirl.modules.precision`).
 
         Args:
             x (Tensor): shared input ``[*B, D]``.
@@ -153,7 +189,7 @@ class FusedCriticEnsemble:
             >>> q.shape == t.shape == (3, 5, 1)
             True
         """
-        with torch.no_grad():
+        with torch.no_grad(), torch.autocast(x.device.type, enabled=False):
             batch_shape = x.shape[:-1]
             x = x.reshape(-1, x.shape[-1])
             h = dh = None

@@ -25,6 +25,7 @@ from torchrl.modules import ProbabilisticActor, TanhNormal
 from torchrl_csirl._compat import safe_tanh as _torchrl_safe_tanh
 from torchrl_csirl.modules.actor_critic import BoundedLogStdNormalParams, functorch_transforms_active
 from torchrl_csirl.modules.ensemble import mlp_layer_keys, parameter_free
+from torchrl_csirl.modules.precision import cast_weight, low_precision_dtype
 
 __all__ = ["FusedTanhNormalActor", "fused_tanh_normal_actor"]
 
@@ -114,12 +115,30 @@ class FusedTanhNormalActor:
     def dist_params(self, observation: torch.Tensor, params: TensorDictBase) -> tuple[torch.Tensor, torch.Tensor]:
         """``(loc, scale)`` of the pre-tanh Gaussian for ``observation`` ``[*B, obs]``."""
         h = observation if self.input_features is None else self.input_features(observation)
+        low = low_precision_dtype(h)
+        if low is not None:
+            return self.head(self._hidden_low_precision(h, params, low))
         for index, (weight_key, bias_key) in enumerate(self.linear_keys):
             bias = None if bias_key is None else params.get(bias_key)
             h = F.linear(h, params.get(weight_key), bias)
             if index < len(self.activations):
                 h = self.activations[index](h)
         return self.head(h)
+
+    def _hidden_low_precision(self, h: torch.Tensor, params: TensorDictBase, dtype: torch.dtype) -> torch.Tensor:
+        """The MLP under low-precision autocast: hidden layers in ``dtype``, the output layer in float32."""
+        last = len(self.linear_keys) - 1
+        with torch.autocast(h.device.type, enabled=False):
+            h = h.to(dtype)
+            for index, (weight_key, bias_key) in enumerate(self.linear_keys):
+                weight = params.get(weight_key)
+                bias = None if bias_key is None else params.get(bias_key)
+                if index == last:
+                    h = F.linear(h.float(), weight, bias)
+                else:
+                    h = F.linear(h, cast_weight(weight, dtype), None if bias is None else cast_weight(bias, dtype))
+                    h = self.activations[index](h)
+        return h
 
     @staticmethod
     def rsample_and_log_prob(loc: torch.Tensor, scale: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

@@ -12,6 +12,7 @@ from torch import nn
 from torchrl.modules import MLP
 
 from torchrl_csirl.modules.actor_critic import _input_size
+from torchrl_csirl.modules.precision import mlp_forward
 
 __all__ = [
     "REWARD_ACTIVATIONS",
@@ -67,7 +68,7 @@ class RewardMLP(nn.Module):
         if self.input_features is not None:
             inputs = (self.input_features(inputs[0]), *inputs[1:])
         x = inputs[0] if len(inputs) == 1 else torch.cat(inputs, dim=-1)
-        return torch.tanh(self.mlp(x))
+        return torch.tanh(mlp_forward(self.mlp, x))
 
 
 def make_reward_network(

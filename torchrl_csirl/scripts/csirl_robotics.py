@@ -30,9 +30,9 @@ from omegaconf import DictConfig
 
 from torchrl_csirl.launch import config as config_lib
 from torchrl_csirl.launch.builders import Run, check_collector
-from torchrl_csirl.launch.csirl import CSIRLRoboticsConfig
+from torchrl_csirl.launch.csirl import CSIRLRoboticsConfig, learner_precision
 from torchrl_csirl.launch.robotics import check_robotics_config, prepare_task
-from torchrl_csirl.launch.run import resolve_device, run_script
+from torchrl_csirl.launch.run import run_script
 from torchrl_csirl.scripts import csirl_highway
 
 __all__ = ["CSIRLRoboticsConfig", "load_config", "load_run_config", "main"]
@@ -40,7 +40,7 @@ __all__ = ["CSIRLRoboticsConfig", "load_config", "load_run_config", "main"]
 
 def _check(cfg: DictConfig, overrides: list[str] | None = None) -> DictConfig:
     check_collector(cfg.collector)
-    resolve_device(cfg.device)
+    learner_precision(cfg)
     return check_robotics_config(cfg, overrides)
 
 

@@ -15,6 +15,7 @@ from tensordict import TensorDictBase
 from torch import nn
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
+from torchrl_csirl.modules.precision import LearnerPrecision
 from torchrl_csirl.trainers.trainer import CSIRLTrainer, check_finite_losses
 
 if TYPE_CHECKING:
@@ -87,6 +88,8 @@ class SACUpdate:
             :meth:`~torchrl_csirl.data.DemonstrationMixer.sample`). Defaults to sampling the
             trainer's online buffer.
         actor_bc: an :class:`ActorBehaviourCloning` term added to the actor loss (None: plain SAC).
+        precision: the matmul precision of the losses' forward pass (``optim.precision``;
+            :class:`~torchrl_csirl.modules.LearnerPrecision`). Defaults to float32.
     """
 
     LOSS_KEYS = ("loss_qvalue", "loss_actor", "loss_alpha")
@@ -95,13 +98,14 @@ class SACUpdate:
     def __init__(self, loss: nn.Module, optimizer: torch.optim.Optimizer, target_updater: Any,
                  max_grad_norm: float | None = None,
                  sample: Callable[[], TensorDictBase] | None = None,
-                 actor_bc: ActorBehaviourCloning | None = None) -> None:
+                 actor_bc: ActorBehaviourCloning | None = None, precision: LearnerPrecision | None = None) -> None:
         self.loss = loss
         self.optimizer = optimizer
         self.target_updater = target_updater
         self.max_grad_norm = max_grad_norm
         self._sample = sample
         self.actor_bc = actor_bc
+        self.precision = precision if precision is not None else LearnerPrecision()
 
     def sample(self, trainer: CSIRLTrainer) -> TensorDictBase:
         """A training batch: ``sample()`` if given, else one of the trainer's online buffer."""
@@ -122,7 +126,8 @@ class SACUpdate:
 
     def __call__(self, trainer: CSIRLTrainer) -> dict[str, torch.Tensor]:
         batch = self.sample(trainer)
-        out = self.loss(batch)
+        with self.precision.autocast():
+            out = self.loss(batch)
         losses, logs = self.with_actor_bc({key: out.get(key) for key in self.LOSS_KEYS if key in out.keys()})
         self.step(losses, trainer)
         return {**{key: value.detach() for key, value in losses.items()}, **_detached(out, self.LOG_KEYS), **logs,
@@ -165,7 +170,9 @@ class MetaRewardUpdate:
         if trainer.updates % self.meta_every:
             return self.sac_update(trainer)
         online = self.sac_update.sample(trainer)
-        out = self.meta_loss(online, self.expert_buffer.sample(), regularizer=trainer.online_buffer.sample())
+        expert, regularizer = self.expert_buffer.sample(), trainer.online_buffer.sample()
+        with self.sac_update.precision.autocast():  # the SAC update's precision
+            out = self.meta_loss(online, expert, regularizer=regularizer)
         sac_losses, logs = self.sac_update.with_actor_bc(
             {key: out.get(key) for key in SACUpdate.LOSS_KEYS if key in out.keys()})
         meta = out.get("loss_meta")
