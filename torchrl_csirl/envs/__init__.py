@@ -20,7 +20,9 @@ Importing this package registers the gymnasium ids ``csirl/highway-fast-v0``,
 from __future__ import annotations
 
 from torchrl_csirl._compat import gym_env_of
-from torchrl_csirl.envs.gymnasium_task import make_gymnasium_env, make_gymnasium_task
+from torchrl_csirl.envs.gymnasium_env import make_gymnasium_env
+from torchrl_csirl.envs.gymnasium_task import make_gymnasium_task
+from torchrl_csirl.envs.info import FAILURE_KEYS, INFO_KEYS, info_spec
 from torchrl_csirl.envs.locomotion import LOCOMOTION_TASKS, LocomotionExpert, make_locomotion_env
 from torchrl_csirl.envs.metrics import (
     accomplish_rate,
@@ -43,7 +45,7 @@ from torchrl_csirl.envs.scenarios import (
     scenario_config_overrides,
 )
 from torchrl_csirl.envs.spec import TaskSpec
-from torchrl_csirl.envs.torchrl_env import FAILURE_KEYS, INFO_KEYS, info_spec, make_env, make_serial_env
+from torchrl_csirl.envs.torchrl_env import make_env, make_serial_env
 
 register_scenarios()
 

@@ -36,6 +36,7 @@ import numpy as np
 import torch
 
 from torchrl_csirl._paths import EXPERTS_DIR
+from torchrl_csirl.envs.gymnasium_env import make_gymnasium_env
 from torchrl_csirl.envs.spec import TaskSpec
 
 __all__ = ["LOCOMOTION_GYM_IDS", "LOCOMOTION_MAKE_KWARGS", "LOCOMOTION_TASKS", "LocomotionExpert", "expert_policy_path",
@@ -87,8 +88,6 @@ def make_locomotion_env(name: str, device: torch.device | str = "cpu", **make_kw
         >>> env.observation_spec["observation"].shape, env.action_spec.shape
         (torch.Size([18]), torch.Size([6]))
     """
-    from torchrl_csirl.envs.gymnasium_task import make_gymnasium_env
-
     if name not in LOCOMOTION_GYM_IDS:
         raise ValueError(f"{name!r} is not a locomotion task; expected one of {sorted(LOCOMOTION_GYM_IDS)}.")
     if make_kwargs.get("render_mode") is not None and "camera_id" not in make_kwargs:

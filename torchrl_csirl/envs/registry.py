@@ -23,7 +23,7 @@ from functools import partial
 from torchrl.envs import EnvBase
 
 from torchrl_csirl.envs.locomotion import locomotion_factories
-from torchrl_csirl.envs.scenarios import TASKS
+from torchrl_csirl.envs.scenarios import TASKS, make_scenario_env
 from torchrl_csirl.envs.spec import TaskSpec
 
 __all__ = ["env_factory", "import_task_module", "register_task", "registered_factory", "task_names"]
@@ -90,8 +90,9 @@ def registered_factory(name: str) -> Callable[..., EnvBase] | None:
 def env_factory(name: str | TaskSpec, **overrides) -> Callable[[], EnvBase]:
     """A picklable zero-argument factory of the task's TorchRL environment, for worker processes.
 
-    Built-in tasks give ``partial(make_env, name, **overrides)`` (resolved by name in the worker);
-    registered ones their own factory, so a spawned worker needs no registry. After
+    The tasks with a gymnasium id of their own (driving, robotics) give
+    ``partial(make_scenario_env, name, **overrides)`` (:func:`~torchrl_csirl.envs.scenarios.make_scenario_env`,
+    resolved by name in the worker); registered ones their own factory, so a spawned worker needs no registry. After
     :func:`import_task_module`, the factory imports those modules first in the worker (a module that
     registers a gymnasium id must have run there before ``gymnasium.make`` finds the id).
 
@@ -99,12 +100,10 @@ def env_factory(name: str | TaskSpec, **overrides) -> Callable[[], EnvBase]:
         >>> env_factory("merge")().batch_size
         torch.Size([])
     """
-    from torchrl_csirl.envs.torchrl_env import make_env
-
     name = name.name if isinstance(name, TaskSpec) else name
     factory = registered_factory(name)
     if factory is None:
-        factory = partial(make_env, name, **overrides)
+        factory = partial(make_scenario_env, name, **overrides)
     elif overrides:
         factory = partial(factory, **overrides)
     if not _TASK_MODULES:

@@ -15,6 +15,9 @@ from typing import Mapping
 
 import gymnasium as gym
 import numpy as np
+import torch
+from torchrl.envs import EnvBase
+from torchrl.envs.libs.gym import GymEnv
 
 from torchrl_csirl.envs.driving import (
     CSIRLHighwayEnv,
@@ -22,6 +25,7 @@ from torchrl_csirl.envs.driving import (
     CSIRLMergeEnv,
     CSIRLRoundaboutEnv,
 )
+from torchrl_csirl.envs.info import INFO_KEYS, ScenarioInfoReader, info_spec
 from torchrl_csirl.envs.locomotion import LOCOMOTION_TASKS
 from torchrl_csirl.envs.robotics.ant_goal import ANT_GOAL_SPEC
 from torchrl_csirl.envs.robotics.tasks import ROBOTICS_TASKS
@@ -32,6 +36,7 @@ __all__ = [
     "ScenarioSpec",
     "TASKS",
     "make_gym_env",
+    "make_scenario_env",
     "register_scenarios",
     "resolve_scenario",
     "sample_lane_centres",
@@ -289,6 +294,33 @@ def make_gym_env(name: str, render_mode: str | None = None, **config_overrides) 
     register_scenarios()
     env = gym.make(spec.gym_id, **spec.gym_make_kwargs(render_mode, **config_overrides))
     return env.unwrapped
+
+
+def make_scenario_env(
+    name: str | TaskSpec,
+    seed: int | None = None,
+    device: torch.device | str = "cpu",
+    info_keys=INFO_KEYS,
+    **overrides,
+) -> EnvBase:
+    """A task of :data:`TASKS` that has a ``csirl/<name>-v0`` gymnasium id (the driving scenarios, the
+    robotics tasks, ``ant-goal``) as a TorchRL :class:`~torchrl.envs.libs.gym.GymEnv`, its info entries
+    read into the TensorDict with fixed specs (:func:`~torchrl_csirl.envs.info.info_spec`).
+
+    What :func:`~torchrl_csirl.envs.make_env` builds for a task without a registered factory; the
+    arguments are :func:`~torchrl_csirl.envs.make_env`'s.
+
+    Examples:
+        >>> make_scenario_env("merge", seed=0).rollout(2, break_when_any_done=False)["next", "distance_to_finish"].shape
+        torch.Size([2])
+    """
+    spec = resolve_scenario(name)
+    register_scenarios()
+    env = GymEnv(spec.gym_id, device=device, **spec.gym_make_kwargs(**overrides))
+    env.set_info_dict_reader(ScenarioInfoReader(list(info_keys), spec=info_spec(info_keys)))
+    if seed is not None:
+        env.set_seed(seed)
+    return env
 
 
 def scenario_config_overrides(name: str | ScenarioSpec, **config_overrides) -> dict:

@@ -1,68 +1,21 @@
-"""TorchRL environments for the CSIRL tasks (driving scenarios and robotics tasks)."""
+"""TorchRL environments for the CSIRL tasks, by name: the built-in ones and those of :func:`~torchrl_csirl.envs.register_task`.
+
+The info entries (:data:`INFO_KEYS`, :func:`info_spec`, :class:`ScenarioInfoReader`) live in
+:mod:`torchrl_csirl.envs.info` and are importable from here too.
+"""
 from __future__ import annotations
 
 from collections.abc import Callable
 from functools import partial
 
 import torch
-from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase, SerialEnv
-from torchrl.envs.gym_like import default_info_dict_reader
-from torchrl.envs.libs.gym import GymEnv
 
+from torchrl_csirl.envs.info import FAILURE_KEYS, INFO_KEYS, ScenarioInfoReader, info_spec
 from torchrl_csirl.envs.registry import env_factory, registered_factory
-from torchrl_csirl.envs.scenarios import register_scenarios, resolve_scenario
+from torchrl_csirl.envs.scenarios import make_scenario_env, resolve_scenario
 
 __all__ = ["FAILURE_KEYS", "INFO_KEYS", "ScenarioInfoReader", "info_spec", "make_env", "make_serial_env"]
-
-#: info entries read into the TensorDict (root at reset, under "next" after a step)
-INFO_KEYS: tuple[str, ...] = (
-    "distance_to_finish",
-    "progress",
-    "crashed",
-    "offroad",
-    "arrived",
-    "success",
-)
-
-#: the info entries that mark a failed termination (a crash, leaving the road)
-FAILURE_KEYS: tuple[str, ...] = ("crashed", "offroad")
-
-
-class ScenarioInfoReader(default_info_dict_reader):
-    """Info reader writing the scenario entries with the dtypes of their specs.
-
-    TorchRL's default reader expects numpy values; the scenarios report Python floats/bools.
-    """
-
-    def __call__(self, info_dict: dict, tensordict):
-        spec = self.info_spec
-        for key in self.keys:
-            if key in info_dict:
-                value = torch.as_tensor(info_dict[key], dtype=spec[key].dtype)
-            else:
-                value = spec[key].zero()
-            tensordict.set(key, value.to(tensordict.device) if tensordict.device else value)
-        return tensordict
-
-
-def info_spec(keys=INFO_KEYS) -> Composite:
-    """Specs of the scenario info entries (float32 distance/progress, bool flags).
-
-    Examples:
-        >>> info_spec()["distance_to_finish"].dtype
-        torch.float32
-    """
-    specs = {
-        "distance_to_finish": Unbounded((), dtype=torch.float32),
-        "progress": Bounded(0.0, 1.0, (), dtype=torch.float32),
-    }
-    for flag in ("crashed", "offroad", "arrived", "success"):
-        specs[flag] = Categorical(2, (), dtype=torch.bool)
-    unknown = set(keys) - set(specs)
-    if unknown:
-        raise ValueError(f"Unknown info keys {sorted(unknown)}; expected a subset of {INFO_KEYS}.")
-    return Composite({k: specs[k] for k in keys}, shape=())
 
 
 def make_env(
@@ -112,13 +65,7 @@ def make_env(
         if seed is not None:
             env.set_seed(seed)
         return env
-    register_scenarios()
-    env = GymEnv(spec.gym_id, device=device, **spec.gym_make_kwargs(**overrides))
-    reader = ScenarioInfoReader(list(info_keys), spec=info_spec(info_keys))
-    env.set_info_dict_reader(reader)
-    if seed is not None:
-        env.set_seed(seed)
-    return env
+    return make_scenario_env(spec, seed, device, info_keys, **overrides)
 
 
 def make_serial_env(name: str | Callable[[], EnvBase], num_envs: int, seed: int | None = None, **kwargs) -> EnvBase:
