@@ -30,12 +30,15 @@ def _loss(**kwargs):
 
 
 def test_defaults():
+    """The recipes' (CSIRL_DEFAULTS): SAC's automatic temperature from 0.01 (issue 89; the paper fixes it)."""
     loss = _loss()
     assert loss.num_qvalue_nets == 5
-    assert loss.fixed_alpha and math.isclose(loss._alpha.item(), 0.01, rel_tol=1e-6)
+    assert not loss.fixed_alpha and math.isclose(loss._alpha.item(), 0.01, rel_tol=1e-6)
     assert math.isclose(loss.value_estimator.gamma.item(), 0.99, rel_tol=1e-6)
     assert loss.loss_function == "l2"
-    assert not any(p is loss.log_alpha for p in loss.parameters())
+    assert any(p is loss.log_alpha for p in loss.parameters())
+    fixed = _loss(fixed_alpha=True)  # the paper's
+    assert fixed.fixed_alpha and not any(p is fixed.log_alpha for p in fixed.parameters())
 
 
 def test_critics_are_independently_initialised():
@@ -230,9 +233,12 @@ def test_training_step_with_soft_update():
         torch.testing.assert_close(value, expected)
 
 
-def _assert_same(a: torch.Tensor, b: torch.Tensor, device: str) -> None:
-    """Bit for bit on the CPU; within float32 rounding on a GPU (batched and vmapped products use different kernels)."""
-    if device == "cpu":
+def _assert_same(a: torch.Tensor | None, b: torch.Tensor | None, device: str) -> None:
+    """Bit for bit on the CPU; within float32 rounding on a GPU (batched and vmapped products use different kernels);
+    ``None`` (no gradient, e.g. the temperature's outside ``loss_alpha``) on both sides."""
+    if a is None or b is None:
+        assert a is None and b is None
+    elif device == "cpu":
         assert torch.equal(a, b)
     else:
         torch.testing.assert_close(a, b, rtol=1e-5, atol=1e-6)

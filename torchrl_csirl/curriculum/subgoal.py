@@ -22,7 +22,8 @@ from tensordict.nn import TensorDictModuleBase
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
 from torchrl_csirl._validation import expert_observation_tensor, validate_subgoal
-from torchrl_csirl.objectives.ensemble_sac import _DISPERSIONS, qvalue_dispersion
+from torchrl_csirl.hyperparameters import CSIRL_DEFAULTS, DISPERSIONS
+from torchrl_csirl.objectives.ensemble_sac import qvalue_dispersion
 
 #: The paper's decision uncertainty ``U`` (Eq. 6): the ensemble's dispersion, one implementation.
 critic_uncertainty = qvalue_dispersion
@@ -41,7 +42,7 @@ class _HasQValues(Protocol):
 
 
 def scan_subgoal(
-    uncertainty: torch.Tensor, subgoal: int, delta: float = 5.0, sigma: float = 0.2
+    uncertainty: torch.Tensor, subgoal: int, delta: float = CSIRL_DEFAULTS.delta, sigma: float = CSIRL_DEFAULTS.sigma
 ) -> tuple[int, torch.Tensor]:
     """The soft-average scan selecting the next subgoal.
 
@@ -153,9 +154,9 @@ class SubgoalCurriculum:
         loss: _HasQValues,
         policy: TensorDictModuleBase,
         *,
-        delta: float = 5.0,
-        sigma: float = 0.2,
-        dispersion: str = "variance",
+        delta: float = CSIRL_DEFAULTS.delta,
+        sigma: float = CSIRL_DEFAULTS.sigma,
+        dispersion: str = CSIRL_DEFAULTS.dispersion,
         initial_subgoal: int | None = None,
         initial_range: tuple[int, int] = (1, 5),
         seed: int = 0,
@@ -167,8 +168,8 @@ class SubgoalCurriculum:
             raise ValueError(f"expert observations must have shape [L, D], got {tuple(expert.shape)}.")
         if not callable(getattr(loss, "qvalues", None)):
             raise TypeError(f"loss must provide a qvalues(td) method, got {type(loss).__name__}.")
-        if dispersion not in _DISPERSIONS:
-            raise ValueError(f"dispersion must be one of {_DISPERSIONS}, got {dispersion!r}.")
+        if dispersion not in DISPERSIONS:
+            raise ValueError(f"dispersion must be one of {DISPERSIONS}, got {dispersion!r}.")
         if not 0.0 <= sigma <= 1.0:
             raise ValueError(f"sigma must be in [0, 1], got {sigma}.")
         if delta <= 0:

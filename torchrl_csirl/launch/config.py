@@ -32,11 +32,14 @@ import difflib
 import os
 import types
 import typing
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Optional, Union
 
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
+
+from torchrl_csirl._options import option
+from torchrl_csirl.hyperparameters import CSIRLOptimHyperparameters
 
 __all__ = [
     "CheckpointConfig",
@@ -68,32 +71,6 @@ DEVICES = ("cpu", "cuda", "auto")
 
 class ConfigError(ValueError):
     """A bad configuration key or value (one line: the key, the value, what is allowed)."""
-
-
-# ---------------------------------------------------------------------------------------- declaring
-def option(default: Any, *, choices: tuple | None = None, minimum: float | None = None,
-           above: float | None = None, below: float | None = None, help: str = "") -> Any:
-    """A schema leaf: its default and what values :func:`validate` accepts.
-
-    Args:
-        default: the default value (its type comes from the field's annotation).
-        choices: the allowed values, or a callable returning them when a value is checked (a
-            registry that grows at run time).
-        minimum: the smallest allowed value (inclusive).
-        above: values must be strictly greater.
-        below: values must be strictly smaller.
-        help: one line shown by :func:`describe` (``--help``).
-
-    Examples:
-        >>> from dataclasses import fields
-        >>> @dataclass
-        ... class C:
-        ...     k: int = option(2, minimum=1, help="environments")
-        >>> fields(C)[0].metadata["minimum"], C().k
-        (1, 2)
-    """
-    metadata = {"choices": choices, "minimum": minimum, "above": above, "below": below, "help": help}
-    return field(default=default, metadata=metadata)
 
 
 # ---------------------------------------------------------------------------------------- shared sections
@@ -163,22 +140,10 @@ class ModelConfig:
 
 
 @dataclass
-class OptimConfig:
-    lr: float = option(3.0e-4, above=0.0, help="actor and critics (Adam)")
-    reward_lr: float = option(1.0e-3, above=0.0, help="reward network (Adam)")
-    utd_ratio: float = option(0.5, above=0.0, help="updates per collected frame")
-    tau: float = option(0.005, above=0.0, below=1.0, help="Polyak factor of the target critics")
-    max_grad_norm: Optional[float] = option(None, above=0.0, help="clip the gradient norm (null: no clipping)")
-    precision: str = option(
-        "fp32", choices=lambda: _precisions(),
-        help="the learner's matmuls: fp32, bf16 (bfloat16 hidden layers, float32 weights, outputs and losses; "
-             "needs native bf16) or auto (bf16 where native); docs/performance.md#bfloat16")
-
-
-def _precisions() -> tuple[str, ...]:
-    from torchrl_csirl.modules.precision import PRECISIONS  # torch stays out of the configuration's import
-
-    return PRECISIONS
+class OptimConfig(CSIRLOptimHyperparameters):
+    """``optim`` of CSIRL's recipes: the learner's optimisation hyperparameters, declared in
+    :class:`~torchrl_csirl.hyperparameters.CSIRLOptimHyperparameters` (:func:`~torchrl_csirl.objectives.make_csirl_learner`'s
+    and :meth:`~torchrl_csirl.objectives.CSIRLLearner.optimizers`' defaults)."""
 
 
 @dataclass

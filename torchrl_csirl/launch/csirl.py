@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
-from typing import Any, Callable, Optional
+from typing import Any, Callable
 
 import torch
 from omegaconf import DictConfig
@@ -26,6 +26,7 @@ from torchrl.objectives import BCLoss
 from torchrl_csirl.curriculum import SubgoalCurriculum
 from torchrl_csirl.data import DemonstrationMixer, ExpertDemonstrations
 from torchrl_csirl.envs import FAILURE_KEYS, SCENARIOS, ScenarioSpec, resolve_scenario  # noqa: F401 - SCENARIOS: used by tests
+from torchrl_csirl.hyperparameters import CSIRLHyperparameters
 from torchrl_csirl.launch import config as config_lib
 from torchrl_csirl.launch.builders import (
     Run,
@@ -52,14 +53,8 @@ from torchrl_csirl.launch.config import (
 from torchrl_csirl.launch.registry import register_recipe
 from torchrl_csirl.launch.robotics import RoboticsExpertConfig, RoboticsSections, check_driving_task
 from torchrl_csirl.launch.run import ExpertDataError, resolve_device
-from torchrl_csirl.modules import (
-    REWARD_ACTIVATIONS,
-    LearnerPrecision,
-    PrecisionUnsupported,
-    expert_reference_states,
-)
-from torchrl_csirl.objectives import CSIRL_DEFAULTS, ActorBehaviourCloning, CSIRLLearner, make_csirl_learner
-from torchrl_csirl.objectives.meta_reward import GRADIENT_BALANCES, META_GRADIENTS
+from torchrl_csirl.modules import LearnerPrecision, PrecisionUnsupported, expert_reference_states
+from torchrl_csirl.objectives import ActorBehaviourCloning, CSIRLLearner, make_csirl_learner
 from torchrl_csirl.trainers import MetaRewardUpdate, SACUpdate, SubgoalSelectionHook
 from torchrl_csirl.transforms import CombineRewards, IntrinsicReward, SubgoalMatchingReward
 
@@ -71,49 +66,9 @@ CONFIG_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "config", 
 
 # ---------------------------------------------------------------------------------------- config
 @dataclass
-class CSIRLConfig:
-    intrinsic: bool = option(True, help="false: CSIRL-B (matching reward only, no meta-gradient)")
-    fixed_subgoal: bool = option(
-        False, help="true: no curriculum, the subgoal stays at the curriculum trajectory's last state (ablation)")
-    delta: float = option(5.0, above=0.0, help="subgoal threshold on U_i / U_avg")
-    sigma: float = option(0.2, above=0.0, help="soft-average factor")
-    dispersion: str = option(CSIRL_DEFAULTS.dispersion, choices=("variance", "abs_cv"), help="variance (paper) | abs_cv (code)")
-    num_qvalue_nets: int = option(CSIRL_DEFAULTS.num_qvalue_nets, minimum=2, help="critics in the ensemble")
-    updates_per_round: int = option(2000, above=0, help="updates between two subgoal selections (paper: 20000)")
-    meta_every: int = option(2, above=0, help="a meta-gradient step every k updates (paper: 1)")
-    lr_inner: float = option(CSIRL_DEFAULTS.lr_inner, above=0.0, help="inner SGD step of the meta-gradient")
-    meta_scale: float = option(CSIRL_DEFAULTS.meta_scale, above=0.0, help="multiplies the meta-objective")
-    reward_l1_coef: float = option(CSIRL_DEFAULTS.reward_l1_coef, minimum=0.0, help="weight of mean |r_w| in the meta-objective")
-    gradient_balance: str = option(
-        CSIRL_DEFAULTS.gradient_balance, choices=GRADIENT_BALANCES,
-        help="sum: the gradient of the meta-objective (paper); normalized: its imitation and regulariser parts "
-             "each at unit norm, weighted 1 : reward_l1_coef (balanced_meta_gradient)")
-    meta_gradient: str = option(
-        CSIRL_DEFAULTS.meta_gradient, choices=META_GRADIENTS,
-        help="double_backward: through both inner steps; jvp: the inner critic step in closed form (a forward-mode "
-             "pass of the critics; the same gradient up to float rounding)")
-    reward_activation: str = option(
-        CSIRL_DEFAULTS.reward_activation, choices=tuple(REWARD_ACTIVATIONS),
-        help="hidden-layer activation of r_w: relu (paper) or a smooth one whose units cannot die")
-    reward_reference: str = option(
-        "none", choices=("none", "expert"),
-        help="expert: r_w measured against its mean over 256 expert states (no constant shift can be learned; "
-             "ExpertCenteredReward); none: the paper")
-    reward_scale: float = option(CSIRL_DEFAULTS.reward_scale, above=0.0, help="multiplies the expert-centred r_w (reward_reference=expert)")
-    matching_scale: Optional[float] = option(
-        None, above=0.0, help="multiplies the matching potential (null: the scenario's or task's published value)")
-    matching_target: str = option("final", choices=("final", "next", "path"),
-                                  help="final (the paper's text) | next (published code) | path (final's targets, "
-                                       "distances along the expert's path)")
-    matching_features: str = option("position", choices=("ego", "position"),
-                                    help="nearest expert state on: position | ego (the whole ego row: paper, code)")
-    failure_resets_progress: bool = option(
-        False, help="true: a crash or leaving the road gives s' the matching potential of the curriculum's start "
-                    "(the episode pays back its progress); false: the paper")
-    gamma: float = option(CSIRL_DEFAULTS.gamma, above=0.0, below=1.0, help="discount")
-    alpha: float = option(CSIRL_DEFAULTS.alpha_init, above=0.0, help="entropy coefficient (its initial value unless fixed_alpha)")
-    actor_bc_coef: float = option(0.0, minimum=0.0, help="> 0: behavioural cloning on the actor (TD3+BC-style)")
-    fixed_alpha: bool = option(CSIRL_DEFAULTS.fixed_alpha, help="false: SAC's automatic temperature (paper: true)")
+class CSIRLConfig(CSIRLHyperparameters):
+    """The ``csirl`` section: CSIRL's hyperparameters (:class:`~torchrl_csirl.hyperparameters.CSIRLHyperparameters`,
+    declared once there), as the baselines' ``sac`` section is their learner's dataclass."""
 
 
 @dataclass

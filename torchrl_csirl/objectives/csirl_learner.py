@@ -3,6 +3,8 @@ network ``r_w`` and the meta-gradient loss, built from plain arguments.
 
 This is what ``recipes/csirl_highway.py`` builds from its configuration (the ``csirl`` and
 ``optim`` sections); a script of one's own gets the same learner without the recipe's configuration.
+The defaults are the configuration's (:mod:`torchrl_csirl.hyperparameters`; :data:`CSIRL_DEFAULTS` and
+:class:`CSIRLHyperparameters` are importable from here too).
 """
 from __future__ import annotations
 
@@ -14,6 +16,7 @@ from torch import nn
 from torchrl.modules import ProbabilisticActor
 from torchrl.objectives import SoftUpdate
 
+from torchrl_csirl.hyperparameters import CSIRL_DEFAULTS, CSIRL_OPTIM_DEFAULTS, CSIRLHyperparameters
 from torchrl_csirl.modules import (
     ExpertCenteredReward,
     make_actor,
@@ -24,41 +27,6 @@ from torchrl_csirl.objectives.ensemble_sac import EnsembleSACLoss
 from torchrl_csirl.objectives.meta_reward import MetaRewardLoss
 
 __all__ = ["CSIRL_DEFAULTS", "CSIRLHyperparameters", "CSIRLLearner", "make_csirl_learner"]
-
-
-@dataclass(frozen=True)
-class CSIRLHyperparameters:
-    """The learner's hyperparameters with their defaults: the one place they are declared.
-
-    :func:`make_csirl_learner`'s keyword defaults and the run layer's ``csirl`` / ``optim`` schema
-    (:class:`torchrl_csirl.launch.csirl.CSIRLConfig`) both read :data:`CSIRL_DEFAULTS`, so a learner
-    built in Python and one built from a configuration start from the same values. Where the
-    building blocks' own defaults differ (the paper's, e.g. :class:`EnsembleSACLoss`'s
-    ``fixed_alpha=True``), docs/recipes.md tabulates them.
-
-    Examples:
-        >>> CSIRL_DEFAULTS.num_qvalue_nets, CSIRL_DEFAULTS.fixed_alpha, CSIRL_DEFAULTS.hidden
-        (5, False, (256, 256))
-    """
-
-    num_qvalue_nets: int = 5
-    alpha_init: float = 0.01
-    fixed_alpha: bool = False
-    gamma: float = 0.99
-    dispersion: str = "variance"
-    tau: float = 0.005
-    reward_activation: str = "relu"
-    reward_scale: float = 1.0
-    lr_inner: float = 0.01
-    meta_scale: float = 100.0
-    reward_l1_coef: float = 1.0
-    gradient_balance: str = "sum"
-    meta_gradient: str = "double_backward"
-    hidden: tuple[int, ...] = (256, 256)
-
-
-#: the defaults of :func:`make_csirl_learner` and of the recipes' schema
-CSIRL_DEFAULTS = CSIRLHyperparameters()
 
 
 @dataclass
@@ -80,7 +48,8 @@ class CSIRLLearner:
     reward_network: nn.Module
     meta: MetaRewardLoss | None
 
-    def optimizers(self, lr: float = 3e-4, reward_lr: float = 1e-3) -> dict[str, torch.optim.Optimizer]:
+    def optimizers(self, lr: float = CSIRL_OPTIM_DEFAULTS.lr,
+                   reward_lr: float = CSIRL_OPTIM_DEFAULTS.reward_lr) -> dict[str, torch.optim.Optimizer]:
         """Adam on the actor and critics (``"optim_sac"``, ``lr``) and on ``r_w`` (``"optim_reward"``, ``reward_lr``)."""
         return {
             "optim_sac": torch.optim.Adam([p for p in self.sac.parameters() if p.requires_grad], lr=lr),
@@ -93,14 +62,14 @@ def make_csirl_learner(
     action_dim: int,
     *,
     input_features: nn.Module | None = None,
-    hidden: Sequence[int] = CSIRL_DEFAULTS.hidden,
+    hidden: Sequence[int] = (256, 256),
     num_qvalue_nets: int = CSIRL_DEFAULTS.num_qvalue_nets,
     alpha_init: float = CSIRL_DEFAULTS.alpha_init,
     fixed_alpha: bool = CSIRL_DEFAULTS.fixed_alpha,
     gamma: float = CSIRL_DEFAULTS.gamma,
     dispersion: str = CSIRL_DEFAULTS.dispersion,
-    tau: float = CSIRL_DEFAULTS.tau,
-    intrinsic: bool = True,
+    tau: float = CSIRL_OPTIM_DEFAULTS.tau,
+    intrinsic: bool = CSIRL_DEFAULTS.intrinsic,
     reward_activation: str = CSIRL_DEFAULTS.reward_activation,
     reward_reference: torch.Tensor | None = None,
     reward_scale: float = CSIRL_DEFAULTS.reward_scale,
@@ -113,8 +82,9 @@ def make_csirl_learner(
 ) -> CSIRLLearner:
     """Builds CSIRL's actor, ensemble-SAC loss, target updater, reward network and meta-gradient loss.
 
-    The defaults are :data:`CSIRL_DEFAULTS`, the recipes' default preset (docs/recipes.md; the
-    paper's values where they differ are ``fixed_alpha=True`` and, in the recipe, ``meta_every=1``).
+    The defaults are :data:`CSIRL_DEFAULTS` and ``CSIRL_OPTIM_DEFAULTS.tau``
+    (:mod:`torchrl_csirl.hyperparameters`), the recipes' default preset (docs/recipes.md; the
+    paper's values where they differ are ``fixed_alpha=True`` and ``meta_every=1``, ``preset=paper``).
     The networks are MLPs of ``hidden`` units (:func:`~torchrl_csirl.modules.make_actor`,
     :func:`~torchrl_csirl.modules.make_qvalue`, :func:`~torchrl_csirl.modules.make_reward_network`).
 

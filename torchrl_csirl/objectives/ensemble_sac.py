@@ -23,12 +23,11 @@ from torchrl_csirl._compat import (
     set_qvalue_ensemble_evaluator,
     vmap_qvalue_networks,
 )
+from torchrl_csirl.hyperparameters import CSIRL_DEFAULTS, DISPERSIONS
 from torchrl_csirl.modules.ensemble import fused_critic_ensemble
 from torchrl_csirl.modules.fused_actor import fused_tanh_normal_actor
 
 __all__ = ["EnsembleSACLoss", "qvalue_dispersion", "reinitialize_module"]
-
-_DISPERSIONS = ("variance", "abs_cv")
 
 check_sac_internals()  # the SACLoss internals overridden below
 
@@ -60,7 +59,7 @@ def reinitialize_module(module: nn.Module) -> nn.Module:
     return module
 
 
-def qvalue_dispersion(qvalues: torch.Tensor, dispersion: str = "variance") -> torch.Tensor:
+def qvalue_dispersion(qvalues: torch.Tensor, dispersion: str = CSIRL_DEFAULTS.dispersion) -> torch.Tensor:
     """Disagreement of an ensemble of Q estimates along dim 0 (CSIRL's uncertainty U).
 
     Args:
@@ -80,8 +79,8 @@ def qvalue_dispersion(qvalues: torch.Tensor, dispersion: str = "variance") -> to
         >>> qvalue_dispersion(q, "abs_cv")
         tensor([0.5000, 0.0000])
     """
-    if dispersion not in _DISPERSIONS:
-        raise ValueError(f"dispersion must be one of {_DISPERSIONS}, got {dispersion!r}.")
+    if dispersion not in DISPERSIONS:
+        raise ValueError(f"dispersion must be one of {DISPERSIONS}, got {dispersion!r}.")
     if qvalues.ndim < 1 or qvalues.shape[0] < 2:
         raise ValueError(
             f"qvalues must have shape [N, *batch] with N >= 2 critics, got {tuple(qvalues.shape)}."
@@ -148,9 +147,13 @@ class EnsembleSACLoss(SACLoss):
             re-initialised ``num_qvalue_nets`` times) or ``num_qvalue_nets`` critics.
 
     Keyword Args:
+        The CSIRL hyperparameters' defaults are :data:`~torchrl_csirl.hyperparameters.CSIRL_DEFAULTS`.
+
         num_qvalue_nets (int): ensemble size. Defaults to ``5``.
-        alpha_init (float): entropy coefficient. Defaults to ``0.01``.
-        fixed_alpha (bool): keep alpha fixed. Defaults to ``True`` (CSIRL).
+        alpha_init (float): entropy coefficient (its initial value unless ``fixed_alpha``).
+            Defaults to ``0.01``.
+        fixed_alpha (bool): keep alpha fixed. Defaults to ``False``: SAC's automatic temperature,
+            as the recipes (the paper: ``True``, ``preset=paper``; before issue 89 this default was ``True``).
         gamma (float): discount of the TD(0) target. Defaults to ``0.99``.
         loss_function (str): critic regression loss. Defaults to ``"l2"`` (squared error,
             as in the published code; ``SACLoss`` defaults to ``"smooth_l1"``).
@@ -190,12 +193,12 @@ class EnsembleSACLoss(SACLoss):
         actor_network: TensorDictModule,
         qvalue_network: TensorDictModule | Sequence[TensorDictModule],
         *,
-        num_qvalue_nets: int = 5,
-        alpha_init: float = 0.01,
-        fixed_alpha: bool = True,
-        gamma: float = 0.99,
+        num_qvalue_nets: int = CSIRL_DEFAULTS.num_qvalue_nets,
+        alpha_init: float = CSIRL_DEFAULTS.alpha_init,
+        fixed_alpha: bool = CSIRL_DEFAULTS.fixed_alpha,
+        gamma: float = CSIRL_DEFAULTS.gamma,
         loss_function: str = "l2",
-        dispersion: str = "variance",
+        dispersion: str = CSIRL_DEFAULTS.dispersion,
         reinitialize_qvalue: bool = True,
         differentiable_reward: bool = False,
         fused_qvalue: bool | None = None,
@@ -206,8 +209,8 @@ class EnsembleSACLoss(SACLoss):
             raise ValueError("EnsembleSACLoss implements SAC v2 only: value_network must be None.")
         if not isinstance(num_qvalue_nets, int) or num_qvalue_nets < 1:
             raise ValueError(f"num_qvalue_nets must be a positive int, got {num_qvalue_nets!r}.")
-        if dispersion not in _DISPERSIONS:
-            raise ValueError(f"dispersion must be one of {_DISPERSIONS}, got {dispersion!r}.")
+        if dispersion not in DISPERSIONS:
+            raise ValueError(f"dispersion must be one of {DISPERSIONS}, got {dispersion!r}.")
         members = self._make_members(qvalue_network, num_qvalue_nets, reinitialize_qvalue)
         ensemble = None if fused_qvalue is False else fused_critic_ensemble(members[0])
         if fused_qvalue and ensemble is None:

@@ -12,13 +12,10 @@ from torchrl.objectives.common import LossModule
 from torchrl.objectives.value import TD0Estimator
 
 from torchrl_csirl._compat import sac_alpha, sac_reduce_loss, sac_reduced_alpha_loss
+from torchrl_csirl.hyperparameters import CSIRL_DEFAULTS, GRADIENT_BALANCES, META_GRADIENTS
 from torchrl_csirl.objectives.ensemble_sac import EnsembleSACLoss
 
 __all__ = ["MetaRewardLoss", "balanced_meta_gradient"]
-
-GRADIENT_BALANCES = ("sum", "normalized")
-META_GRADIENTS = ("double_backward", "jvp")
-
 
 def _leaves_like(params: TensorDictBase) -> TensorDict:
     """Detached copies (sharing storage) of ``params`` that are fresh autograd leaves (a plain TensorDict)."""
@@ -221,7 +218,7 @@ class MetaRewardLoss(LossModule):
 
     Keyword Args:
         lr_inner (float): inner SGD step size. Defaults to ``0.01``.
-        scale (float): multiplies the meta-objective. Defaults to ``100.0``.
+        scale (float): multiplies the meta-objective (the recipes' ``csirl.meta_scale``). Defaults to ``100.0``.
         reward_l1_coef (float): weight of ``mean |r_w(s)|``. ``0`` disables it.
             Defaults to ``1.0``.
         deterministic_expert_action (bool): use the mean action of ``pi_theta'`` instead of
@@ -308,14 +305,14 @@ class MetaRewardLoss(LossModule):
         sac_loss: EnsembleSACLoss,
         reward_network: TensorDictModule,
         *,
-        lr_inner: float = 0.01,
-        scale: float = 100.0,
-        reward_l1_coef: float = 1.0,
+        lr_inner: float = CSIRL_DEFAULTS.lr_inner,
+        scale: float = CSIRL_DEFAULTS.meta_scale,
+        reward_l1_coef: float = CSIRL_DEFAULTS.reward_l1_coef,
         deterministic_expert_action: bool = False,
         use_matching_reward: bool = True,
-        gradient_balance: str = "sum",
+        gradient_balance: str = CSIRL_DEFAULTS.gradient_balance,
         joint_sac_update: bool = False,
-        meta_gradient: str = "double_backward",
+        meta_gradient: str = CSIRL_DEFAULTS.meta_gradient,
     ) -> None:
         if not isinstance(sac_loss, EnsembleSACLoss):
             raise TypeError(f"sac_loss must be an EnsembleSACLoss, got {type(sac_loss).__name__}.")

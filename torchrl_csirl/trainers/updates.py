@@ -15,6 +15,7 @@ from tensordict import TensorDictBase
 from torch import nn
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
+from torchrl_csirl.hyperparameters import CSIRL_DEFAULTS
 from torchrl_csirl.modules.precision import LearnerPrecision
 from torchrl_csirl.trainers.trainer import CSIRLTrainer, check_finite_losses
 
@@ -148,14 +149,15 @@ class MetaRewardUpdate:
         sac_update: the plain step (shares the SAC optimiser and target updater).
         reward_optimizer: optimiser over the reward network.
         expert_buffer: replay buffer of expert transitions (the outer behavioural-cloning batch).
-        meta_every: cadence of the meta step (1 = every update, as the paper).
+        meta_every: cadence of the meta step (1 = every update, as the paper). Defaults to ``2``
+            (:data:`~torchrl_csirl.hyperparameters.CSIRL_DEFAULTS`, as the recipes; ``1`` before issue 89).
     """
 
     META_KEYS = ("loss_meta", "loss_imitation", "loss_reward_l1", "intrinsic_reward_mean", "meta_grad_norm",
                  "meta_grad_norm_imitation", "meta_grad_norm_l1")
 
     def __init__(self, meta_loss: nn.Module, sac_update: SACUpdate, reward_optimizer: torch.optim.Optimizer,
-                 expert_buffer: Any, meta_every: int = 1) -> None:
+                 expert_buffer: Any, meta_every: int = CSIRL_DEFAULTS.meta_every) -> None:
         if not getattr(meta_loss, "joint_sac_update", False):
             raise ValueError("MetaRewardUpdate needs a MetaRewardLoss built with joint_sac_update=True.")
         if meta_every < 1:
