@@ -32,24 +32,10 @@ import ast
 import os
 from collections import defaultdict
 
-PACKAGE = "torchrl_csirl"
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-PACKAGE_DIR = os.path.join(ROOT, PACKAGE)
+from package_imports import ROOT, import_from_target, package_modules
 
 #: ``module -> imported module -> ["file:line", ...]``
 Graph = dict[str, dict[str, list[str]]]
-
-
-def package_modules() -> dict[str, str]:
-    """``dotted module name -> path`` of every ``.py`` file of the package (a package: its ``__init__.py``)."""
-    modules = {}
-    for folder, _, files in os.walk(PACKAGE_DIR):
-        for file in sorted(files):
-            if file.endswith(".py"):
-                path = os.path.join(folder, file)
-                parts = os.path.relpath(path, ROOT)[:-3].split(os.sep)
-                modules[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
-    return modules
 
 
 def _is_type_checking(test: ast.expr) -> bool:
@@ -104,12 +90,7 @@ def imported_modules(node: ast.Import | ast.ImportFrom, module: str, is_package:
     """
     if isinstance(node, ast.Import):
         return [_nearest(alias.name, known) for alias in node.names if _nearest(alias.name, known)]
-    if node.level:
-        base = module.split(".") if is_package else module.split(".")[:-1]
-        base = base[:len(base) - node.level + 1]
-        target = ".".join(base + ([node.module] if node.module else []))
-    else:
-        target = node.module or ""
+    target = import_from_target(node, module, is_package)
     found = [f"{target}.{alias.name}" for alias in node.names if f"{target}.{alias.name}" in known]
     if len(found) < len(node.names) and _nearest(target, known):  # a name defined in ``target``
         found.append(_nearest(target, known))

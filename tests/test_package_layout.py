@@ -10,13 +10,7 @@ import ast
 import os
 from collections import defaultdict
 
-PACKAGE = "torchrl_csirl"
-PACKAGE_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), PACKAGE)
-
-
-def _module_name(path: str) -> str:
-    parts = os.path.relpath(path, os.path.dirname(PACKAGE_DIR))[:-3].split(os.sep)
-    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+from package_imports import PACKAGE, PACKAGE_DIR, ROOT, import_from_target, package_modules
 
 
 def _imported(node: ast.AST, module: str, is_package: bool) -> list[str]:
@@ -25,12 +19,7 @@ def _imported(node: ast.AST, module: str, is_package: bool) -> list[str]:
         return [alias.name for alias in node.names]
     if not isinstance(node, ast.ImportFrom):
         return []
-    if node.level:
-        base = module.split(".") if is_package else module.split(".")[:-1]
-        base = base[:len(base) - node.level + 1]
-        target = ".".join(base + ([node.module] if node.module else []))
-    else:
-        target = node.module or ""
+    target = import_from_target(node, module, is_package)
     return [target] + [f"{target}.{alias.name}" for alias in node.names]
 
 
@@ -47,24 +36,19 @@ def _unit(name: str) -> str | None:
 def import_graph() -> dict[str, dict[str, list[str]]]:
     """``unit -> imported unit -> ["file:line", ...]`` over the whole package."""
     graph: dict[str, dict[str, list[str]]] = defaultdict(lambda: defaultdict(list))
-    for folder, _, files in os.walk(PACKAGE_DIR):
-        for file in sorted(files):
-            if not file.endswith(".py"):
-                continue
-            path = os.path.join(folder, file)
-            module = _module_name(path)
-            source = _unit(module)
-            if source is None:  # the package's own __init__
-                continue
-            with open(path, encoding="utf-8") as f:
-                tree = ast.parse(f.read(), path)
-            for node in ast.walk(tree):
-                for name in _imported(node, module, file == "__init__.py"):
-                    target = _unit(name)
-                    if target is not None and target != source:
-                        where = f"{os.path.relpath(path, os.path.dirname(PACKAGE_DIR))}:{node.lineno}"
-                        if where not in graph[source][target]:
-                            graph[source][target].append(where)
+    for module, path in package_modules().items():
+        source = _unit(module)
+        if source is None:  # the package's own __init__
+            continue
+        with open(path, encoding="utf-8") as f:
+            tree = ast.parse(f.read(), path)
+        for node in ast.walk(tree):
+            for name in _imported(node, module, path.endswith("__init__.py")):
+                target = _unit(name)
+                if target is not None and target != source:
+                    where = f"{os.path.relpath(path, ROOT)}:{node.lineno}"
+                    if where not in graph[source][target]:
+                        graph[source][target].append(where)
     return graph
 
 
