@@ -115,7 +115,7 @@ def test_sac_trains_on_the_progress_reward(tmp_path):
         finish = float(spec.normalize_position(spec.finish_position)[0])
         expected = spec.matching_scale * ((x - finish).abs() - (next_x - finish).abs())
         torch.testing.assert_close(batch["next", "reward"].squeeze(-1), expected)
-        assert run.method.states["loss"].qvalue_network_params.batch_size[0] == 2  # standard SAC: two critics
+        assert run.parts.method.states["loss"].qvalue_network_params.batch_size[0] == 2  # standard SAC: two critics
     finally:
         run.close()
 

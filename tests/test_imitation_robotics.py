@@ -14,7 +14,13 @@ from torchrl_csirl.envs import make_env, resolve_scenario
 from torchrl_csirl.envs.expert_policy import ExpertDriverPolicy
 from torchrl_csirl.launch import imitation
 from torchrl_csirl.launch.config import ConfigError
+from torchrl_csirl.launch.imitation import IMITATION_RECIPE
 from torchrl_csirl.scripts import benchmark, imitation_robotics
+
+
+def load_robotics(overrides):
+    """The baselines' configuration, relocate when no task is named (as recipes/imitation_robotics.py runs it)."""
+    return IMITATION_RECIPE.load_config(overrides, default_task="relocate")
 
 TINY = [*TINY_ROBOTICS_RUN, "updates_per_round=20"]  # rounds of 20 updates
 
@@ -29,7 +35,7 @@ def test_bc_on_relocate_end_to_end(tmp_path):
     with open(os.path.join(summary["run_dir"], "summary.json")) as f:
         assert json.load(f)["method"] == "bc"
     # a resume reads the saved robotics configuration back, with the command line's changes
-    resumed = imitation_robotics.load_run_config(summary["run_dir"], ["collector.total_frames=600"])
+    resumed = IMITATION_RECIPE.load_run_config(summary["run_dir"], ["collector.total_frames=600"])
     assert (resumed.method, resumed.env.task, resumed.collector.total_frames) == ("bc", "relocate", 600)
 
 
@@ -45,30 +51,29 @@ def test_the_expert_row_drives_the_task_expert():
 
 
 def test_sac_learns_from_the_task_reward_on_robotics_and_the_progress_reward_on_driving():
-    robotics = imitation_robotics.load_config(["method=sac", "env.task=relocate"])
+    robotics = load_robotics(["method=sac", "env.task=relocate"])
     assert imitation.true_reward_transforms(robotics, resolve_scenario("relocate"), torch.device("cpu")) == []
     driving = imitation.load_config(["method=sac", "env.scenario=merge"])
     names = [type(t).__name__ for t in imitation.true_reward_transforms(
         driving, resolve_scenario("merge"), torch.device("cpu"))]
     assert names == ["ProgressReward", "CombineRewards"]
-    scaled = imitation_robotics.load_config(["method=sac", "env.task=relocate", "sac.reward_scale=2"])
+    scaled = load_robotics(["method=sac", "env.task=relocate", "sac.reward_scale=2"])
     with pytest.raises(ConfigError, match="sac.reward_scale=2.0: relocate trains SAC on the environment's own reward"):
         imitation.true_reward_transforms(scaled, resolve_scenario("relocate"), torch.device("cpu"))
 
 
 def test_configuration_errors():
-    cfg = imitation_robotics.load_config(["method=dac", "env.scenario=antmaze-umaze"])
+    cfg = load_robotics(["method=dac", "env.scenario=antmaze-umaze"])
     assert (cfg.env.task, cfg.collector.frames_per_batch, cfg.expert.curriculum) == ("antmaze-umaze", 1400, "expert")
     with pytest.raises(ConfigError, match="method: required"):
-        imitation_robotics.load_config(["env.task=relocate"])
-    with pytest.raises(ConfigError, match="env.task=merge"):
-        imitation_robotics.load_config(["method=bc", "env.task=merge"])
+        load_robotics(["env.task=relocate"])
+    assert load_robotics(["method=bc", "env.task=merge"]).env == {"scenario": "merge"}  # the driving schema
     with pytest.raises(ConfigError, match="model.ego_relative_features=true"):
-        imitation_robotics.load_config(["method=bc", "model.ego_relative_features=true"])
+        load_robotics(["method=bc", "model.ego_relative_features=true"])
     with pytest.raises(ConfigError, match="model.lane_features=true: lanes exist in driving scenes only"):
-        imitation_robotics.load_config(["method=bc", "model.lane_features=true"])
-    with pytest.raises(ConfigError, match="method=csirl: CSIRL is trained by recipes/csirl_robotics.py"):
-        imitation_robotics.load_config(["method=csirl"])
+        load_robotics(["method=bc", "model.lane_features=true"])
+    with pytest.raises(ConfigError, match="method=csirl: CSIRL is trained by recipes/csirl_highway.py"):
+        load_robotics(["method=csirl"])
 
 
 def test_benchmark_sweeps_the_robotics_tasks_with_their_recipes_and_reports_the_return(tmp_path):

@@ -15,6 +15,7 @@ from tensordict import TensorDict
 from torchrl_csirl._compat import gym_env_of
 from torchrl_csirl.envs import TaskSpec, make_env, resolve_scenario
 from torchrl_csirl.envs.expert import make_expert
+from torchrl_csirl.launch.csirl import CSIRL_RECIPE
 from torchrl_csirl.modules import DropFeatures, load_policy, make_actor, make_input_features, save_policy
 from torchrl_csirl.modules.features import feature_map_from_config
 from torchrl_csirl.scripts import csirl_robotics, imitation_robotics, train_expert
@@ -97,14 +98,14 @@ def test_valuedice_standardised_states_measure_the_gradient_penalty_in_them():
 def test_valuedice_reads_standardised_states_where_asked_and_says_where_it_cannot(tmp_path):
     from torchrl_csirl.data import load_expert_demonstrations
     from torchrl_csirl.launch import ConfigError
-    from torchrl_csirl.launch.imitation import ImitationHighwayConfig, load_baseline_config, make_trainer
+    from torchrl_csirl.launch.imitation import load_config, make_trainer
     from torchrl_csirl.modules import StandardizeFeatures, find_standardization
 
-    cfg = load_baseline_config(imitation_robotics.ImitationRoboticsConfig, [
+    cfg = load_config([
         "method=valuedice", "env.scenario=halfcheetah", "valuedice.normalize_states=true", "expert.num_trajectories=1", *TINY,
         f"logger.output_dir={tmp_path}"])
     run = make_trainer(cfg, str(tmp_path / "run"))
-    method = run.parts["method"]
+    method = run.parts.method
     norm = find_standardization(method.policy)
     assert isinstance(norm, StandardizeFeatures) and norm.in_features == 18  # x too: dropped after it
     observations = load_expert_demonstrations("halfcheetah", 1).transitions()["observation"]
@@ -116,8 +117,7 @@ def test_valuedice_reads_standardised_states_where_asked_and_says_where_it_canno
     obs = TensorDict({"observation": observations[:3]}, [3])
     with torch.no_grad():
         torch.testing.assert_close(method.policy.module[0](obs.clone())["loc"], load_policy(path).module[0](obs.clone())["loc"])
-    driving = load_baseline_config(ImitationHighwayConfig, ["method=valuedice", "env.scenario=merge",
-                                                            "valuedice.normalize_states=true"])
+    driving = load_config(["method=valuedice", "env.scenario=merge", "valuedice.normalize_states=true"])
     with pytest.raises(ConfigError, match="valuedice.normalize_states=true: standardised states need an input map .* "
                                           "got EgoRelativeFeatures"):
         make_trainer(driving, str(tmp_path / "driving"))
@@ -127,7 +127,7 @@ def test_the_hopper_cells_of_dac_and_valuedice_enter_the_papers_single_absorbing
     """The benchmark's Hopper cells run DAC and ValueDICE with the papers' placeholder (the expert never falls);
     ValueDICE's, on standardised states, is the raw observation its standardisation maps to zero, with its code's
     10 self-loops per learner termination."""
-    from torchrl_csirl.launch.imitation import load_baseline_config, make_trainer
+    from torchrl_csirl.launch.imitation import load_config, make_trainer
     from torchrl_csirl.modules import find_standardization
     from torchrl_csirl.scripts.benchmark import split_overrides, table_overrides
 
@@ -140,9 +140,9 @@ def test_the_hopper_cells_of_dac_and_valuedice_enter_the_papers_single_absorbing
     assert not any("absorbing" in o for o in hopper["gail"])
     cheetah = split_overrides(table_overrides("halfcheetah"), ["dac", "valuedice"], "halfcheetah")
     assert not any("absorbing" in o for o in cheetah["dac"] + cheetah["valuedice"])
-    cfg = load_baseline_config(imitation_robotics.ImitationRoboticsConfig, [
+    cfg = load_config([
         "method=valuedice", "env.scenario=hopper", *hopper["valuedice"], *TINY, f"logger.output_dir={tmp_path}"])
-    method = make_trainer(cfg, str(tmp_path / "run")).parts["method"]
+    method = make_trainer(cfg, str(tmp_path / "run")).parts.method
     assert method.states["loss"].self_loops_per_termination == 10
     norm = find_standardization(method.states["loss"].nu_network)
     for transform in (*method.online_transforms, *method.expert_transforms):
@@ -230,7 +230,7 @@ def test_the_collector_refuses_a_batch_that_cuts_a_locomotion_episode():
     from torchrl_csirl.launch import ConfigError
     from torchrl_csirl.launch.builders import check_whole_episodes
 
-    cfg = csirl_robotics.load_config(["env.task=hopper"])  # the robotics scripts' 1 400 frames: 700 per worker
+    cfg = CSIRL_RECIPE.load_config(["env.task=hopper"])  # the robotics scripts' 1 400 frames: 700 per worker
     with pytest.raises(ConfigError, match="frames_per_batch >= 2000"):
         check_whole_episodes(cfg.collector, resolve_scenario("hopper"), 1)
 
@@ -302,10 +302,10 @@ def test_the_shipped_expert_and_its_demonstrations(tmp_path, name, floor):
 
 
 def test_valuedice_exploration_noise_reaches_the_collector_not_the_evaluation(tmp_path):
-    from torchrl_csirl.launch.imitation import load_baseline_config, make_trainer
+    from torchrl_csirl.launch.imitation import load_config, make_trainer
     from torchrl_csirl.modules import MeanActionGaussianNoise
 
-    cfg = load_baseline_config(imitation_robotics.ImitationRoboticsConfig, [
+    cfg = load_config([
         "method=valuedice", "env.scenario=hopper", "valuedice.exploration_noise=0.1", *TINY,
         f"logger.output_dir={tmp_path}"])
     run = make_trainer(cfg, str(tmp_path / "run"))

@@ -12,6 +12,7 @@ import torch
 from torchrl_csirl.data import record_demonstrations
 from torchrl_csirl.envs import make_gymnasium_task, register_task, resolve_scenario
 from torchrl_csirl.launch import ConfigError, ExpertDataError
+from torchrl_csirl.launch.csirl import CSIRL_RECIPE
 from torchrl_csirl.launch.robotics import prepare_task
 from torchrl_csirl.scripts import csirl_highway, csirl_robotics, imitation_robotics
 
@@ -41,7 +42,8 @@ def car_demos(tmp_path_factory) -> str:
 
 
 def test_a_gymnasium_id_trains_csirl_with_no_code(tmp_path, car_demos):
-    summary = csirl_robotics.main([f"env.gym_id={MOUNTAIN_CAR}", "env.features=0", f"expert.path={car_demos}",
+    """The README's CSIRL script takes any task: its family picks the schema."""
+    summary = csirl_highway.main([f"env.gym_id={MOUNTAIN_CAR}", "env.features=0", f"expert.path={car_demos}",
                                    "csirl.updates_per_round=10", "csirl.num_qvalue_nets=2", "replay_buffer.batch_size=32",
                                    "csirl.matching_target=path", *TINY, f"logger.output_dir={tmp_path}"])
     assert summary["scenario"] == MOUNTAIN_CAR and summary["frames"] == 400
@@ -51,7 +53,7 @@ def test_a_gymnasium_id_trains_csirl_with_no_code(tmp_path, car_demos):
     with open(os.path.join(run_dir, "summary.json")) as f:
         assert json.load(f)["scenario"] == MOUNTAIN_CAR
     # the task is part of the saved configuration: a resume re-registers it and continues
-    resumed = csirl_robotics.main([f"checkpoint.resume={run_dir}", "collector.total_frames=600"])
+    resumed = csirl_highway.main([f"checkpoint.resume={run_dir}", "collector.total_frames=600"])
     assert resumed["frames"] == 600 and resumed["run_dir"] == run_dir
 
 
@@ -93,12 +95,12 @@ def test_register_task_refuses_the_builtin_names_and_twice_the_same():
 ])
 def test_bad_task_settings_are_one_line(overrides, message):
     with pytest.raises(ConfigError) as err:
-        csirl_robotics.load_config(overrides)
+        CSIRL_RECIPE.load_config(overrides)
     assert message in str(err.value) and "\n" not in str(err.value)
 
 
 def test_demonstrations_must_exist_and_fit_the_task(tmp_path, car_demos):
-    cfg = csirl_robotics.load_config([f"env.gym_id={MOUNTAIN_CAR}", *TINY, f"logger.output_dir={tmp_path}"])
+    cfg = CSIRL_RECIPE.load_config([f"env.gym_id={MOUNTAIN_CAR}", *TINY, f"logger.output_dir={tmp_path}"])
     with pytest.raises(ExpertDataError, match="expert.path: required for 'MountainCarContinuous-v0'"):
         csirl_robotics.main([f"env.gym_id={MOUNTAIN_CAR}", *TINY, f"logger.output_dir={tmp_path}"])
     with pytest.raises(ExpertDataError, match="observations of size 2 and actions of size 1, but 'relocate' has 39 and 30"):
@@ -173,14 +175,35 @@ def test_train_expert_trains_sac_on_a_gymnasium_id_and_writes_its_demonstrations
     assert [e["seed"] for e in demos.metadata["episodes"]] == [20_000, 20_001]
 
 
-@pytest.mark.parametrize("overrides, message", [
-    ([f"env.gym_id={MOUNTAIN_CAR}"], "env.gym_id=MountainCarContinuous-v0: the driving scripts take env.scenario only; "
-                                     "recipes/csirl_robotics.py runs any other task"),
-    (["env.scenario=relocate"], "env.scenario=relocate: not a driving scene; recipes/csirl_robotics.py runs it"),
+@pytest.mark.parametrize("overrides, schema", [
+    ([f"env.gym_id={MOUNTAIN_CAR}"], "CSIRLTaskConfig"), (["env.scenario=relocate"], "CSIRLTaskConfig"),
+    (["env.task=hopper"], "CSIRLTaskConfig"), (["env.scenario=roundabout"], "CSIRLHighwayConfig"), ([], "CSIRLHighwayConfig"),
 ])
-def test_a_driving_script_names_the_script_for_another_task(overrides, message):
+def test_the_csirl_script_configures_every_task_with_its_familys_schema(overrides, schema):
     from torchrl_csirl.launch import csirl
 
-    with pytest.raises(ConfigError) as err:
-        csirl.load_config(overrides)
-    assert str(err.value) == message
+    cfg = csirl.load_config(overrides)
+    assert ("task" in cfg.env) == (schema == "CSIRLTaskConfig")
+    assert cfg.model.ego_relative_features == (schema == "CSIRLHighwayConfig")
+
+
+def test_the_console_command_trains_csirl_on_the_hopper(tmp_path):
+    """``torchrl-csirl train env.scenario=hopper`` (here as ``python -m torchrl_csirl``, the same entry point)."""
+    import subprocess
+    import sys
+
+    import tomllib
+
+    with open(os.path.join(os.path.dirname(__file__), "..", "pyproject.toml"), "rb") as f:
+        assert tomllib.load(f)["project"]["scripts"]["torchrl-csirl"] == "torchrl_csirl.scripts.cli:main"
+    command = [sys.executable, "-m", "torchrl_csirl", "train", "env.scenario=hopper", "csirl.updates_per_round=10",
+               "csirl.num_qvalue_nets=2", "replay_buffer.batch_size=32", *TINY, f"logger.output_dir={tmp_path}"]
+    unshipped = subprocess.run(command, capture_output=True, text=True, timeout=300)  # TINY asks for 3 trajectories
+    assert unshipped.returncode == 2 and unshipped.stderr.strip().splitlines()[-1].startswith(
+        "error: expert.num_trajectories=3: num_trajectories must be one of the shipped sizes")
+    proc = subprocess.run([*command, "expert.num_trajectories=5"], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    summary = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert (summary["scenario"], summary["method"], summary["frames"]) == ("hopper", "csirl", 400)
+    bad = subprocess.run([sys.executable, "-m", "torchrl_csirl", "train", "method=nope"], capture_output=True, text=True)
+    assert bad.returncode == 2 and bad.stderr.strip().startswith("error: method=nope: unknown; one of bc, csirl, csirl-b")

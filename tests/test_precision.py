@@ -184,9 +184,9 @@ def test_a_tiny_bf16_run_trains_every_network(tmp_path):
         "collector.total_frames=300", "optim.precision=bf16"])
     run = csirl.make_trainer(cfg, str(tmp_path))
     try:
-        params = {"actor": list(run.modules.actor.parameters()),
-                  "critics": list(run.modules.sac.qvalue_network_params.values(True, True)),
-                  "reward": list(run.modules.reward_network.parameters())}
+        params = {"actor": list(run.parts.modules.actor.parameters()),
+                  "critics": list(run.parts.modules.sac.qvalue_network_params.values(True, True)),
+                  "reward": list(run.parts.modules.reward_network.parameters())}
         before = {k: [p.detach().clone() for p in v] for k, v in params.items()}
         run.trainer.train()
         assert run.trainer.updates == 150 and any("loss_meta" in r for r in run.logger.rows)

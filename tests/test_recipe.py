@@ -162,7 +162,7 @@ def test_a_csirl_run_moves_its_actor_critics_and_reward_network(tmp_path):
     cfg = _tiny_cfg(tmp_path, "collector.total_frames=300")
     run = csirl.make_trainer(cfg, str(tmp_path))
     try:
-        modules = run.modules
+        modules = run.parts.modules
         groups = {
             "actor": dict(modules.actor.named_parameters()),
             "critics": {k: v for k, v in modules.sac.named_parameters() if k.startswith("qvalue_network_params")},
@@ -184,15 +184,15 @@ def test_csirl_b_switch_trains_without_the_reward_network(tmp_path):
     cfg = _tiny_cfg(tmp_path, "csirl.intrinsic=false", "collector.total_frames=300")
     run = csirl.make_trainer(cfg, str(tmp_path))
     try:
-        assert run.modules.meta is None
-        reward_before = [p.clone() for p in run.modules.reward_network.parameters()]
+        assert run.parts.modules.meta is None
+        reward_before = [p.clone() for p in run.parts.modules.reward_network.parameters()]
         run.trainer.train()
         sample = run.online_buffer.sample()
         assert "intrinsic_reward" not in sample["next"].keys()
         torch.testing.assert_close(sample["next", "reward"], sample["next", "matching_reward"])
         rows = run.logger.rows
         assert run.trainer.updates == 150 and not any("loss_meta" in r for r in rows)
-        assert all(torch.equal(a, b) for a, b in zip(reward_before, run.modules.reward_network.parameters()))
+        assert all(torch.equal(a, b) for a, b in zip(reward_before, run.parts.modules.reward_network.parameters()))
     finally:
         run.close()
 
@@ -223,12 +223,12 @@ def test_fixed_subgoal_switch_keeps_the_subgoal_at_the_last_curriculum_state(tmp
     cfg = _tiny_cfg(tmp_path, "csirl.fixed_subgoal=true", "collector.total_frames=300")
     run = csirl.make_trainer(cfg, str(tmp_path))
     try:
-        last = run.curriculum.length - 1
-        assert run.curriculum.subgoal == last
+        last = run.parts.curriculum.length - 1
+        assert run.parts.curriculum.subgoal == last
         run.trainer.train()
-        history = run.selection.history
+        history = run.parts.selection.history
         assert len(history) >= 2 and all(entry["subgoal"] == last for entry in history)
-        assert run.matching.subgoal == last
+        assert run.parts.matching.subgoal == last
     finally:
         run.close()
 
@@ -250,9 +250,9 @@ def test_automatic_temperature_is_trained_and_logged(tmp_path):
     cfg = _tiny_cfg(tmp_path, "csirl.fixed_alpha=false", "collector.total_frames=300")
     run = csirl.make_trainer(cfg, str(tmp_path))
     try:
-        log_alpha = run.modules.sac.log_alpha
+        log_alpha = run.parts.modules.sac.log_alpha
         assert log_alpha.requires_grad
-        assert any(p is log_alpha for g in run.optimizers["optim_sac"].param_groups for p in g["params"])
+        assert any(p is log_alpha for g in run.parts.optimizers["optim_sac"].param_groups for p in g["params"])
         before = log_alpha.detach().clone()
         run.trainer.train()
         assert not torch.equal(before, log_alpha.detach())
@@ -268,7 +268,7 @@ def test_demonstrations_in_the_batch_and_actor_cloning_are_wired_and_logged(tmp_
     run = csirl.make_trainer(cfg, str(tmp_path))
     try:
         update = run.trainer.update_step.sac_update
-        assert update.actor_bc.coef == 0.4 and update.actor_bc.bc_loss.actor_network is run.modules.actor
+        assert update.actor_bc.coef == 0.4 and update.actor_bc.bc_loss.actor_network is run.parts.modules.actor
         run.trainer.train()
         batch = update.sample(run.trainer)
         assert batch.batch_size == (64,)
@@ -353,8 +353,8 @@ def test_published_file_drives_the_run(tmp_path, curriculum, expected):
         assert run.demos.num_trajectories == 5 and run.demos.metadata["curriculum_trajectory"] == expected
         assert run.demos.lengths.tolist() == [60] * 5
         curriculum_obs = stored.trajectory_observations(expected, include_final=True)
-        torch.testing.assert_close(run.curriculum.expert_observations.cpu(), curriculum_obs)
-        assert run.curriculum.length == 61 and len(run.expert_buffer) == 5 * 60
+        torch.testing.assert_close(run.parts.curriculum.expert_observations.cpu(), curriculum_obs)
+        assert run.parts.curriculum.length == 61 and len(run.parts.expert_buffer) == 5 * 60
     finally:
         run.close()
 
@@ -723,7 +723,9 @@ def test_help_lists_every_key_with_what_it_accepts():
 
 
 def test_method_registry_reads_each_method_with_its_recipe_schema():
-    from torchrl_csirl.launch import registry
+    from torchrl_csirl.launch import recipes
 
-    assert {"csirl", "csirl-b"} <= set(registry.known_methods())
-    assert registry.load_config_for("csirl-b")(["preset=paper"]).csirl.updates_per_round == 20000
+    assert {"csirl", "csirl-b"} <= set(recipes.known_methods())
+    cfg = recipes.load_config_for("csirl-b")(["preset=paper"])
+    assert cfg.csirl.updates_per_round == 20000 and cfg.csirl.intrinsic is False
+    assert recipes.load_config_for("csirl")(["env.scenario=hopper"]).env.task == "hopper"

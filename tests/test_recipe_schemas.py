@@ -1,5 +1,5 @@
-"""Every script's typed schema is importable from ``torchrl_csirl.launch`` (a documentation build's
-configuration reference reads them there) and is the schema the script itself uses."""
+"""Every recipe is registered once (:mod:`torchrl_csirl.launch.recipes`) with its schemas, which describe every
+key; each training script runs its registered recipe; the task's family picks the schema."""
 from __future__ import annotations
 
 import importlib
@@ -7,35 +7,45 @@ import os
 
 import pytest
 
-import torchrl_csirl.launch as common
 import torchrl_csirl.scripts
-from torchrl_csirl.launch import config
+from torchrl_csirl.launch import config, recipe_for, recipe_schemas, recipes
 
 SCRIPTS = os.path.dirname(torchrl_csirl.scripts.__file__)
 
 
-def _schema(recipe: str) -> type:
-    module, _, name = common.RECIPE_SCHEMAS[recipe].partition(":")
-    return getattr(importlib.import_module(module), name)
-
-
-def test_every_configured_recipe_has_its_schema_listed():
+def test_every_configured_script_runs_a_registered_recipe():
     configured = {name[:-3] for name in os.listdir(SCRIPTS)
                   if name.endswith(".py") and "help_requested" in open(os.path.join(SCRIPTS, name)).read()}
-    # the robotics recipes pass their schema to their driving recipe's main
-    configured |= {"csirl_robotics", "imitation_robotics"}
-    assert set(common.RECIPE_SCHEMAS) == configured
+    assert configured == {r.script.rpartition(".")[2] for r in recipes().values()}
+    for recipe in recipes().values():
+        source = open(os.path.join(SCRIPTS, recipe.script.rpartition(".")[2] + ".py")).read()
+        assert "run_recipe(" in source and recipe.trainer is not None and recipe.finish is not None
 
 
-@pytest.mark.parametrize("recipe", sorted(common.RECIPE_SCHEMAS))
-def test_schema_describes_every_key_and_is_the_recipes_own(recipe):
-    schema = _schema(recipe)
-    lines = config.describe(schema)
+@pytest.mark.parametrize("schema", recipe_schemas())
+def test_schema_describes_every_key(schema):
+    module, _, name = schema.partition(":")
+    klass = getattr(importlib.import_module(module), name)
+    lines = config.describe(klass)
     assert any(line.startswith("seed = ") for line in lines)
-    for klass in schema.__mro__:
-        config.attribute_docs(klass)
-    script = importlib.import_module(f"torchrl_csirl.scripts.{recipe}")
-    assert getattr(script, schema.__name__) is schema
+    for base in klass.__mro__:
+        config.attribute_docs(base)
+
+
+@pytest.mark.parametrize("method, task, schema", [
+    ("csirl", "merge", "CSIRLHighwayConfig"), ("csirl", "relocate", "CSIRLTaskConfig"),
+    ("csirl-b", "hopper", "CSIRLTaskConfig"), ("bc", "roundabout", "ImitationHighwayConfig"),
+    ("gail", "antmaze-umaze", "ImitationTaskConfig"),
+])
+def test_the_tasks_family_picks_the_schema(method, task, schema):
+    assert recipe_for(method).schema_for(task).__name__ == schema
+
+
+def test_a_method_belongs_to_one_recipe_and_an_unknown_one_is_named():
+    owners = [m for r in recipes().values() for m in r.methods]
+    assert len(owners) == len(set(owners))
+    with pytest.raises(KeyError, match="unknown method 'nope'"):
+        recipe_for("nope")
 
 
 def test_the_glue_finds_the_recipes_preset_config_group():

@@ -12,8 +12,14 @@ from torchrl_csirl.data import load_expert_demonstrations
 from torchrl_csirl.envs import resolve_scenario
 from torchrl_csirl.launch import builders
 from torchrl_csirl.launch.config import ConfigError
+from torchrl_csirl.launch.csirl import CSIRL_RECIPE
 from torchrl_csirl.launch.run import ExpertDataError
 from torchrl_csirl.scripts import csirl_robotics
+
+
+def load_robotics(overrides):
+    """The CSIRL recipe's configuration, relocate when no task is named (as recipes/csirl_robotics.py runs it)."""
+    return CSIRL_RECIPE.load_config(overrides, default_task="relocate")
 
 # rounds of 10 updates of a 2-critic ensemble on 32-transition batches
 TINY = [*TINY_ROBOTICS_RUN, "replay_buffer.batch_size=32", "csirl.updates_per_round=10", "csirl.num_qvalue_nets=2"]
@@ -46,17 +52,18 @@ def test_antmaze_end_to_end_from_the_shipped_ant_data(tmp_path):
 
 def test_configuration_and_data_errors(tmp_path):
     with pytest.raises(ConfigError, match="model.ego_relative_features=true"):
-        csirl_robotics.load_config(["model.ego_relative_features=true"])
-    with pytest.raises(ConfigError, match="env.scenario=merge"):
-        csirl_robotics.load_config(["env.scenario=merge"])
-    with pytest.raises(ConfigError, match="env.task=merge"):
-        csirl_robotics.load_config(["env.task=merge"])
+        load_robotics(["model.ego_relative_features=true"])
+    # a driving scene, named either way, is configured by the driving schema (one CSIRL script for every task)
+    assert load_robotics(["env.scenario=merge"]).env == {"scenario": "merge"}
+    assert load_robotics(["env.task=merge"]).env == {"scenario": "merge"}
+    with pytest.raises(ConfigError, match="env.scenario=mergee: unknown task \\(did you mean merge\\?\\)"):
+        load_robotics(["env.scenario=mergee"])
     with pytest.raises(ConfigError, match="env.task=relocate and env.scenario=antmaze-umaze: the same setting"):
-        csirl_robotics.load_config(["env.task=relocate", "env.scenario=antmaze-umaze"])
-    assert csirl_robotics.load_config(["env.scenario=relocate"]).env.task == "relocate"
+        load_robotics(["env.task=relocate", "env.scenario=antmaze-umaze"])
+    assert load_robotics(["env.scenario=relocate"]).env.task == "relocate"
     # a dataset of another task: one error naming both dimensions
     relocate_data = os.path.join(os.path.dirname(builders.__file__), "..", "..", "torchrl_csirl", "data", "experts",
                                  "relocate", "expert_25.npz")
-    cfg = csirl_robotics.load_config(["env.scenario=antmaze-umaze", f"expert.path={os.path.abspath(relocate_data)}"])
+    cfg = load_robotics(["env.scenario=antmaze-umaze", f"expert.path={os.path.abspath(relocate_data)}"])
     with pytest.raises(ExpertDataError, match="observations of size 39 and actions of size 30, but 'antmaze-umaze' has 29 and 8"):
         builders.load_experts(cfg.expert, resolve_scenario("antmaze-umaze"))

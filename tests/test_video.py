@@ -12,6 +12,7 @@ from omegaconf import OmegaConf
 from PIL import Image
 
 from torchrl_csirl.launch.config import ConfigError
+from torchrl_csirl.launch.csirl import CSIRL_RECIPE
 from torchrl_csirl.modules import make_actor, save_policy
 from torchrl_csirl.scripts import watch
 from torchrl_csirl.visualization import VideoError, write_video
@@ -93,11 +94,10 @@ def test_an_env_without_render_mode_is_named_as_the_cause_and_its_run_has_videos
 
 
 def _run_dir(tmp_path, task="relocate", policy=True):
-    from torchrl_csirl.scripts import csirl_robotics
 
     run_dir = tmp_path / "run"
     run_dir.mkdir()
-    cfg = csirl_robotics.load_config([f"env.task={task}", "eval.seed=7"])
+    cfg = CSIRL_RECIPE.load_config([f"env.task={task}", "eval.seed=7"])
     OmegaConf.save(cfg, run_dir / "config.yaml")
     if policy:
         from torchrl_csirl.envs import resolve_scenario

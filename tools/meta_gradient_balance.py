@@ -26,8 +26,8 @@ import torch
 from tensordict import TensorDict
 
 from torchrl_csirl.envs import SCENARIOS, make_env
-from torchrl_csirl.launch.builders import load_experts, requested_config
-from torchrl_csirl.launch.csirl import load_config, load_run_config, make_loss_modules, make_matching
+from torchrl_csirl.launch.csirl import CSIRL_RECIPE, make_loss_modules, make_matching
+from torchrl_csirl.launch.experts import load_experts
 from torchrl_csirl.launch.run import resolve_resume
 from torchrl_csirl.objectives import MetaRewardLoss
 
@@ -69,7 +69,7 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     parser.add_argument("--steps", type=int, default=10, help="meta-losses averaged")
     args, overrides = parser.parse_known_args(argv)
     # a trained run: its own configuration (networks, scenario), updated by the command line
-    cfg = requested_config(overrides, load_config, load_run_config)
+    cfg = CSIRL_RECIPE.requested_config(overrides)
     torch.manual_seed(cfg.seed)
     spec = SCENARIOS[cfg.env.scenario]
     demos = load_experts(cfg.expert, spec)

@@ -30,7 +30,7 @@ from collections import defaultdict
 from omegaconf import OmegaConf
 
 from torchrl_csirl.launch.config import ConfigError, flatten_config, format_override
-from torchrl_csirl.launch.registry import load_config_for
+from torchrl_csirl.launch.recipes import load_config_for
 from torchrl_csirl.launch.summaries import find_summaries, mean_std
 
 #: configuration keys that do not change what a run learns (or are shown elsewhere in the key)

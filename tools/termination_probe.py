@@ -34,15 +34,12 @@ import shutil
 import tempfile
 
 import torch
-from omegaconf import OmegaConf
 from tensordict import TensorDictBase
 
 from torchrl_csirl.launch.builders import resume_run
 from torchrl_csirl.launch.config import ConfigError
-from torchrl_csirl.launch.imitation import load_run_config, make_trainer
+from torchrl_csirl.launch.imitation import IMITATION_RECIPE, make_trainer
 from torchrl_csirl.launch.run import run_script
-from torchrl_csirl.scripts import imitation_robotics
-from torchrl_csirl.scripts.benchmark import is_robotics
 from torchrl_csirl.transforms import absorbing_self_loops
 
 PROBED_METHODS = ("sac", "sqil", "gail", "dac", "iqlearn", "valuedice")
@@ -96,11 +93,11 @@ def valuedice_residuals(loss, transitions: TensorDictBase) -> dict[str, float | 
 
 def probe(run, samples: int) -> dict[str, object]:
     """The probe's figures for the replay (``"agent"``) and the demonstrations (``"expert"``)."""
-    method = run.method
+    method = run.parts.method
     loss = method.states["loss"]
     out: dict[str, object] = {"method": method.name, "scenario": run.spec.name}
     with torch.no_grad():
-        for side, buffer in (("agent", run.online_buffer), ("expert", run.expert_buffer)):
+        for side, buffer in (("agent", run.online_buffer), ("expert", run.parts.expert_buffer)):
             if len(buffer) == 0:
                 raise ConfigError(f"termination_probe: the run's {side} buffer is empty "
                                   f"(was it saved? checkpoint.save_buffer)")
@@ -126,9 +123,7 @@ def open_copy(run_dir: str, workdir: str, overrides: list[str] = ()):
     os.makedirs(copy)
     shutil.copy(os.path.join(run_dir, "config.yaml"), copy)
     shutil.copytree(checkpoint, os.path.join(copy, "checkpoints", "last"))
-    scenario = OmegaConf.load(os.path.join(copy, "config.yaml")).env.scenario
-    load = imitation_robotics.load_run_config if is_robotics(scenario) else load_run_config
-    cfg = load(copy, [f"checkpoint.resume={copy}", "logger.backend=csv", *overrides])
+    cfg = IMITATION_RECIPE.load_run_config(copy, [f"checkpoint.resume={copy}", "logger.backend=csv", *overrides])
     if cfg.method not in PROBED_METHODS:
         raise ConfigError(f"termination_probe: method {cfg.method!r} has no critic to probe; "
                           f"probed methods: {', '.join(PROBED_METHODS)}")

@@ -13,57 +13,53 @@ an installed wheel) are thin calls into this layer. Its modules:
   ``checkpoint``). Defaults live there, once.
 * :mod:`torchrl_csirl.launch.run`: the run directory (never overwritten), device, resume point,
   summary and the scripts' error handling (:func:`run_script`: SIGTERM and Ctrl-C checkpoint).
-* :mod:`torchrl_csirl.launch.builders`: environments, collector, buffers, logging, evaluation,
-  checkpoints and the trainer every method assembles (:func:`open_run`, :func:`train_and_finish`).
-* :mod:`torchrl_csirl.launch.registry`: which schema trains a method (its loader by method name).
+* :mod:`torchrl_csirl.launch.recipes`: one registry of recipes (:class:`Recipe`: methods, schemas, presets,
+  checks, trainer, finish); a method's recipe by name (:func:`recipe_for`).
+* the shared builders, one concern each (gathered in :mod:`torchrl_csirl.launch.builders`):
+  :mod:`~torchrl_csirl.launch.experts` (demonstrations), :mod:`~torchrl_csirl.launch.collection`
+  (environments, collector), :mod:`~torchrl_csirl.launch.assembly` (buffer, logger, :class:`Run`, the trainer),
+  :mod:`~torchrl_csirl.launch.lifecycle` (start, resume, train, :func:`run_recipe`),
+  :mod:`~torchrl_csirl.launch.final` (the final test and summary).
 * :mod:`torchrl_csirl.launch.summaries`: finished runs' ``summary.json`` files, mean / std over
   seeds, Welch's test.
 * :mod:`torchrl_csirl.launch.processes`: a local sweep's cell processes (pid files; SIGTERM stops
   them at a checkpoint before the sweep exits).
 * :mod:`torchrl_csirl.launch.csirl` / :mod:`torchrl_csirl.launch.imitation`: CSIRL's and the
-  baselines' schemas (driving and robotics) and builders.
-* :mod:`torchrl_csirl.launch.robotics`: the robotics tasks' schema sections and checks.
-* :mod:`torchrl_csirl.launch.ant_expert` / :mod:`torchrl_csirl.launch.expert_training`: the schemas of
+  baselines' recipes (a driving schema and every other task's) and builders.
+* :mod:`torchrl_csirl.launch.robotics`: the non-driving tasks' schema sections, the task a command line
+  names and its schema family.
+* :mod:`torchrl_csirl.launch.ant_expert` / :mod:`torchrl_csirl.launch.expert_training`: the recipes of
   the AntMaze expert's training and of an expert for any task (SAC, then its demonstrations).
 * :mod:`torchrl_csirl.launch.video`: the final evaluation's video.
 
-:data:`RECIPE_SCHEMAS` names each script's schema as ``module:class`` (the configuration
-reference in the docs is generated from it).
+:func:`recipe_schemas` names every recipe's schemas as ``module:class`` (the configuration reference in
+the docs is generated from them).
 
 Examples:
-    >>> import importlib
-    >>> module, _, name = RECIPE_SCHEMAS["csirl_highway"].partition(":")
-    >>> getattr(importlib.import_module(module), name).__name__
-    'CSIRLHighwayConfig'
+    >>> "torchrl_csirl.launch.csirl:CSIRLTaskConfig" in recipe_schemas()
+    True
     >>> from torchrl_csirl.launch import load_config_for
     >>> load_config_for("csirl")(["seed=3", "env.scenario=roundabout"]).env.scenario
     'roundabout'
 """
 from torchrl_csirl.launch.config import ConfigError, load_config, load_run_config, option
-from torchrl_csirl.launch.registry import known_methods, load_config_for, register_recipe
+from torchrl_csirl.launch.recipes import Recipe, known_methods, load_config_for, recipe_for, recipe_schemas, recipes, register_recipe
 from torchrl_csirl.launch.run import ExpertDataError, resolve_device, run_script, write_summary
 
 __all__ = [
-    "RECIPE_SCHEMAS",
     "ConfigError",
     "ExpertDataError",
+    "Recipe",
     "known_methods",
     "load_config",
     "load_config_for",
     "load_run_config",
     "option",
+    "recipe_for",
+    "recipe_schemas",
+    "recipes",
     "register_recipe",
     "resolve_device",
     "run_script",
     "write_summary",
 ]
-
-#: script (``recipes/<name>.py`` = ``torchrl_csirl.scripts.<name>``) -> its configuration schema, ``module:class``
-RECIPE_SCHEMAS = {
-    "csirl_highway": "torchrl_csirl.launch.csirl:CSIRLHighwayConfig",
-    "csirl_robotics": "torchrl_csirl.launch.csirl:CSIRLRoboticsConfig",
-    "imitation_highway": "torchrl_csirl.launch.imitation:ImitationHighwayConfig",
-    "imitation_robotics": "torchrl_csirl.launch.imitation:ImitationRoboticsConfig",
-    "train_ant_expert": "torchrl_csirl.launch.ant_expert:AntExpertConfig",
-    "train_expert": "torchrl_csirl.launch.expert_training:ExpertTrainingConfig",
-}

@@ -1,11 +1,13 @@
-"""The schema of ``recipes/train_ant_expert.py``: SAC on the ant's goal-reaching task
-(``ant-goal``), the run that trains the AntMaze expert's walking policy.
+"""The schema and finish of ``recipes/train_ant_expert.py``: SAC on the ant's goal-reaching task
+(``ant-goal``), the run that trains the AntMaze expert's walking policy, tested at the end as the walker of the
+AntMaze waypoint expert (its recipe: :data:`~torchrl_csirl.launch.expert_training.ANT_EXPERT_RECIPE`).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from typing import Optional
 
+from torchrl_csirl.launch.assembly import Run
 from torchrl_csirl.launch.config import (
     DEVICES,
     CheckpointConfig,
@@ -16,9 +18,10 @@ from torchrl_csirl.launch.config import (
     UpdateRatioConfig,
     option,
 )
+from torchrl_csirl.launch.final import final_summary
 from torchrl_csirl.objectives._imitation import SACHyperparameters
 
-__all__ = ["AntExpertConfig", "TASK"]
+__all__ = ["AntExpertConfig", "TASK", "evaluate_waypoint_expert", "finish"]
 
 TASK = "ant-goal"
 
@@ -79,3 +82,45 @@ class AntExpertConfig:
     expert_eval: ExpertEvalConfig = field(default_factory=ExpertEvalConfig)
     logger: LoggerConfig = field(default_factory=LoggerConfig)
     checkpoint: AntCheckpointConfig = field(default_factory=AntCheckpointConfig)
+
+
+# ---------------------------------------------------------------------------------------- finish
+def evaluate_waypoint_expert(policy, episodes: int, seed: int) -> dict[str, float]:
+    """The waypoint expert driven by ``policy`` on ``episodes`` AntMaze U-maze episodes (seed + i).
+
+    Returns:
+        ``success_rate`` (goal reached), ``progress`` (mean route progress), ``steps`` (mean length).
+    """
+    from torchrl_csirl.envs import make_gym_env
+    from torchrl_csirl.envs.robotics import WaypointAntExpert
+
+    env = make_gym_env("antmaze-umaze")
+    expert = WaypointAntExpert(policy)
+    successes, progress, steps = [], [], []
+    try:
+        for i in range(episodes):
+            _, info = env.reset(seed=seed + i)
+            expert.reset(env)
+            for t in range(1, env.max_steps + 1):
+                _, _, terminated, truncated, info = env.step(expert.act(env))
+                if terminated or truncated:
+                    break
+            successes.append(float(info["success"]))
+            progress.append(float(info["progress"]))
+            steps.append(t)
+    finally:
+        env.close()
+    n = max(len(successes), 1)
+    return {"success_rate": sum(successes) / n, "progress": sum(progress) / n, "steps": sum(steps) / n}
+
+
+def finish(run: Run) -> dict[str, object]:
+    """Final hop test, ``policy.pt``, the learning curve, the waypoint expert on AntMaze, the summary."""
+    summary = final_summary(run, "sac", title="SAC on ant-goal (4-goal chain success)")
+    summary["hop_success_rate"] = summary["success_rate"]
+    episodes = run.cfg.expert_eval.episodes
+    if episodes:
+        maze = evaluate_waypoint_expert(run.mirror.policy, episodes, run.cfg.expert_eval.seed)
+        summary.update(antmaze_success_rate=maze["success_rate"], antmaze_progress=maze["progress"],
+                       antmaze_episodes=episodes, antmaze_seed=run.cfg.expert_eval.seed)
+    return summary

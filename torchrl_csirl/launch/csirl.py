@@ -1,16 +1,20 @@
-"""CSIRL's part of the run layer (``recipes/csirl_highway.py``, ``recipes/csirl_robotics.py``): its
-configuration schema and its builders.
+"""CSIRL's part of the run layer (``recipes/csirl_highway.py``, any task): its recipe (:data:`CSIRL_RECIPE`:
+schemas, presets, checks, trainer, finish) and its builders.
 
 The pieces every script shares (environments, collector, buffers, logging, evaluation,
-checkpoints, device, run directory, summary) live in :mod:`torchrl_csirl.launch.builders`; this module adds the
-``csirl`` section of the configuration and builds the ensemble-SAC learner, the reward network,
+checkpoints, device, run directory, summary) live in :mod:`torchrl_csirl.launch.builders`' modules; this module
+adds the ``csirl`` section of the configuration and builds the ensemble-SAC learner, the reward network,
 the meta-gradient loss, the subgoal curriculum and the matching reward, then hands them to
-:func:`torchrl_csirl.launch.builders.assemble_trainer`.
+:func:`~torchrl_csirl.launch.assembly.assemble_trainer`. A driving scene is configured by
+:class:`CSIRLHighwayConfig`, any other task by :class:`CSIRLTaskConfig` (its family decides).
 
 Examples:
     >>> cfg = load_config(["env.scenario=roundabout", "csirl.intrinsic=false"])
     >>> cfg.env.scenario, method_name(cfg)
     ('roundabout', 'csirl-b')
+    >>> cfg = load_config(["env.scenario=hopper"])
+    >>> cfg.env.task, cfg.model.ego_relative_features, cfg.collector.frames_per_batch
+    ('hopper', False, 1400)
 """
 from __future__ import annotations
 
@@ -27,15 +31,8 @@ from torchrl_csirl.curriculum import SubgoalCurriculum
 from torchrl_csirl.data import DemonstrationMixer, ExpertDemonstrations
 from torchrl_csirl.envs import FAILURE_KEYS, SCENARIOS, ScenarioSpec, resolve_scenario  # noqa: F401 - SCENARIOS: used by tests
 from torchrl_csirl.hyperparameters import CSIRLHyperparameters
-from torchrl_csirl.launch import config as config_lib
-from torchrl_csirl.launch.builders import (
-    Run,
-    assemble_trainer,
-    check_collector,
-    load_experts,
-    make_online_buffer,
-    model_input_features,
-)
+from torchrl_csirl.launch.assembly import Run, assemble_trainer, make_online_buffer, model_input_features
+from torchrl_csirl.launch.collection import check_collector_config
 from torchrl_csirl.launch.config import (
     DEVICES,
     CheckpointConfig,
@@ -50,15 +47,18 @@ from torchrl_csirl.launch.config import (
     ReplayBufferConfig,
     option,
 )
-from torchrl_csirl.launch.registry import register_recipe
-from torchrl_csirl.launch.robotics import RoboticsExpertConfig, RoboticsSections, check_driving_task
+from torchrl_csirl.launch.experts import load_experts
+from torchrl_csirl.launch.final import final_summary
+from torchrl_csirl.launch.recipes import Recipe, register_recipe
+from torchrl_csirl.launch.robotics import RoboticsExpertConfig, RoboticsSections
 from torchrl_csirl.launch.run import ExpertDataError, resolve_device
 from torchrl_csirl.modules import LearnerPrecision, PrecisionUnsupported, expert_reference_states
 from torchrl_csirl.objectives import ActorBehaviourCloning, CSIRLLearner, make_csirl_learner
 from torchrl_csirl.trainers import MetaRewardUpdate, SACUpdate, SubgoalSelectionHook
 from torchrl_csirl.transforms import CombineRewards, IntrinsicReward, SubgoalMatchingReward
 
-__all__ = ["ConfigError", "CSIRLConfig", "CSIRLHighwayConfig", "CSIRLRoboticsConfig", "ExpertDataError", "load_config", "make_trainer"]
+__all__ = ["CSIRL_RECIPE", "ConfigError", "CSIRLConfig", "CSIRLHighwayConfig", "CSIRLParts", "CSIRLRoboticsConfig", "CSIRLTaskConfig",
+           "ExpertDataError", "finish", "load_config", "load_run_config", "make_trainer"]
 
 #: the preset config group (``preset/<name>.yaml``, ``scene/<scenario>.yaml``), shipped in the package
 CONFIG_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "config", "csirl_highway")
@@ -91,31 +91,15 @@ class CSIRLHighwayConfig:
 
 
 @dataclass
-class CSIRLRoboticsConfig(RoboticsSections, CSIRLHighwayConfig):
-    """``recipes/csirl_robotics.py``: the driving recipe's defaults with the robotics sections."""
+class CSIRLTaskConfig(RoboticsSections, CSIRLHighwayConfig):
+    """``recipes/csirl_highway.py`` on any task but the driving scenes (robotics, locomotion, ``env.gym_id``, yours):
+    the driving defaults with the task sections (``env``, ``expert``, ``model``, ``collector``)."""
 
     expert: RoboticsExpertConfig = field(default_factory=RoboticsExpertConfig)
 
 
-def load_config(overrides: list[str] | None = None) -> DictConfig:
-    """The default configuration, the preset (``preset=paper``) and ``key=value`` overrides.
-
-    Raises:
-        ConfigError: one line naming the bad key or value (a non-driving task: the script that runs it).
-    """
-    check_driving_task(overrides, "recipes/csirl_robotics.py")
-    cfg = config_lib.load_config(CSIRLHighwayConfig, overrides, CONFIG_DIR)
-    check_collector(cfg.collector)
-    learner_precision(cfg)
-    return cfg
-
-
-def load_run_config(run_dir: str, overrides: list[str] | None = None) -> DictConfig:
-    """The configuration saved in ``run_dir/config.yaml``, updated by ``overrides`` (resume)."""
-    cfg = config_lib.load_run_config(CSIRLHighwayConfig, run_dir, overrides)
-    check_collector(cfg.collector)
-    learner_precision(cfg)
-    return cfg
+#: the name this schema had when the robotics tasks had a script of their own
+CSIRLRoboticsConfig = CSIRLTaskConfig
 
 
 def learner_precision(cfg: DictConfig) -> LearnerPrecision:
@@ -129,9 +113,6 @@ def learner_precision(cfg: DictConfig) -> LearnerPrecision:
         return LearnerPrecision.from_setting(cfg.optim.precision, device)
     except PrecisionUnsupported as err:
         raise ConfigError(str(err)) from None
-
-
-register_recipe(("csirl", "csirl-b"), load_config)
 
 
 def method_name(cfg: DictConfig) -> str:
@@ -244,12 +225,9 @@ def first_subgoal(cfg: DictConfig, length: int) -> int | None:
 
 
 # ---------------------------------------------------------------------------------------- assembly
-def make_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume_frames: int | None = None) -> Run:
-    """Builds every piece and the trainer with the CSIRL hooks registered.
-
-    The returned :class:`~torchrl_csirl.launch.builders.Run` also holds ``modules``, ``optimizers``,
-    ``curriculum``, ``matching``, ``expert_buffer`` and ``selection`` (in ``run.parts``).
-    """
+def make_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume_frames: int | None = None) -> Run[CSIRLParts]:
+    """Builds every piece and the trainer with the CSIRL hooks registered (CSIRL's own pieces: ``run.parts``,
+    :class:`CSIRLParts`)."""
     torch.manual_seed(cfg.seed)
     device = resolve_device(cfg.device)
     spec = resolve_scenario(cfg.env.scenario)  # a driving scenario or a robotics task
@@ -273,6 +251,60 @@ def make_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume_fra
         total_frames=total_frames(cfg, curriculum.length), updates_per_round=cfg.csirl.updates_per_round,
         states=states, round_hooks=[("subgoal_selection", selection)], frames_done=frames_done,
         resume_frames=resume_frames,
-        parts=dict(modules=modules, optimizers=optimizers, curriculum=curriculum, matching=matching,
-                   expert_buffer=expert, selection=selection),
+        parts=CSIRLParts(modules, optimizers, curriculum, matching, expert, selection),
     )
+
+
+@dataclass
+class CSIRLParts:
+    """CSIRL's own pieces of a :class:`~torchrl_csirl.launch.assembly.Run` (``run.parts``)."""
+
+    modules: CSIRLLearner  #: actor, ensemble SAC loss, reward network, meta-loss
+    optimizers: dict[str, torch.optim.Optimizer]  #: ``optim_sac``, ``optim_reward``
+    curriculum: SubgoalCurriculum  #: the subgoal curriculum
+    matching: SubgoalMatchingReward  #: the matching reward toward the current subgoal
+    expert_buffer: TensorDictReplayBuffer  #: the demonstrations' transitions
+    selection: SubgoalSelectionHook  #: the round-end subgoal selection and its history
+
+
+# ---------------------------------------------------------------------------------------- finish
+def curriculum_plots(run: Run[CSIRLParts]) -> list[str]:
+    """The subgoal curriculum with its uncertainty profiles, and the task with the selected subgoals: the driving
+    scene (:func:`~torchrl_csirl.visualization.render_curriculum`) or any other task's picture
+    (:func:`~torchrl_csirl.visualization.plot_robotics_curriculum`: the maze from above, or the matching features)."""
+    from torchrl_csirl.visualization import plot_robotics_curriculum, plot_subgoal_curriculum, render_curriculum
+
+    curriculum, history = run.parts.curriculum, run.parts.selection.history
+    picture = render_curriculum if run.spec.family == "driving" else plot_robotics_curriculum
+    paths = [
+        plot_subgoal_curriculum(history, os.path.join(run.run_dir, "subgoals.png"),
+                                curriculum_length=curriculum.length, delta=curriculum.delta),
+        picture(run.spec, curriculum.expert_observations.cpu(),
+                sorted({h["subgoal"] for h in history} | {curriculum.subgoal}),
+                os.path.join(run.run_dir, "curriculum.png")),
+    ]
+    return [os.fspath(p) for p in paths]
+
+
+def finish(run: Run[CSIRLParts]) -> dict[str, object]:
+    """Final evaluation, checkpoint, policy, plots and the summary."""
+    summary = final_summary(run, method_name(run.cfg), title=f"CSIRL on {run.spec.name}")
+    summary.update(final_subgoal=run.parts.curriculum.subgoal, curriculum_length=run.parts.curriculum.length)
+    summary["plots"] += curriculum_plots(run)
+    return summary
+
+
+def check_precision(cfg: DictConfig) -> None:
+    """``optim.precision`` usable on ``device`` (:func:`learner_precision`)."""
+    learner_precision(cfg)
+
+
+#: ``recipes/csirl_highway.py``: CSIRL and CSIRL-B on any task
+CSIRL_RECIPE = register_recipe(Recipe(
+    name="csirl", script="torchrl_csirl.scripts.csirl_highway", methods=("csirl", "csirl-b"),
+    schema=CSIRLHighwayConfig, task_schema=CSIRLTaskConfig, config_dir=CONFIG_DIR,
+    checks=(check_collector_config, check_precision),
+    method_overrides=lambda method: ["csirl.intrinsic=false"] if method == "csirl-b" else [],
+    trainer=make_trainer, finish=finish, method_of=lambda cfg: method_name(cfg)))
+load_config = CSIRL_RECIPE.load_config
+load_run_config = CSIRL_RECIPE.load_run_config

@@ -1,4 +1,5 @@
-"""The schema and builder of ``recipes/train_expert.py``: SAC on a task's own reward, then demonstrations
+"""The recipes of ``recipes/train_expert.py`` and ``recipes/train_ant_expert.py`` (:data:`EXPERT_RECIPE`,
+:data:`ANT_EXPERT_RECIPE`); the schema, builder and finish of the first: SAC on a task's own reward, then demonstrations
 of the trained policy written to a file, for any non-driving task (a robotics task, ``ant-goal``, a
 task of your own, a gymnasium id). ``recipes/train_ant_expert.py`` is the same run on ``ant-goal`` with
 the AntMaze waypoint test at the end.
@@ -11,6 +12,7 @@ from typing import Optional
 
 import torch
 from omegaconf import DictConfig, OmegaConf
+from torchrl.envs import ExplorationType, set_exploration_type
 from torchrl.objectives import SoftUpdate
 
 from torchrl_csirl.envs import resolve_scenario, task_names
@@ -19,17 +21,23 @@ from torchrl_csirl.launch.ant_expert import (
     AntCheckpointConfig,
     AntCollectorConfig,
     AntEvalConfig,
+    AntExpertConfig,
     AntReplayBufferConfig,
 )
-from torchrl_csirl.launch.builders import Run, assemble_trainer, make_online_buffer
+from torchrl_csirl.launch.ant_expert import finish as ant_finish
+from torchrl_csirl.launch.assembly import Run, assemble_trainer, make_online_buffer
+from torchrl_csirl.launch.collection import check_collector_config
 from torchrl_csirl.launch.config import DEVICES, LoggerConfig, UpdateRatioConfig, option
+from torchrl_csirl.launch.final import final_summary
+from torchrl_csirl.launch.recipes import Recipe, register_recipe
 from torchrl_csirl.launch.robotics import RoboticsEnvConfig
 from torchrl_csirl.launch.run import resolve_device
 from torchrl_csirl.modules import make_actor, make_input_features, make_qvalue
 from torchrl_csirl.objectives import SACHyperparameters, make_sac_learner
 from torchrl_csirl.trainers import KeepBestPolicy, SACUpdate, StopAtTarget
 
-__all__ = ["BEST_POLICY_FILE", "DemosConfig", "ExpertEnvConfig", "ExpertTrainingConfig", "make_sac_trainer"]
+__all__ = ["ANT_EXPERT_RECIPE", "BEST_POLICY_FILE", "DemosConfig", "EXPERT_RECIPE", "ExpertEnvConfig", "ExpertTrainingConfig",
+           "finish", "make_sac_trainer", "write_demonstrations"]
 
 #: the weights of the best evaluation (``eval.keep_best``), in the run directory
 BEST_POLICY_FILE = "best_policy.pt"
@@ -97,8 +105,56 @@ def make_sac_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume
         states={"loss": loss, "optim_sac": optimizer}, frames_done=frames_done, resume_frames=resume_frames,
     )
     if cfg.eval.keep_best:  # registered after the evaluation, before the round's checkpoint
-        run.parts["keep_best"] = KeepBestPolicy(run.evaluation, actor, os.path.join(run_dir, BEST_POLICY_FILE))
+        run.keep_best = KeepBestPolicy(run.evaluation, actor, os.path.join(run_dir, BEST_POLICY_FILE))
         run.trainer.register_op("round_end", run.keep_best, "keep_best")
     if cfg.eval.stop_at_return is not None:
         run.trainer.register_op("post_round", StopAtTarget(run.evaluation, cfg.eval.stop_at_return), "stop_at_return")
     return run
+
+
+# ---------------------------------------------------------------------------------------- finish
+def write_demonstrations(run: Run) -> dict[str, object]:
+    """The trained policy's demonstrations (``demos`` section): the ``.npz`` and, if asked, a Minari dataset."""
+    from torchrl_csirl.data import record_demonstrations, save_minari_dataset
+
+    demos_cfg, spec = run.cfg.demos, run.spec
+    run.mirror.sync()
+    with set_exploration_type(ExplorationType.DETERMINISTIC):
+        demos = record_demonstrations(spec.name, run.mirror.policy, demos_cfg.episodes, seed=demos_cfg.seed,
+                                      only_successful=demos_cfg.only_successful, min_return=demos_cfg.min_return)
+    path = demos_cfg.path or os.path.join(run.run_dir, f"demos_{demos_cfg.episodes}.npz")
+    demos.save(path)
+    episodes = demos.metadata["episodes"]
+    out: dict[str, object] = {"demos_path": os.path.abspath(path), "demos_episodes": len(episodes),
+                              "demos_return": sum(e["return"] for e in episodes) / len(episodes),
+                              "demos_success_rate": sum(e["success"] for e in episodes) / len(episodes)}
+    if demos_cfg.minari_id:
+        save_minari_dataset(demos, demos_cfg.minari_id, task=spec.name, overwrite=True)
+        out["demos_minari_id"] = demos_cfg.minari_id
+    return out
+
+
+def finish(run: Run) -> dict[str, object]:
+    """Final test, ``policy.pt``, the learning curve, the demonstrations, the summary."""
+    summary = final_summary(run, "sac", title=f"SAC on {run.spec.name} (its own reward)")
+    if run.cfg.demos.episodes:
+        summary.update(write_demonstrations(run))
+    return summary
+
+
+# ---------------------------------------------------------------------------------------- the recipes
+def check_device(cfg: DictConfig) -> None:
+    """The learner's device is usable (:func:`~torchrl_csirl.launch.run.resolve_device`)."""
+    resolve_device(cfg.device)
+
+
+#: ``recipes/train_expert.py``: SAC on any non-driving task's own reward, then its demonstrations
+EXPERT_RECIPE = register_recipe(Recipe(
+    name="expert", script="torchrl_csirl.scripts.train_expert", methods=(), schema=ExpertTrainingConfig,
+    checks=(check_collector_config, check_device), trainer=make_sac_trainer, finish=finish,
+    method_of=lambda cfg: "sac"))
+#: ``recipes/train_ant_expert.py``: the AntMaze expert's walker (SAC on ``ant-goal``), tested on the maze
+ANT_EXPERT_RECIPE = register_recipe(Recipe(
+    name="ant_expert", script="torchrl_csirl.scripts.train_ant_expert", methods=(), schema=AntExpertConfig,
+    checks=(check_collector_config, check_device), trainer=make_sac_trainer, finish=ant_finish,
+    method_of=lambda cfg: "sac"))

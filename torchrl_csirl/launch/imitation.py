@@ -44,24 +44,15 @@ from typing import Any, Optional
 import torch
 from omegaconf import DictConfig, OmegaConf
 from torch import nn
+from torchrl.data import TensorDictReplayBuffer
 from torchrl.envs import Compose
 from torchrl.envs.utils import RandomPolicy
 from torchrl.objectives import BCLoss, SoftUpdate
 
 from torchrl_csirl.data import ExpertDemonstrations
 from torchrl_csirl.envs import ScenarioSpec, TaskSpec, resolve_scenario
-from torchrl_csirl.launch import config as config_lib
-from torchrl_csirl.launch.builders import (
-    Run,
-    assemble_trainer,
-    check_collector,
-    evaluation_summary,
-    load_experts,
-    make_eval_env,
-    make_logger,
-    make_online_buffer,
-    model_input_features,
-)
+from torchrl_csirl.launch.assembly import Run, assemble_trainer, make_logger, make_online_buffer, model_input_features
+from torchrl_csirl.launch.collection import check_collector_config, make_eval_env
 from torchrl_csirl.launch.config import (
     DEVICES,
     CheckpointConfig,
@@ -76,9 +67,11 @@ from torchrl_csirl.launch.config import (
     UpdateRatioConfig,
     option,
 )
-from torchrl_csirl.launch.registry import register_recipe
-from torchrl_csirl.launch.robotics import RoboticsSections, check_driving_task
-from torchrl_csirl.launch.run import ExpertDataError, expert_accomplish_rate, resolve_device
+from torchrl_csirl.launch.experts import load_experts
+from torchrl_csirl.launch.final import evaluation_summary, final_summary
+from torchrl_csirl.launch.recipes import Recipe, register_recipe
+from torchrl_csirl.launch.robotics import RoboticsSections
+from torchrl_csirl.launch.run import expert_accomplish_rate, resolve_device
 from torchrl_csirl.modules import make_actor, make_qvalue, with_standardization
 from torchrl_csirl.objectives._imitation import SACHyperparameters, make_sac_learner
 from torchrl_csirl.trainers import BCUpdate, SACUpdate, evaluate_policy
@@ -90,8 +83,8 @@ from torchrl_csirl.trainers.imitation import (
 )
 from torchrl_csirl.transforms import CombineRewards, ProgressReward
 
-__all__ = ["ImitationHighwayConfig", "ImitationRoboticsConfig", "METHODS", "REFERENCE_METHODS", "load_config",
-           "load_run_config", "make_trainer", "evaluate_reference"]
+__all__ = ["IMITATION_RECIPE", "ImitationHighwayConfig", "ImitationParts", "ImitationRoboticsConfig", "ImitationTaskConfig",
+           "METHODS", "REFERENCE_METHODS", "evaluate_reference", "finish", "load_config", "load_run_config", "make_trainer"]
 
 #: the loss-based baselines of :func:`~torchrl_csirl.trainers.imitation.make_imitation_method`
 LOSS_METHODS = tuple(IMITATION_METHODS)
@@ -163,85 +156,36 @@ class RoboticsImitationExpertConfig(ImitationExpertConfig):
 
 
 @dataclass
-class ImitationRoboticsConfig(RoboticsSections, ImitationHighwayConfig):
-    """``recipes/imitation_robotics.py``: the driving baselines' schema with the robotics sections."""
+class ImitationTaskConfig(RoboticsSections, ImitationHighwayConfig):
+    """``recipes/imitation_highway.py`` on any task but the driving scenes: the driving baselines' schema with the
+    task sections (``env``, ``expert``, ``model``, ``collector``)."""
 
     expert: RoboticsImitationExpertConfig = field(default_factory=RoboticsImitationExpertConfig)
 
 
-def check_method(overrides: list[str], csirl_recipe: str = "recipes/csirl_highway.py") -> None:
-    """One clear line for a missing method, or for a CSIRL method (``csirl_recipe`` trains it)."""
+#: the name this schema had when the robotics tasks had a script of their own
+ImitationRoboticsConfig = ImitationTaskConfig
+
+
+def check_method(overrides: list[str], resuming: bool = False) -> None:
+    """One clear line for a missing method (a resumed run keeps its own), or for a CSIRL method."""
     given = [o.split("=", 1)[1] for o in overrides if o.startswith("method=")]
     if not given:
+        if resuming:
+            return
         raise ConfigError(f"method: required (method=<name>), one of {', '.join(METHODS)}")
     if given[-1] in CSIRL_METHODS:
-        raise ConfigError(f"method={given[-1]}: CSIRL is trained by {csirl_recipe}")
+        raise ConfigError(f"method={given[-1]}: CSIRL is trained by recipes/csirl_highway.py (torchrl-csirl train)")
 
 
-def checked_config(cfg: DictConfig) -> DictConfig:
-    """A method is named, the collector and the device are usable (every baseline recipe's checks)."""
+def check_named_method(cfg: DictConfig) -> None:
+    """A method is named and the device is usable (the recipe's checks besides the collector's)."""
     if cfg.method is None:
         raise ConfigError(f"method=null: must be one of {', '.join(METHODS)}")
-    check_collector(cfg.collector)
     resolve_device(cfg.device)
-    return cfg
-
-
-def load_baseline_config(schema: type, overrides: list[str] | None = None, run_dir: str | None = None,
-                         csirl_recipe: str = "recipes/csirl_highway.py") -> DictConfig:
-    """A baseline recipe's configuration: ``schema``'s defaults, or with ``run_dir`` the run's saved
-    configuration (resume, which keeps its method unless the command line names one), updated by
-    ``overrides``; the method named (:func:`check_method`) and :func:`checked_config`.
-
-    Raises:
-        ConfigError: one line naming the bad key or value.
-    """
-    overrides = list(overrides or [])
-    if run_dir is None or any(o.startswith("method=") for o in overrides):
-        check_method(overrides, csirl_recipe)
-    if run_dir is None:
-        return checked_config(config_lib.load_config(schema, overrides))
-    return checked_config(config_lib.load_run_config(schema, run_dir, overrides))
-
-
-def load_config(overrides: list[str] | None = None) -> DictConfig:
-    """The defaults and ``key=value`` overrides (``method=<name>`` required).
-
-    Raises:
-        ConfigError: one line naming the bad key or value.
-    """
-    check_driving_task(overrides, "recipes/imitation_robotics.py")
-    return load_baseline_config(ImitationHighwayConfig, overrides)
-
-
-def load_run_config(run_dir: str, overrides: list[str] | None = None) -> DictConfig:
-    """The configuration saved in ``run_dir/config.yaml``, updated by ``overrides`` (resume)."""
-    return load_baseline_config(ImitationHighwayConfig, overrides, run_dir)
-
-
-def _loader_of(method: str):
-    def load(overrides: list[str]) -> DictConfig:
-        return load_config([f"method={method}", *overrides])
-
-    return load
-
-
-for _method in METHODS:
-    register_recipe((_method,), _loader_of(_method))
 
 
 # ---------------------------------------------------------------------------------------- data
-def load_demonstrations(cfg: DictConfig, spec: TaskSpec) -> ExpertDemonstrations:
-    """:func:`torchrl_csirl.launch.builders.load_experts`, with an unavailable shipped size as one :class:`ExpertDataError` line."""
-    try:
-        return load_experts(cfg.expert, spec)
-    except ValueError as err:
-        if isinstance(err, ExpertDataError):
-            raise
-        raise ExpertDataError(f"expert.num_trajectories={cfg.expert.num_trajectories}: {err} "
-                              f"(method={cfg.method} needs these demonstrations)") from None
-
-
 # ---------------------------------------------------------------------------------------- methods
 def sac_hyperparameters(section: DictConfig) -> SACHyperparameters:
     """The SAC learner's settings of the ``sac`` section (its ``reward_scale`` aside)."""
@@ -301,7 +245,7 @@ METHOD_BUILDERS = {"sac": make_sac, "bc": make_bc, **{name: make_loss_method for
 
 def method_input_features(cfg: DictConfig, spec: TaskSpec, demos: ExpertDemonstrations) -> nn.Module | None:
     """The input map of the method's networks: the ``model`` section's
-    (:func:`~torchrl_csirl.launch.builders.model_input_features`), after a standardisation fitted to the
+    (:func:`~torchrl_csirl.launch.assembly.model_input_features`), after a standardisation fitted to the
     demonstrations' observations where the method's section asks for it (``valuedice.normalize_states``)."""
     features = model_input_features(cfg.model, spec)
     section = cfg.get(cfg.method)
@@ -314,9 +258,9 @@ def method_input_features(cfg: DictConfig, spec: TaskSpec, demos: ExpertDemonstr
                           "model.lane_features=false)") from None
 
 
-def make_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume_frames: int | None = None) -> Run:
-    """Builds the method and the trainer with the shared hooks (``run.method`` is the
-    :class:`~torchrl_csirl.trainers.imitation.ImitationMethod`, ``run.expert_buffer`` its demonstrations).
+def make_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume_frames: int | None = None) -> Run[ImitationParts]:
+    """Builds the method and the trainer with the shared hooks (the method and its demonstrations: ``run.parts``,
+    :class:`ImitationParts`).
 
     The online buffer samples the method's ``batch_size`` (``expert.batch_size`` for ``bc``); the
     expert buffer holds every demonstrated transition, with the method's expert transforms.
@@ -324,7 +268,7 @@ def make_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume_fra
     torch.manual_seed(cfg.seed)
     device = resolve_device(cfg.device)
     spec = resolve_scenario(cfg.env.scenario)  # a driving scenario or a robotics task
-    demos = load_demonstrations(cfg, spec)
+    demos = load_experts(cfg.expert, spec)
     try:  # e.g. a negative learning rate of a section read from a hyperparameter dataclass
         method = METHOD_BUILDERS[cfg.method](cfg, spec, device, method_input_features(cfg, spec, demos))
     except ConfigError:
@@ -339,8 +283,16 @@ def make_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume_fra
         cfg, spec, run_dir, device=device, demos=demos, policy=method.policy, online_buffer=online,
         update_step=method.make_update_step(online, expert), total_frames=cfg.collector.total_frames,
         updates_per_round=cfg.updates_per_round, states=method.states, frames_done=frames_done,
-        resume_frames=resume_frames, parts={"method": method, "expert_buffer": expert}, behaviour=method.behaviour,
+        resume_frames=resume_frames, parts=ImitationParts(method, expert), behaviour=method.behaviour,
     )
+
+
+@dataclass
+class ImitationParts:
+    """A baseline's own pieces of a :class:`~torchrl_csirl.launch.assembly.Run` (``run.parts``)."""
+
+    method: ImitationMethod  #: the method's losses, policy, update step and transforms
+    expert_buffer: TensorDictReplayBuffer  #: the demonstrations' transitions (with the method's expert transforms)
 
 
 # ---------------------------------------------------------------------------------------- reference rows
@@ -357,7 +309,7 @@ def evaluate_reference(cfg: DictConfig, run_dir: str) -> dict[str, Any]:
     """A reference row: its policy on the ``eval.final_episodes`` test episodes, logged; the summary."""
     torch.manual_seed(cfg.seed)
     spec = resolve_scenario(cfg.env.scenario)
-    demos = load_demonstrations(cfg, spec)
+    demos = load_experts(cfg.expert, spec)
     env = make_eval_env(spec.name)
     logger = make_logger(cfg, run_dir)
     start = time.perf_counter()
@@ -371,3 +323,25 @@ def evaluate_reference(cfg: DictConfig, run_dir: str) -> dict[str, Any]:
     return {**evaluation_summary(cfg, spec, cfg.method, final, expert_accomplish_rate(demos.metadata)), "device": "cpu",
             "auc": None, "frames": 0, "updates": 0, "rounds": 0, "wall_s": round(time.perf_counter() - start, 1),
             "run_dir": run_dir, "plots": []}
+
+
+# ---------------------------------------------------------------------------------------- the recipe
+def finish(run: Run[ImitationParts]) -> dict[str, object]:
+    """The final evaluation, policy, curve and summary of a trained method."""
+    return final_summary(run, run.cfg.method, title=f"{run.cfg.method} on {run.spec.name}")
+
+
+def reference_evaluation(cfg: DictConfig):
+    """:func:`evaluate_reference` for a reference row (``random``, ``expert``), None for a trained method."""
+    return evaluate_reference if cfg.method in REFERENCE_METHODS else None
+
+
+#: ``recipes/imitation_highway.py``: one baseline (``method=<name>``) on any task
+IMITATION_RECIPE = register_recipe(Recipe(
+    name="imitation", script="torchrl_csirl.scripts.imitation_highway", methods=METHODS,
+    schema=ImitationHighwayConfig, task_schema=ImitationTaskConfig,
+    checks=(check_collector_config, check_named_method), command_check=check_method,
+    method_overrides=lambda method: [f"method={method}"], trainer=make_trainer, finish=finish,
+    untrained=reference_evaluation))
+load_config = IMITATION_RECIPE.load_config
+load_run_config = IMITATION_RECIPE.load_run_config

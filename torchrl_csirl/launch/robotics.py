@@ -8,19 +8,21 @@ or any gymnasium id with flat ``Box`` spaces (``env.gym_id=``, :func:`prepare_ta
 """
 from __future__ import annotations
 
+import difflib
 import os
 from dataclasses import dataclass, field
 from typing import Optional
 
 from omegaconf import DictConfig, OmegaConf
 
-from torchrl_csirl.envs import import_task_module, make_gymnasium_task, task_names
+from torchrl_csirl.envs import import_task_module, make_gymnasium_task, resolve_scenario, task_names
 from torchrl_csirl.envs.robotics import ANT_GOAL_SPEC
 from torchrl_csirl.launch import config as config_lib  # noqa: F401 - doctests
 from torchrl_csirl.launch.config import CollectorConfig, ConfigError, ExpertConfig, ModelConfig, option, override_strings
 
 __all__ = ["RoboticsCollectorConfig", "RoboticsEnvConfig", "RoboticsExpertConfig", "RoboticsModelConfig",
-           "RoboticsSections", "check_driving_task", "check_robotics_config", "prepare_task", "resolve_task", "task_choices"]
+           "RoboticsSections", "check_task_sections", "prepare_task", "requested_task", "resolve_task", "schema_family",
+           "task_choices"]
 
 
 def task_choices() -> tuple[str, ...]:
@@ -70,6 +72,13 @@ class RoboticsSections:
     collector: RoboticsCollectorConfig = field(default_factory=RoboticsCollectorConfig)
 
 
+def _saved_env(run_dir: str | None) -> dict:
+    """A run directory's saved ``env`` section (empty: no run, or no such file)."""
+    if run_dir is None or not os.path.isfile(os.path.join(run_dir, "config.yaml")):
+        return {}
+    return OmegaConf.to_container(OmegaConf.load(os.path.join(run_dir, "config.yaml"))).get("env") or {}
+
+
 def prepare_task(overrides: list[str] | None, run_dir: str | None = None) -> list[str]:
     """Registers the task the configuration names before it is checked; returns the overrides.
 
@@ -87,10 +96,8 @@ def prepare_task(overrides: list[str] | None, run_dir: str | None = None) -> lis
         ['env.gym_id=MountainCarContinuous-v0', 'env.features=0', 'env.scenario=MountainCarContinuous-v0']
     """
     overrides = list(overrides or [])
-    saved: dict = {}
-    if run_dir is not None and os.path.isfile(os.path.join(run_dir, "config.yaml")):
-        saved = OmegaConf.to_container(OmegaConf.load(os.path.join(run_dir, "config.yaml"))).get("env") or {}
-    given = {**{f"env.{k}": ("null" if v is None else str(v)) for k, v in saved.items()}, **override_strings(overrides)}
+    given = {**{f"env.{k}": ("null" if v is None else str(v)) for k, v in _saved_env(run_dir).items()},
+             **override_strings(overrides)}
     module = given.get("env.module", "null")
     try:
         if module != "null":
@@ -112,22 +119,46 @@ def prepare_task(overrides: list[str] | None, run_dir: str | None = None) -> lis
     return overrides
 
 
-def check_driving_task(overrides: list[str] | None, script: str) -> None:
-    """A driving script asked for another task: one line naming the script that runs it.
+def requested_task(overrides: list[str] | None, run_dir: str | None = None) -> str | None:
+    """The task a command line names (``env.gym_id``, ``env.task`` or ``env.scenario``, over a resumed
+    run's saved ``env`` section); None when it names none.
 
     Examples:
-        >>> check_driving_task(["env.scenario=relocate"], "recipes/csirl_robotics.py")
+        >>> requested_task(["seed=1", "env.task=relocate"]), requested_task(["seed=1"])
+        ('relocate', None)
+    """
+    given = {**{f"env.{k}": ("null" if v is None else str(v)) for k, v in _saved_env(run_dir).items()},
+             **override_strings(overrides)}
+    for key in ("env.gym_id", "env.task", "env.scenario"):
+        if given.get(key, "null") != "null":
+            return given[key]
+    return None
+
+
+def schema_family(task: str) -> str:
+    """``"driving"`` for a driving scene, ``"task"`` for any other registered task: which of a recipe's two
+    schemas configures it (:class:`~torchrl_csirl.launch.recipes.Recipe`).
+
+    Raises:
+        ConfigError: an unknown task, with the known ones and how to bring one's own.
+
+    Examples:
+        >>> schema_family("merge"), schema_family("hopper")
+        ('driving', 'task')
+        >>> schema_family("mergee")  # doctest: +ELLIPSIS
         Traceback (most recent call last):
         ...
-        torchrl_csirl.launch.config.ConfigError: env.scenario=relocate: not a driving scene; recipes/csirl_robotics.py runs it
+        torchrl_csirl.launch.config.ConfigError: env.scenario=mergee: unknown task (did you mean merge?); one of ...
     """
-    given = override_strings(overrides)
-    for key in ("env.gym_id", "env.module", "env.task"):
-        if given.get(key, "null") != "null":
-            raise ConfigError(f"{key}={given[key]}: the driving scripts take env.scenario only; {script} runs any other task")
-    scenario = given.get("env.scenario")
-    if scenario is not None and scenario in task_choices():
-        raise ConfigError(f"env.scenario={scenario}: not a driving scene; {script} runs it")
+    try:
+        family = resolve_scenario(task).family
+    except ValueError:
+        names = task_names()
+        close = difflib.get_close_matches(task, names, n=1)
+        hint = f" (did you mean {close[0]}?)" if close else ""
+        raise ConfigError(f"env.scenario={task}: unknown task{hint}; one of {', '.join(names)}, or env.gym_id=<a gymnasium "
+                          "id>, or env.module=<a module that registers yours>") from None
+    return "driving" if family == "driving" else "task"
 
 
 def resolve_task(cfg: DictConfig, overrides: list[str] | None) -> None:
@@ -149,9 +180,13 @@ def resolve_task(cfg: DictConfig, overrides: list[str] | None) -> None:
     cfg.env.task = cfg.env.scenario
 
 
-def check_robotics_config(cfg: DictConfig, overrides: list[str] | None = None) -> DictConfig:
-    """The checks every robotics recipe shares: ``env.task`` resolved, no ego-relative inputs."""
+def check_task_sections(cfg: DictConfig, overrides: list[str] | None = None) -> DictConfig:
+    """The checks of a non-driving schema (a no-op on a driving one): ``env.task`` resolved, no driving inputs."""
+    if "task" not in cfg.env:
+        return cfg
     resolve_task(cfg, overrides)
+    if "model" not in cfg:
+        return cfg
     if cfg.model.ego_relative_features:
         raise ConfigError("model.ego_relative_features=true: the other-vehicle offsets exist in driving scenes only")
     if cfg.model.lane_features:

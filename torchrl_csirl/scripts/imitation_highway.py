@@ -1,62 +1,42 @@
-"""One baseline on a driving scenario: ``python recipes/imitation_highway.py method=<name> [key=value ...]``.
+"""One baseline on any task: ``python recipes/imitation_highway.py method=<name> [key=value ...]``
+(``torchrl-csirl train method=<name>``).
 
 Trains (or, for the reference rows, evaluates) one of the methods CSIRL is compared with, under
 the CSIRL recipe's budget, networks, input features, demonstrations and evaluation, with the same
-outputs. Methods: ``sac`` (SAC on the true distance reward), ``bc`` (behavioural cloning),
-``random`` and ``expert`` (reference rows, no training); CSIRL itself is
-``recipes/csirl_highway.py``. Configuration: the typed schema in ``torchrl_csirl/launch/imitation.py``
-(``python recipes/imitation_highway.py --help`` lists every key). See docs/benchmark.md.
+outputs. Methods: ``sac`` (SAC on the true reward: the driving scenes' distance reward, another task's
+own reward), ``bc`` (behavioural cloning), ``gail``, ``dac``, ``valuedice``, ``sqil``, ``iqlearn``, and
+``random`` and ``expert`` (reference rows, no training); CSIRL itself is ``recipes/csirl_highway.py``.
+The task is named as for CSIRL (``env.scenario``, ``env.task``, ``env.gym_id``, ``env.module``) and its
+family picks the schema (:class:`~torchrl_csirl.launch.imitation.ImitationTaskConfig` for every task but
+the driving scenes). ``--help`` lists every key. See docs/benchmark.md.
 
 The run directory (``logger.output_dir``/<name>) receives ``config.yaml``, ``metrics.jsonl``,
 ``metrics.csv``, ``summary.json`` and, for a trained method, ``checkpoints/last``, ``policy.pt``
 and ``learning_curve.png``; the last printed line is a JSON summary. ``checkpoint.resume=<run dir>``
 continues a killed run; an existing run is never replaced unless ``logger.overwrite=true``.
+
+Example (BC on Relocate)::
+
+    python recipes/imitation_highway.py method=bc env.task=relocate seed=0 collector.main_threads=1
 """
 from __future__ import annotations
 
 import sys
-import time
 
-from torchrl_csirl.launch.builders import (
-    final_summary,
-    open_configured_run,
-    requested_config,
-    start_run,
-    train_and_finish,
-)
 from torchrl_csirl.launch.config import help_requested
-from torchrl_csirl.launch.imitation import (
-    REFERENCE_METHODS,
-    ImitationHighwayConfig,
-    evaluate_reference,
-    load_config,
-    load_run_config,
-    make_trainer,
-)
+from torchrl_csirl.launch.imitation import IMITATION_RECIPE, ImitationHighwayConfig  # noqa: F401 - the schema, for the docs
+from torchrl_csirl.launch.lifecycle import run_recipe
 from torchrl_csirl.launch.run import run_script, write_summary
 
-
-def summarize(run) -> dict[str, object]:
-    """The final evaluation, policy, curve and summary of a trained method."""
-    return final_summary(run, run.cfg.method, title=f"{run.cfg.method} on {run.spec.name}")
+__all__ = ["main"]
 
 
-def main(argv: list[str] | None = None, *, schema: type = ImitationHighwayConfig, doc: str | None = None,
-         load=load_config, load_run=load_run_config) -> dict[str, object]:
-    """Train (or evaluate) one baseline; ``schema``, ``doc``, ``load`` and ``load_run`` are another
-    recipe's when it reuses this one (imitation_robotics.py)."""
+def main(argv: list[str] | None = None, *, default_task: str | None = None) -> dict[str, object]:
+    """Train (or evaluate) one baseline; ``default_task``: the task when the command line names none."""
     argv = sys.argv[1:] if argv is None else list(argv)
-    if help_requested(argv, doc or __doc__, schema):
+    if help_requested(argv, __doc__, IMITATION_RECIPE.help_schema(argv, default_task=default_task)):
         return {}
-    start = time.perf_counter()
-    cfg = requested_config(argv, load, load_run)  # a resumed run keeps its method
-    if cfg.method in REFERENCE_METHODS:
-        summary = start_run(cfg, cfg.method, evaluate_reference)
-    else:
-        run = open_configured_run(cfg, lambda cfg: cfg.method, make_trainer)
-        summary = train_and_finish(run, summarize)
-    # a resumed run's earlier processes count too (up to their checkpoint)
-    summary["total_wall_s"] = round(time.perf_counter() - start + summary.get("earlier_wall_s", 0.0), 1)
+    summary = run_recipe(IMITATION_RECIPE, argv, default_task=default_task)
     print(f"{summary['scenario']} / {summary['method']}: accomplish rate {summary['accomplish_rate']:.3f} "
           f"(success {summary['success_rate']:.2f}) after {summary['frames']} frames / {summary['updates']} updates",
           file=sys.stderr)

@@ -1,0 +1,231 @@
+"""One registry of recipes: what each training script is, in one record (:class:`Recipe`).
+
+A recipe names the methods it trains, its configuration schema (one for the driving scenes, one for
+every other task: the task's :attr:`~torchrl_csirl.envs.TaskSpec.family` picks it), its presets, the
+checks a loaded configuration must pass, its trainer and its finish. Loading is the same for every
+recipe (:meth:`Recipe.load_config`, :meth:`Recipe.load_run_config`, :meth:`Recipe.requested_config`):
+the task named on the command line is registered first (``env.module``, ``env.gym_id``,
+:func:`~torchrl_csirl.launch.robotics.prepare_task`), its family chooses the schema, then the
+checks run. The run-level tools (``tools/summarize_runs.py``, the sweep, ``torchrl-csirl train``)
+look a recipe up by method name (:func:`recipe_for`).
+
+Examples:
+    >>> recipe_for("csirl").name, recipe_for("gail").name
+    ('csirl', 'imitation')
+    >>> cfg = recipe_for("csirl").load_config(["env.gym_id=MountainCarContinuous-v0"])
+    >>> cfg.env.scenario, type(cfg.expert.curriculum).__name__
+    ('MountainCarContinuous-v0', 'str')
+    >>> recipe_for("gibberish")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    KeyError: "unknown method 'gibberish'; known: bc, csirl, csirl-b, ..."
+"""
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from omegaconf import DictConfig
+
+from torchrl_csirl.launch import config as config_lib
+from torchrl_csirl.launch.config import ConfigError, override_strings
+from torchrl_csirl.launch.robotics import check_task_sections, prepare_task, requested_task, schema_family
+from torchrl_csirl.launch.run import resolve_resume
+
+__all__ = ["RECIPE_MODULES", "Recipe", "known_methods", "load_config_for", "recipe_for", "recipe_schemas", "recipes",
+           "register_recipe"]
+
+#: the run-layer modules that declare the recipes (imported on the first look-up)
+RECIPE_MODULES = ("torchrl_csirl.launch.csirl", "torchrl_csirl.launch.imitation", "torchrl_csirl.launch.expert_training")
+
+_RECIPES: dict[str, Recipe] = {}
+
+
+@dataclass(frozen=True)
+class Recipe:
+    """A training script's configuration, checks, trainer and finish.
+
+    Attributes:
+        name: the recipe's name (``csirl``, ``imitation``, ``expert``, ``ant_expert``).
+        script: the module whose ``main`` runs it (``torchrl_csirl.scripts.<name>``).
+        methods: the method names it trains (a run's ``summary.json`` ``method``).
+        schema: the configuration schema of the driving scenes (or of every task when ``task_schema`` is None).
+        task_schema: the schema of every other task (None: ``schema`` for every task).
+        config_dir: the folder of ``schema``'s presets and per-scene defaults (None: ``preset=default`` only).
+        checks: ``check(cfg)`` for each configuration loaded (several keys at once, the device, ...);
+            each raises :class:`~torchrl_csirl.launch.config.ConfigError`.
+        command_check: ``check(overrides, resuming)`` on the command line before loading (e.g. a method named).
+        method_overrides: ``method -> key=value strings`` that select a method of this recipe.
+        trainer: ``trainer(cfg, run_dir, frames_done=, resume_frames=) -> Run``.
+        finish: ``finish(run) -> summary`` (final evaluation, policy, plots).
+        method_of: ``method_of(cfg) -> str``, the method a configuration trains.
+        untrained: ``untrained(cfg)``: for a configuration that trains nothing (a reference row), its
+            ``evaluate(cfg, run_dir) -> summary``; else None.
+    """
+
+    name: str
+    script: str
+    methods: tuple[str, ...]
+    schema: type
+    task_schema: type | None = None
+    config_dir: str | None = None
+    checks: Sequence[Callable[[DictConfig], Any]] = ()
+    command_check: Callable[[list[str], bool], None] | None = None
+    method_overrides: Callable[[str], list[str]] = field(default=lambda method: [])
+    trainer: Callable[..., Any] | None = None
+    finish: Callable[[Any], dict[str, Any]] | None = None
+    method_of: Callable[[DictConfig], str] = field(default=lambda cfg: cfg.method)
+    untrained: Callable[[DictConfig], Callable[[DictConfig, str], dict[str, Any]] | None] = field(default=lambda cfg: None)
+
+    def schema_for(self, task: str | None) -> type:
+        """The schema of ``task`` (None: the schema's own default task)."""
+        if self.task_schema is None or task is None or schema_family(task) == "driving":
+            return self.schema
+        return self.task_schema
+
+    def _config_dir(self, schema: type) -> str | None:
+        return self.config_dir if schema is self.schema else None
+
+    def _checked(self, cfg: DictConfig, overrides: list[str]) -> DictConfig:
+        check_task_sections(cfg, overrides)
+        for check in self.checks:
+            check(cfg)
+        return cfg
+
+    def load_config(self, overrides: list[str] | None = None, *, default_task: str | None = None) -> DictConfig:
+        """Defaults, the preset, ``key=value`` overrides, for the task they name (its schema), checked.
+
+        Args:
+            overrides: ``key=value`` strings (the command line).
+            default_task: the task when the command line names none (None: the schema's default).
+
+        Raises:
+            ConfigError: one line naming the bad key or value.
+        """
+        overrides = list(overrides or [])
+        if self.command_check is not None:
+            self.command_check(overrides, False)
+        overrides = prepare_task(overrides)
+        if default_task is not None and requested_task(overrides) is None:
+            overrides = [f"env.scenario={default_task}", *overrides]
+        schema = self.schema_for(requested_task(overrides))
+        if schema is self.schema and self.task_schema is not None:
+            overrides = scene_overrides(overrides)
+        return self._checked(config_lib.load_config(schema, overrides, self._config_dir(schema)), overrides)
+
+    def load_run_config(self, run_dir: str, overrides: list[str] | None = None) -> DictConfig:
+        """The configuration saved in ``run_dir/config.yaml``, updated by ``overrides`` (resume), checked."""
+        overrides = list(overrides or [])
+        if self.command_check is not None:
+            self.command_check(overrides, True)
+        overrides = prepare_task(overrides, run_dir)
+        schema = self.schema_for(requested_task(overrides, run_dir))
+        if schema is self.schema and self.task_schema is not None:
+            overrides = scene_overrides(overrides)
+        return self._checked(config_lib.load_run_config(schema, run_dir, overrides), overrides)
+
+    def requested_config(self, argv: list[str], *, default_task: str | None = None) -> DictConfig:
+        """The configuration a command line asks for: a new run's (:meth:`load_config`), or with
+        ``checkpoint.resume=`` the saved run's updated by the rest of the line (:meth:`load_run_config`,
+        e.g. a larger ``collector.total_frames``), ``checkpoint.resume`` kept."""
+        resume = override_strings(argv).get("checkpoint.resume")
+        if resume is None or resume == "null":
+            return self.load_config(argv, default_task=default_task)
+        cfg = self.load_run_config(resolve_resume(resume)[0], [a for a in argv if not a.startswith("checkpoint.resume=")])
+        cfg.checkpoint.resume = resume
+        return cfg
+
+    def help_schema(self, argv: list[str], *, default_task: str | None = None) -> type:
+        """The schema ``--help`` describes: the one of the task the command line names."""
+        try:
+            overrides = prepare_task([a for a in argv if "=" in a])
+        except ConfigError:
+            return self.schema
+        return self.schema_for(requested_task(overrides) or default_task)
+
+
+def scene_overrides(overrides: list[str]) -> list[str]:
+    """A driving scene named as ``env.task`` (the other tasks' spelling) given as ``env.scenario``, the driving
+    schema's one key for it.
+
+    Raises:
+        ConfigError: ``env.task`` and ``env.scenario`` naming different scenes.
+
+    Examples:
+        >>> scene_overrides(["env.task=merge", "seed=1"])
+        ['env.scenario=merge', 'seed=1']
+    """
+    given = override_strings(overrides)
+    task, scenario = given.get("env.task"), given.get("env.scenario")
+    if task is not None and scenario is not None and task != scenario:
+        raise ConfigError(f"env.task={task} and env.scenario={scenario}: the same setting, give one of them")
+    return [f"env.scenario={o.partition('=')[2]}" if o.startswith("env.task=") else o for o in overrides]
+
+
+def recipe_schemas() -> list[str]:
+    """Every registered recipe's schemas, as ``module:class`` (the docs' configuration reference lists each)."""
+    found = []
+    for recipe in recipes().values():
+        for schema in (recipe.schema, recipe.task_schema):
+            if schema is not None:
+                found.append(f"{schema.__module__}:{schema.__qualname__}")
+    return found
+
+
+def register_recipe(recipe: Recipe) -> Recipe:
+    """Adds ``recipe`` to the registry (its methods must not belong to another recipe)."""
+    taken = {m: r.name for r in _RECIPES.values() if r.name != recipe.name for m in r.methods}
+    clash = [m for m in recipe.methods if m in taken]
+    if clash:
+        raise ValueError(f"register_recipe({recipe.name!r}): {', '.join(clash)} already trained by {taken[clash[0]]!r}")
+    _RECIPES[recipe.name] = recipe
+    return recipe
+
+
+def _import_recipes() -> None:
+    for module in RECIPE_MODULES:
+        importlib.import_module(module)
+
+
+def recipes() -> dict[str, Recipe]:
+    """Every registered recipe, by name."""
+    _import_recipes()
+    return dict(_RECIPES)
+
+
+def known_methods() -> list[str]:
+    """Every method name a registered recipe trains."""
+    return sorted(m for r in recipes().values() for m in r.methods)
+
+
+def recipe_for(method: str) -> Recipe:
+    """The recipe that trains ``method`` (or the recipe named ``method``: ``expert``, ``ant_expert``).
+
+    Raises:
+        KeyError: an unknown method, with the known ones.
+    """
+    found = recipes()
+    for recipe in found.values():
+        if method in recipe.methods:
+            return recipe
+    if method in found:
+        return found[method]
+    raise KeyError(f"unknown method {method!r}; known: {', '.join(known_methods())}")
+
+
+def load_config_for(method: str) -> Callable[[list[str]], DictConfig]:
+    """``overrides -> configuration`` of ``method`` (its recipe's loader with the method selected).
+
+    Examples:
+        >>> load_config_for("csirl-b")(["seed=3"]).csirl.intrinsic
+        False
+    """
+    recipe = recipe_for(method)
+
+    def load(overrides: list[str] | None = None) -> DictConfig:
+        return recipe.load_config([*recipe.method_overrides(method), *(overrides or [])])
+
+    return load
+
