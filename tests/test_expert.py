@@ -147,7 +147,7 @@ def test_overlaps_lane_counts_a_front_turned_into_the_lane():
     from highway_env.road.road import Road, RoadNetwork
     from highway_env.vehicle.kinematics import Vehicle
 
-    from torchrl_csirl.envs.expert import _overlaps_lane
+    from torchrl_csirl.envs.expert_driver import _overlaps_lane
 
     network = RoadNetwork()
     lane = StraightLane([0.0, 0.0], [100.0, 0.0], width=4.0)
