@@ -147,7 +147,7 @@ def test_overlaps_lane_counts_a_front_turned_into_the_lane():
     from highway_env.road.road import Road, RoadNetwork
     from highway_env.vehicle.kinematics import Vehicle
 
-    from torchrl_csirl.envs.expert import _overlaps_lane
+    from torchrl_csirl.envs.expert_driver import _overlaps_lane
 
     network = RoadNetwork()
     lane = StraightLane([0.0, 0.0], [100.0, 0.0], width=4.0)
@@ -173,6 +173,16 @@ def test_make_expert_rejects_unknown_scenario_and_overrides_config():
     with pytest.raises(ValueError, match="Unknown scenario"):
         ExpertDriver("parking")
     assert make_expert("merge", horizon=7).config.horizon == 7
+    with pytest.raises(ValueError, match="takes fields of ExpertConfig"):
+        make_expert("merge", lookahead=3.0)
+
+
+def test_the_driving_expert_knows_every_driving_scenario_of_the_registry():
+    from torchrl_csirl.envs import task_names
+    from torchrl_csirl.envs.expert import EXPERT_CONFIGS, expert_tasks
+
+    assert sorted(EXPERT_CONFIGS) == list(task_names(family="driving")) == sorted(SCENARIO_NAMES)
+    assert set(task_names(family="driving")) <= set(expert_tasks())
 
 
 def test_roundabout_exit_approach_lane_is_the_outer_ring_lane():

@@ -84,6 +84,56 @@ def test_register_task_refuses_the_builtin_names_and_twice_the_same():
         register_task(own_task_module.SPEC, own_task_module.make_own_pendulum)
 
 
+def test_every_task_is_built_by_its_factory_with_the_device_and_info_keys_it_takes():
+    """One env-building path (issue 89): every task, built-in or registered, has a factory; ``device``
+    and ``info_keys`` reach a factory that names them, never one whose ``**kwargs`` would swallow them."""
+    from functools import partial
+
+    from torchrl.envs import GymEnv
+
+    from torchrl_csirl.envs import TASKS
+    from torchrl_csirl.envs.registry import build_env, registered_factory
+
+    assert all(registered_factory(name) is not None for name in TASKS)
+    seen: dict = {}
+
+    def factory(device="cpu", info_keys=(), **overrides):
+        seen.update(device=device, info_keys=info_keys, **overrides)
+        return GymEnv("Pendulum-v1", device=device)
+
+    env = build_env(factory, seed=0, device="cpu", info_keys=("success",), g=9.81)
+    assert seen == {"device": "cpu", "info_keys": ("success",), "g": 9.81} and env.device == torch.device("cpu")
+    env = build_env(partial(GymEnv, "Pendulum-v1"), seed=0, info_keys=("success",))  # takes neither: not passed
+    assert env.rollout(2)["observation"].shape == (2, 3)
+    import own_task_module
+
+    from torchrl_csirl.envs import make_env
+
+    assert make_env(own_task_module.NAME, seed=0, device="cpu").device == torch.device("cpu")
+
+
+def test_a_registered_task_names_its_expert():
+    import own_task_module
+
+    from torchrl_csirl.envs import TASKS, TaskSpec
+    from torchrl_csirl.envs import registry as task_registry
+    from torchrl_csirl.envs.expert import expert_tasks, make_expert
+
+    spec = TaskSpec(name="own-relocate-expert", obs_dim=3, action_dim=1, max_steps=200, finish_position=None,
+                    ego_feature_indices=(0,), position_feature_indices=(0,), matching_scale=1.0,
+                    expert="torchrl_csirl.envs.robotics.expert:make_relocate_expert")
+    register_task(spec, own_task_module.make_own_pendulum)
+    try:
+        assert expert_tasks()[-1] == spec.name and type(make_expert(spec.name)).__name__ == "DAPGRelocateExpert"
+        with pytest.raises(ValueError, match="takes no options, got \\['horizon'\\]"):
+            make_expert(spec.name, horizon=3)
+    finally:
+        TASKS.pop(spec.name, None)
+        task_registry._FACTORIES.pop(spec.name, None)
+    with pytest.raises(ValueError, match="No expert for the task 'own-pendulum'"):
+        make_expert(own_task_module.NAME)
+
+
 @pytest.mark.parametrize("overrides, message", [
     ([f"env.gym_id={MOUNTAIN_CAR}", "env.features=2"],
      "env.features=2: index 2 is outside the observation (size 2: indices 0-1)"),

@@ -34,22 +34,29 @@ __all__ = [
     "curriculum_trajectory",
     "expert_dataset_path",
     "load_expert_demonstrations",
+    "task_curricula",
 ]
 
 DATASET_SIZES = (1, 5, 10, 15, 20, 25)
 """The paper's dataset sizes."""
 CURRICULA = ("empty", "traffic")
 """The driving scenarios' curricula."""
-SCENARIO_NAMES = ("highway-fast", "merge", "roundabout", "intersection")
-TASK_CURRICULA: dict[str, tuple[str, ...]] = {
-    **{name: CURRICULA for name in SCENARIO_NAMES},
-    "antmaze-umaze": ("expert",),
-    "relocate": ("expert",),
-    "hopper": ("expert",),
-    "halfcheetah": ("expert",),
-}
-"""Task -> the curricula of its shipped files (the first is the default)."""
 _FILE_SIZE = 25
+
+
+def task_curricula() -> dict[str, tuple[str, ...]]:
+    """Task -> the curricula of its shipped files (the first is the default): :data:`CURRICULA` for the
+    driving scenarios, ``("expert",)`` for every other task with an expert (read from the task registry).
+
+    Examples:
+        >>> task_curricula()["merge"], task_curricula()["relocate"]
+        (('empty', 'traffic'), ('expert',))
+    """
+    from torchrl_csirl.envs.expert_registry import expert_tasks
+    from torchrl_csirl.envs.registry import task_names
+
+    driving = task_names(family="driving")
+    return {**{name: CURRICULA for name in driving}, **{name: ("expert",) for name in expert_tasks() if name not in driving}}
 
 
 def available_expert_datasets() -> dict[str, list[str]]:
@@ -60,8 +67,8 @@ def available_expert_datasets() -> dict[str, list[str]]:
         ['antmaze-umaze', 'halfcheetah', 'highway-fast', 'hopper', 'intersection', 'merge', 'relocate', 'roundabout']
     """
     found: dict[str, list[str]] = {}
-    for scenario, task_curricula in TASK_CURRICULA.items():
-        curricula = [c for c in task_curricula if os.path.exists(_path(scenario, c))]
+    for scenario, curricula_of_task in task_curricula().items():
+        curricula = [c for c in curricula_of_task if os.path.exists(_path(scenario, c))]
         if curricula:
             found[scenario] = curricula
     return found
@@ -80,9 +87,10 @@ def expert_dataset_path(scenario: str, curriculum: str | None = None) -> str:
         >>> os.path.basename(expert_dataset_path("relocate"))
         'expert_25.npz'
     """
-    if scenario not in TASK_CURRICULA:
-        raise ValueError(f"Unknown scenario {scenario!r}; expected one of {list(TASK_CURRICULA)}.")
-    curricula = TASK_CURRICULA[scenario]
+    known = task_curricula()
+    if scenario not in known:
+        raise ValueError(f"Unknown scenario {scenario!r}; expected one of {list(known)}.")
+    curricula = known[scenario]
     curriculum = curricula[0] if curriculum is None else curriculum
     if curriculum not in curricula:
         raise ValueError(f"Unknown curriculum {curriculum!r} for {scenario!r}; expected one of {list(curricula)}.")

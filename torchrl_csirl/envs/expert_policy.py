@@ -2,9 +2,9 @@
 
 :class:`ExpertDriverPolicy` lets :func:`~torchrl_csirl.trainers.evaluate_policy` (and any
 ``env.rollout``) drive a scenario's TorchRL environment with the privileged
-:class:`~torchrl_csirl.envs.expert.ExpertDriver`, so the expert is scored on exactly the test
+:class:`~torchrl_csirl.envs.expert_driver.ExpertDriver`, so the expert is scored on exactly the test
 episodes (same seeds, same metric) as the learned policies. On a robotics task it drives the
-task's expert (:func:`~torchrl_csirl.envs.expert.make_expert`: the DAPG hand, the waypoint-driven ant).
+task's expert (:func:`~torchrl_csirl.envs.expert_registry.make_expert`: the DAPG hand, the waypoint-driven ant).
 """
 from __future__ import annotations
 
@@ -15,7 +15,8 @@ from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 from torchrl.envs import EnvBase
 
-from torchrl_csirl.envs.expert import ExpertDriver, make_expert
+from torchrl_csirl.envs.expert_driver import ExpertDriver
+from torchrl_csirl.envs.expert_registry import make_expert
 
 __all__ = ["ExpertDriverPolicy"]
 

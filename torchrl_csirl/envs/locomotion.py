@@ -59,6 +59,7 @@ def _locomotion_spec(name: str, joints: int, action_dim: int, dt: float, scale: 
         name=name, obs_dim=velocities + 3 + joints, action_dim=action_dim, max_steps=1000, finish_position=None,
         ego_feature_indices=(0,), position_feature_indices=(0,), hidden_feature_indices=(0,),
         matching_scale=scale, episode_ends_at_goal=False, dt=dt, family="locomotion",
+        expert=f"{__name__}:LocomotionExpert",
         observation_layout=MappingProxyType(layout),
         description=f"gymnasium {LOCOMOTION_GYM_IDS[name]}: the {body} runs forward; the matching reward "
                     "reads the torso's x, the networks do not",
@@ -110,7 +111,7 @@ class LocomotionExpert:
     """A locomotion task's expert: the shipped SAC policy (or another saved one), deterministic.
 
     It reads the observation the environment gives (x included, which the policy's input map drops),
-    through the unwrapped MuJoCo environment, as every expert of :func:`~torchrl_csirl.envs.expert.make_expert`
+    through the unwrapped MuJoCo environment, as every expert of :func:`~torchrl_csirl.envs.expert_registry.make_expert`
     reads its simulator.
 
     Args:

@@ -15,23 +15,27 @@ Such a module may register gymnasium ids rather than tasks (``gymnasium.register
 from __future__ import annotations
 
 import importlib
+import inspect
 import os
 import sys
 from collections.abc import Callable
 from functools import partial
 
+import torch
 from torchrl.envs import EnvBase
 
+from torchrl_csirl.envs.info import INFO_KEYS
 from torchrl_csirl.envs.locomotion import locomotion_factories
-from torchrl_csirl.envs.scenarios import TASKS, make_scenario_env
+from torchrl_csirl.envs.scenarios import TASKS, make_scenario_env, resolve_scenario
 from torchrl_csirl.envs.spec import TaskSpec
 
-__all__ = ["env_factory", "import_task_module", "register_task", "registered_factory", "task_names"]
+__all__ = ["build_env", "env_factory", "import_task_module", "register_task", "registered_factory", "task_names"]
 
 #: the paper's tasks, ``ant-goal`` and the locomotion tasks: never replaced by :func:`register_task`
 BUILTIN_TASKS: frozenset[str] = frozenset(TASKS)
 
-_FACTORIES: dict[str, Callable[..., EnvBase]] = dict(locomotion_factories())
+#: every task's environment factory, by name (the built-in ones and those of :func:`register_task`)
+_FACTORIES: dict[str, Callable[..., EnvBase]] = {}
 
 #: the modules :func:`import_task_module` imported, in order, and the folders it searched them in
 _TASK_MODULES: dict[str, str] = {}
@@ -77,22 +81,85 @@ def register_task(spec: TaskSpec, make_env: Callable[..., EnvBase], *, replace: 
         raise ValueError(f"register_task: {spec.name!r} is a built-in task; give yours another name.")
     if spec.name in TASKS and not replace:
         raise ValueError(f"register_task: {spec.name!r} is already registered (replace=True to replace it).")
-    TASKS[spec.name] = spec
-    _FACTORIES[spec.name] = make_env
+    _register(spec, make_env)
     return spec
 
 
+def _register(spec: TaskSpec, make_env: Callable[..., EnvBase]) -> None:
+    """The one registration, of the built-in tasks and of :func:`register_task`'s: the spec and its factory."""
+    TASKS[spec.name] = spec
+    _FACTORIES[spec.name] = make_env
+
+
+def _register_builtin_tasks() -> None:
+    """The built-in tasks with their factories: the locomotion tasks' own (:func:`~torchrl_csirl.envs.locomotion.locomotion_factories`),
+    the others' ``partial(make_scenario_env, name)`` (their ``csirl/<name>-v0`` gymnasium id as a ``GymEnv``)."""
+    locomotion = locomotion_factories()
+    for spec in tuple(TASKS.values()):
+        _register(spec, locomotion.get(spec.name) or partial(make_scenario_env, spec.name))
+
+
+_register_builtin_tasks()
+
+
 def registered_factory(name: str) -> Callable[..., EnvBase] | None:
-    """The factory :func:`register_task` holds for ``name`` (a locomotion task's; None for the other built-in tasks)."""
+    """The environment factory of the task ``name`` (built-in or :func:`register_task`'s); None for an unknown name.
+
+    Examples:
+        >>> registered_factory("merge").func.__name__, registered_factory("hopper").func.__name__
+        ('make_scenario_env', 'make_locomotion_env')
+    """
     return _FACTORIES.get(name)
+
+
+def build_env(
+    factory: Callable[..., EnvBase],
+    seed: int | None = None,
+    device: torch.device | str | None = "cpu",
+    info_keys=INFO_KEYS,
+    **overrides,
+) -> EnvBase:
+    """The one way a task's environment is built from its factory (what :func:`~torchrl_csirl.envs.make_env` does).
+
+    ``factory(**overrides)``, also given ``device`` and ``info_keys`` when it names them among its
+    parameters; then moved to ``device`` when it is elsewhere (``None``: left where the factory put
+    it) and seeded with ``env.set_seed(seed)`` (None: unseeded).
+
+    Examples:
+        >>> env = build_env(registered_factory("hopper"), seed=0, device="cpu")
+        >>> env.device, env.rollout(2)["observation"].shape
+        (device(type='cpu'), torch.Size([2, 12]))
+    """
+    parameters = _named_parameters(factory)
+    kwargs = dict(overrides)
+    if "device" in parameters and device is not None:
+        kwargs["device"] = device
+    if "info_keys" in parameters:
+        kwargs["info_keys"] = info_keys
+    env = factory(**kwargs)
+    if device is not None and env.device != torch.device(device):
+        env = env.to(device)
+    if seed is not None:
+        env.set_seed(seed)
+    return env
+
+
+def _named_parameters(factory: Callable[..., EnvBase]) -> set[str]:
+    """The keyword parameters a factory names (not those a ``**kwargs`` would swallow)."""
+    try:
+        parameters = inspect.signature(factory).parameters.values()
+    except (TypeError, ValueError):  # a callable without a signature
+        return set()
+    return {p.name for p in parameters if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)}
 
 
 def env_factory(name: str | TaskSpec, **overrides) -> Callable[[], EnvBase]:
     """A picklable zero-argument factory of the task's TorchRL environment, for worker processes.
 
-    The tasks with a gymnasium id of their own (driving, robotics) give
-    ``partial(make_scenario_env, name, **overrides)`` (:func:`~torchrl_csirl.envs.scenarios.make_scenario_env`,
-    resolved by name in the worker); registered ones their own factory, so a spawned worker needs no registry. After
+    ``partial(build_env, factory, **overrides)`` (:func:`build_env`, the path of
+    :func:`~torchrl_csirl.envs.make_env`) with the task's own factory: the built-in tasks' resolve by
+    name in the worker, registered ones are their own function, so a spawned worker needs no
+    registry. ``overrides`` are :func:`~torchrl_csirl.envs.make_env`'s keywords. After
     :func:`import_task_module`, the factory imports those modules first in the worker (a module that
     registers a gymnasium id must have run there before ``gymnasium.make`` finds the id).
 
@@ -100,12 +167,10 @@ def env_factory(name: str | TaskSpec, **overrides) -> Callable[[], EnvBase]:
         >>> env_factory("merge")().batch_size
         torch.Size([])
     """
-    name = name.name if isinstance(name, TaskSpec) else name
-    factory = registered_factory(name)
-    if factory is None:
-        factory = partial(make_scenario_env, name, **overrides)
-    elif overrides:
-        factory = partial(factory, **overrides)
+    spec = resolve_scenario(name)
+    if spec.name not in _FACTORIES:
+        raise ValueError(f"{spec.name!r} is not a registered task (register_task registers it with its factory).")
+    factory = partial(build_env, _FACTORIES[spec.name], **overrides)
     if not _TASK_MODULES:
         return factory
     return partial(_build_after_importing, dict(_TASK_MODULES), factory)
@@ -125,15 +190,23 @@ def _search_in(folder: str) -> None:
         sys.path.insert(1 if sys.path else 0, folder)
 
 
-def task_names(*, driving: bool | None = None) -> tuple[str, ...]:
-    """Every task name (``driving``: only the driving scenes / only the others).
+def task_names(*, driving: bool | None = None, family: str | None = None) -> tuple[str, ...]:
+    """Every task name, sorted: the one list of the tasks (and of the driving scenes) to read.
+
+    Args:
+        driving: only the driving scenes (True) / only the others (False).
+        family: only the tasks of this :attr:`~torchrl_csirl.envs.TaskSpec.family` (``"driving"``,
+            ``"robotics"``, ``"locomotion"``, ``"gymnasium"``, ``"custom"``).
 
     Examples:
         >>> task_names(driving=True)
         ('highway-fast', 'intersection', 'merge', 'roundabout')
+        >>> task_names(family="locomotion")
+        ('halfcheetah', 'hopper')
     """
     return tuple(sorted(name for name, spec in TASKS.items()
-                        if driving is None or (spec.family == "driving") == driving))
+                        if (driving is None or (spec.family == "driving") == driving)
+                        and (family is None or spec.family == family)))
 
 
 def import_task_module(module: str) -> None:

@@ -179,6 +179,7 @@ def _spec(
         matching_scale=float(matching_scale),
         dt=1.0 / config["policy_frequency"],
         family="driving",
+        expert="torchrl_csirl.envs.expert_driver:make_expert_driver",
         observation_layout=MappingProxyType(
             {"ego": (0, n_features), "others": (n_features, vehicles_count * n_features)}
         ),
@@ -307,8 +308,8 @@ def make_scenario_env(
     robotics tasks, ``ant-goal``) as a TorchRL :class:`~torchrl.envs.libs.gym.GymEnv`, its info entries
     read into the TensorDict with fixed specs (:func:`~torchrl_csirl.envs.info.info_spec`).
 
-    What :func:`~torchrl_csirl.envs.make_env` builds for a task without a registered factory; the
-    arguments are :func:`~torchrl_csirl.envs.make_env`'s.
+    The factory of these tasks (:func:`~torchrl_csirl.envs.registry.env_factory`), what
+    :func:`~torchrl_csirl.envs.make_env` builds for them; the arguments are :func:`~torchrl_csirl.envs.make_env`'s.
 
     Examples:
         >>> make_scenario_env("merge", seed=0).rollout(2, break_when_any_done=False)["next", "distance_to_finish"].shape

@@ -49,6 +49,9 @@ class TaskSpec:
             demonstrations end there (driving: arrival at the finish; AntMaze: the goal); False
             where the goal must be held (Relocate: the ball stays at the target).
         dt: seconds per policy step.
+        expert: ``"module:function"`` of the task's expert factory, ``factory(name, **options)`` returning
+            an object with ``reset(env)`` and ``act(env) -> action`` (what
+            :func:`~torchrl_csirl.envs.expert_registry.make_expert` builds); empty: the task has no expert.
         observation_layout: name -> ``(start, stop)`` slice of the flat observation.
         description: one line on the task.
 
@@ -75,6 +78,7 @@ class TaskSpec:
     episode_ends_at_goal: bool = True
     dt: float = 0.2
     family: str = "custom"
+    expert: str = ""
     observation_layout: Mapping[str, tuple[int, int]] = field(
         default_factory=lambda: MappingProxyType({}), compare=False
     )

@@ -12,8 +12,8 @@ import torch
 from torchrl.envs import EnvBase, SerialEnv
 
 from torchrl_csirl.envs.info import FAILURE_KEYS, INFO_KEYS, ScenarioInfoReader, info_spec
-from torchrl_csirl.envs.registry import env_factory, registered_factory
-from torchrl_csirl.envs.scenarios import make_scenario_env, resolve_scenario
+from torchrl_csirl.envs.registry import build_env, env_factory, registered_factory
+from torchrl_csirl.envs.scenarios import resolve_scenario
 
 __all__ = ["FAILURE_KEYS", "INFO_KEYS", "ScenarioInfoReader", "info_spec", "make_env", "make_serial_env"]
 
@@ -25,9 +25,11 @@ def make_env(
     info_keys=INFO_KEYS,
     **overrides,
 ) -> EnvBase:
-    """Create a CSIRL task (driving scenario or robotics task) as a TorchRL environment.
+    """Create a task (driving scenario, robotics, locomotion or a registered one) as a TorchRL environment.
 
-    A :class:`~torchrl.envs.libs.gym.GymEnv` on the registered ``csirl/<name>-v0`` id with the
+    Every task is built the same way, by its factory (:func:`~torchrl_csirl.envs.registry.build_env`):
+    the driving and robotics tasks' is :func:`~torchrl_csirl.envs.scenarios.make_scenario_env`, a
+    :class:`~torchrl.envs.libs.gym.GymEnv` on the registered ``csirl/<name>-v0`` id with the
     task's info entries (``"distance_to_finish"``, ``"progress"``, ``"crashed"``,
     ``"offroad"``, ``"arrived"``, ``"success"``) read into the TensorDict with fixed specs.
     The episode limit appears as ``"truncated"``; crashes, off-road and the scene's own end
@@ -42,8 +44,9 @@ def make_env(
             ``"offroad"`` (always False); AntMaze's ``"crashed"`` is a flipped ant (the episode
             goes on), Relocate's is always False.
         seed: seed applied with ``env.set_seed`` (None: unseeded).
-        device: device of the output TensorDicts.
-        info_keys: which info entries to read.
+        device: device of the output TensorDicts, for every task: given to a factory that takes
+            ``device``, else the environment is moved there (None: where its factory puts it).
+        info_keys: which info entries to read (for a factory that takes ``info_keys``).
         **overrides: highway-env config entries (see :func:`~torchrl_csirl.envs.make_gym_env`),
             e.g. ``fast=False`` for the stock observation code; for a robotics task its
             constructor keywords (e.g. ``render_mode="rgb_array"``).
@@ -60,12 +63,9 @@ def make_env(
     """
     spec = resolve_scenario(name)
     factory = registered_factory(spec.name)
-    if factory is not None:  # a task of the user's own (register_task)
-        env = factory(**overrides)
-        if seed is not None:
-            env.set_seed(seed)
-        return env
-    return make_scenario_env(spec, seed, device, info_keys, **overrides)
+    if factory is None:
+        raise ValueError(f"{spec.name!r} is not a registered task (register_task registers it with its factory).")
+    return build_env(factory, seed, device, info_keys, **overrides)
 
 
 def make_serial_env(name: str | Callable[[], EnvBase], num_envs: int, seed: int | None = None, **kwargs) -> EnvBase:

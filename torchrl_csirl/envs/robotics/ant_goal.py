@@ -58,6 +58,7 @@ __all__ = [
     "free_cells",
     "heading_of",
     "is_flipped",
+    "make_waypoint_ant_expert",
     "next_waypoint",
     "pursuit_waypoint",
 ]
@@ -396,3 +397,15 @@ class WaypointAntExpert:
         if self.lookahead is None:
             return next_waypoint(position, goal, maze)
         return pursuit_waypoint(position, goal, maze, self.lookahead)
+
+
+def make_waypoint_ant_expert(name: str = "antmaze-umaze", policy: Any = None, *, lookahead: float | None = 3.0,
+                             action_gain: float = 0.6) -> WaypointAntExpert:
+    """The expert of ``"antmaze-umaze"`` (its :attr:`~torchrl_csirl.envs.TaskSpec.expert`): a
+    :class:`WaypointAntExpert` with these settings (``policy``: a policy file or run directory).
+
+    Examples:
+        >>> make_waypoint_ant_expert(action_gain=1.0).settings
+        {'lookahead': 3.0, 'action_gain': 1.0}
+    """
+    return WaypointAntExpert(policy, lookahead=lookahead, action_gain=action_gain)

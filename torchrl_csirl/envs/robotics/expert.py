@@ -20,7 +20,7 @@ from torch import nn
 
 from torchrl_csirl._paths import EXPERTS_DIR
 
-__all__ = ["DAPG_POLICY_PATH", "DAPGRelocateExpert", "DAPGRelocatePolicy"]
+__all__ = ["DAPG_POLICY_PATH", "DAPGRelocateExpert", "DAPGRelocatePolicy", "make_relocate_expert"]
 
 DAPG_POLICY_PATH = os.path.join(EXPERTS_DIR, "relocate", "relocate_dapg_policy.npz")
 """The shipped DAPG weights (float64 arrays ``w0, b0, w1, b1, w2, b2``, ``in_shift``, ``in_scale``,
@@ -99,3 +99,13 @@ class DAPGRelocateExpert:
     def act(self, env: Any) -> np.ndarray:
         obs = torch.as_tensor(np.asarray(env.observation(), dtype=np.float64))
         return self.policy(obs).numpy().astype(np.float32)
+
+
+def make_relocate_expert(name: str = "relocate") -> DAPGRelocateExpert:
+    """The expert of ``"relocate"`` (its :attr:`~torchrl_csirl.envs.TaskSpec.expert`): the shipped DAPG policy.
+
+    Examples:
+        >>> type(make_relocate_expert()).__name__
+        'DAPGRelocateExpert'
+    """
+    return DAPGRelocateExpert()

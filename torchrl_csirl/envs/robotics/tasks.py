@@ -436,6 +436,7 @@ def _antmaze_spec() -> RoboticsTaskSpec:
         matching_scale=100.0,
         dt=0.05,
         family="robotics",
+        expert="torchrl_csirl.envs.robotics.ant_goal:make_waypoint_ant_expert",
         observation_layout=MappingProxyType(layout),
         description="ant in D4RL's U-maze: start cell (1, 1) at (-4, 4), goal cell (3, 1) at (-4, -4)",
     )
@@ -463,6 +464,7 @@ def _relocate_spec() -> RoboticsTaskSpec:
         matching_scale=100.0,
         dt=0.01,
         family="robotics",
+        expert="torchrl_csirl.envs.robotics.expert:make_relocate_expert",
         observation_layout=MappingProxyType(layout),
         description="Adroit hand picks up the ball and carries it to a random target (within 0.1 m)",
     )
