@@ -13,7 +13,7 @@ import pytest
 import torch
 from omegaconf import OmegaConf
 
-from torchrl_csirl.launch import builders, config, csirl, run
+from torchrl_csirl.launch import assembly, builders, config, csirl, run
 from torchrl_csirl.trainers import (
     TrainingDivergedError,
     load_checkpoint,
@@ -208,7 +208,7 @@ def test_learning_curve_evaluates_validation_episodes_apart_from_the_test_ones(t
         seeds.append(seed)
         return {"accomplish_rate": 0.0, "success_rate": 0.0, "crash_rate": 0.0, "env_return": 0.0}
 
-    monkeypatch.setattr(builders, "evaluate_policy", fake_evaluate)
+    monkeypatch.setattr(assembly, "evaluate_policy", fake_evaluate)
     cfg = _tiny_cfg(tmp_path, "csirl.intrinsic=false", "collector.total_frames=300", *override)
     run = csirl.make_trainer(cfg, str(tmp_path))
     try:
@@ -392,7 +392,7 @@ def test_expert_end_at_cuts_a_published_file_where_our_scene_ends(tmp_path):
 @pytest.mark.parametrize(
     "override, message",
     [
-        (["env.scenario=mars"], "env.scenario=mars: must be one of highway-fast, intersection, merge, roundabout"),
+        (["env.scenario=mars"], "env.scenario=mars: unknown task; one of ant-goal, antmaze-umaze, halfcheetah, highway-fast"),
         (["collector.total_frames=abc"], "collector.total_frames=abc: must be an integer > 0 or null"),
         (["collector.total_frames=1.5"], "collector.total_frames=1.5: must be an integer > 0 or null"),
         (["csirl.intrinsic=maybe"], "csirl.intrinsic=maybe: must be true or false"),
@@ -723,9 +723,9 @@ def test_help_lists_every_key_with_what_it_accepts():
 
 
 def test_method_registry_reads_each_method_with_its_recipe_schema():
-    from torchrl_csirl.launch import recipes
+    from torchrl_csirl.launch import known_methods, load_config_for
 
-    assert {"csirl", "csirl-b"} <= set(recipes.known_methods())
-    cfg = recipes.load_config_for("csirl-b")(["preset=paper"])
+    assert {"csirl", "csirl-b"} <= set(known_methods())
+    cfg = load_config_for("csirl-b")(["preset=paper"])
     assert cfg.csirl.updates_per_round == 20000 and cfg.csirl.intrinsic is False
-    assert recipes.load_config_for("csirl")(["env.scenario=hopper"]).env.task == "hopper"
+    assert load_config_for("csirl")(["env.scenario=hopper"]).env.task == "hopper"

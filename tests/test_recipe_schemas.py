@@ -8,7 +8,7 @@ import os
 import pytest
 
 import torchrl_csirl.scripts
-from torchrl_csirl.launch import config, recipe_for, recipe_schemas, recipes
+from torchrl_csirl.launch import config, recipe_for, recipe_schemas, registered_recipes
 
 SCRIPTS = os.path.dirname(torchrl_csirl.scripts.__file__)
 
@@ -16,8 +16,8 @@ SCRIPTS = os.path.dirname(torchrl_csirl.scripts.__file__)
 def test_every_configured_script_runs_a_registered_recipe():
     configured = {name[:-3] for name in os.listdir(SCRIPTS)
                   if name.endswith(".py") and "help_requested" in open(os.path.join(SCRIPTS, name)).read()}
-    assert configured == {r.script.rpartition(".")[2] for r in recipes().values()}
-    for recipe in recipes().values():
+    assert configured == {r.script.rpartition(".")[2] for r in registered_recipes().values()}
+    for recipe in registered_recipes().values():
         source = open(os.path.join(SCRIPTS, recipe.script.rpartition(".")[2] + ".py")).read()
         assert "run_recipe(" in source and recipe.trainer is not None and recipe.finish is not None
 
@@ -42,7 +42,7 @@ def test_the_tasks_family_picks_the_schema(method, task, schema):
 
 
 def test_a_method_belongs_to_one_recipe_and_an_unknown_one_is_named():
-    owners = [m for r in recipes().values() for m in r.methods]
+    owners = [m for r in registered_recipes().values() for m in r.methods]
     assert len(owners) == len(set(owners))
     with pytest.raises(KeyError, match="unknown method 'nope'"):
         recipe_for("nope")

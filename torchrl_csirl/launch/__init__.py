@@ -43,7 +43,15 @@ Examples:
     'roundabout'
 """
 from torchrl_csirl.launch.config import ConfigError, load_config, load_run_config, option
-from torchrl_csirl.launch.recipes import Recipe, known_methods, load_config_for, recipe_for, recipe_schemas, recipes, register_recipe
+from torchrl_csirl.launch.recipes import (
+    Recipe,
+    known_methods,
+    load_config_for,
+    recipe_for,
+    recipe_schemas,
+    register_recipe,
+    registered_recipes,
+)
 from torchrl_csirl.launch.run import ExpertDataError, resolve_device, run_script, write_summary
 
 __all__ = [
@@ -57,8 +65,8 @@ __all__ = [
     "option",
     "recipe_for",
     "recipe_schemas",
-    "recipes",
     "register_recipe",
+    "registered_recipes",
     "resolve_device",
     "run_script",
     "write_summary",

@@ -34,7 +34,7 @@ from torchrl_csirl.launch.config import ConfigError, override_strings
 from torchrl_csirl.launch.robotics import check_task_sections, prepare_task, requested_task, schema_family
 from torchrl_csirl.launch.run import resolve_resume
 
-__all__ = ["RECIPE_MODULES", "Recipe", "known_methods", "load_config_for", "recipe_for", "recipe_schemas", "recipes",
+__all__ = ["RECIPE_MODULES", "Recipe", "known_methods", "load_config_for", "recipe_for", "recipe_schemas", "registered_recipes",
            "register_recipe"]
 
 #: the run-layer modules that declare the recipes (imported on the first look-up)
@@ -167,7 +167,7 @@ def scene_overrides(overrides: list[str]) -> list[str]:
 def recipe_schemas() -> list[str]:
     """Every registered recipe's schemas, as ``module:class`` (the docs' configuration reference lists each)."""
     found = []
-    for recipe in recipes().values():
+    for recipe in registered_recipes().values():
         for schema in (recipe.schema, recipe.task_schema):
             if schema is not None:
                 found.append(f"{schema.__module__}:{schema.__qualname__}")
@@ -189,7 +189,7 @@ def _import_recipes() -> None:
         importlib.import_module(module)
 
 
-def recipes() -> dict[str, Recipe]:
+def registered_recipes() -> dict[str, Recipe]:
     """Every registered recipe, by name."""
     _import_recipes()
     return dict(_RECIPES)
@@ -197,7 +197,7 @@ def recipes() -> dict[str, Recipe]:
 
 def known_methods() -> list[str]:
     """Every method name a registered recipe trains."""
-    return sorted(m for r in recipes().values() for m in r.methods)
+    return sorted(m for r in registered_recipes().values() for m in r.methods)
 
 
 def recipe_for(method: str) -> Recipe:
@@ -206,7 +206,7 @@ def recipe_for(method: str) -> Recipe:
     Raises:
         KeyError: an unknown method, with the known ones.
     """
-    found = recipes()
+    found = registered_recipes()
     for recipe in found.values():
         if method in recipe.methods:
             return recipe
