@@ -1,6 +1,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 
 import pytest
 import torch
@@ -279,3 +280,44 @@ def test_fused_qvalue_true_needs_a_supported_critic():
     )
     with pytest.raises(ValueError, match="fused_qvalue=True"):
         EnsembleSACLoss(make_actor(OBS, ACT, hidden=HID), critic, fused_qvalue=True)
+
+
+def _fresh_notices(monkeypatch) -> None:
+    from torchrl_csirl.objectives import ensemble_sac
+
+    monkeypatch.setattr(ensemble_sac, "_NOTICES_GIVEN", set())
+
+
+def test_differences_from_sacloss_logged_once(monkeypatch, caplog):
+    _fresh_notices(monkeypatch)
+    actor = make_actor(3, 2, hidden=(4,))
+    with caplog.at_level("INFO", logger="torchrl"):
+        EnsembleSACLoss(actor, make_qvalue(3, 2, hidden=(4,)))
+        EnsembleSACLoss(actor, make_qvalue(3, 2, hidden=(4,)))
+    lines = [r.getMessage() for r in caplog.records if "differs from SACLoss" in r.getMessage()]
+    assert len(lines) == 1
+    assert "num_qvalue_nets=5 (SACLoss: 2)" in lines[0] and "loss_function='l2'" in lines[0]
+    _fresh_notices(monkeypatch)
+    caplog.clear()
+    with caplog.at_level("INFO", logger="torchrl"):  # SACLoss's own settings: nothing to say
+        EnsembleSACLoss(actor, [make_qvalue(3, 2, hidden=(4,)) for _ in range(2)], num_qvalue_nets=2,
+                        alpha_init=1.0, loss_function="smooth_l1")
+    assert not [r for r in caplog.records if "differs from SACLoss" in r.getMessage()]
+
+
+def test_unfused_path_warned_once_with_its_reason(monkeypatch):
+    from torchrl.modules import MLP, ValueOperator
+
+    _fresh_notices(monkeypatch)
+    actor = make_actor(3, 2, hidden=(4,))
+
+    def torchrl_critic():
+        return ValueOperator(MLP(in_features=5, out_features=1, num_cells=[4]), in_keys=["observation", "action"])
+
+    with pytest.warns(UserWarning, match="unfused path: the critic is not a make_qvalue ConcatMLP"):
+        EnsembleSACLoss(actor, torchrl_critic(), num_qvalue_nets=2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        EnsembleSACLoss(actor, torchrl_critic(), num_qvalue_nets=2, fused_qvalue=False)  # asked for: silent
+        EnsembleSACLoss(actor, torchrl_critic(), num_qvalue_nets=2)  # once per process
+        EnsembleSACLoss(actor, make_qvalue(3, 2, hidden=(4,)), num_qvalue_nets=2)  # fused: silent

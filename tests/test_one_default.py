@@ -48,6 +48,7 @@ OTHER_VALUES: dict[tuple[str, str], str] = {
     ("EnsembleSACLoss.qvalue_dispersion", "dispersion"): "a measure for this call; None: the loss's own",
     ("SACUpdate", "precision"): "a LearnerPrecision built from optim.precision; None: float32 throughout (fp32)",
     ("make_csirl_learner", "reward_reference"): "the expert states themselves; None: no reference (none)",
+    ("MetaRewardLoss.forward", "expert"): "the expert batch itself; None: read from the one-tensordict batch",
 }
 
 

@@ -3,12 +3,15 @@ from __future__ import annotations
 
 import contextlib
 import copy
+import inspect
+import warnings
 from collections.abc import Iterator, Sequence
 
 import torch
 from tensordict import TensorDict, TensorDictBase
 from tensordict.nn import TensorDictModule, dispatch
 from torch import nn
+from torchrl import torchrl_logger
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 from torchrl.objectives import SACLoss
 from torchrl.objectives.utils import ValueEstimators, distance_loss
@@ -91,6 +94,45 @@ def qvalue_dispersion(qvalues: torch.Tensor, dispersion: str = CSIRL_DEFAULTS.di
     return (var / qvalues.mean(dim=0)).abs()
 
 
+#: the notices already given in this process (``_log_sacloss_differences_once``, ``_warn_unfused_once``)
+_NOTICES_GIVEN: set[str] = set()
+
+
+def _first_time(notice: str) -> bool:
+    """``True`` the first time ``notice`` is asked about in this process."""
+    if notice in _NOTICES_GIVEN:
+        return False
+    _NOTICES_GIVEN.add(notice)
+    return True
+
+
+def _sacloss_default(name: str) -> object:
+    return inspect.signature(SACLoss.__init__).parameters[name].default
+
+
+def _log_sacloss_differences_once(*, reinitialized: bool, **settings: object) -> None:
+    """Logs (once per process) the settings in effect that differ from ``SACLoss``'s defaults."""
+    differences = [f"{name}={value!r} (SACLoss: {_sacloss_default(name)!r})" for name, value in settings.items()
+                   if value != _sacloss_default(name)]
+    if reinitialized:
+        differences.append("critics re-initialised independently")
+    if differences and _first_time("sacloss_differences"):
+        torchrl_logger.info(f"EnsembleSACLoss differs from SACLoss: {', '.join(differences)} "
+                            "(EnsembleSACLoss's docstring, 'Differences from SACLoss'; logged once).")
+
+
+def _warn_unfused_once(part: str, reason: str) -> None:
+    """Warns (once per process and ``part``) that the losses run SACLoss's unfused path, and why."""
+    if _first_time(f"unfused_{part}"):
+        warnings.warn(
+            f"EnsembleSACLoss runs SACLoss's unfused path: {reason}. The fused path is bit-identical and "
+            "faster (fused critics alone: 1.1-1.4x per update, docs/performance.md); build the "
+            "networks with torchrl_csirl.modules.make_actor / make_qvalue to get it, or pass "
+            "fused=False / fused_qvalue=False to silence this warning.",
+            stacklevel=3,
+        )
+
+
 class EnsembleSACLoss(SACLoss):
     """SAC loss with ``N`` independently initialised critics, as used by CSIRL.
 
@@ -121,8 +163,8 @@ class EnsembleSACLoss(SACLoss):
       path (``tests/test_fused_sac.py``). Options it does not implement (``skip_done_states``,
       other value estimators, ``reduction="none"`` in ``forward``) run SACLoss's path;
       :meth:`fused_applies` says which one runs. ``fused=False`` always runs SACLoss's.
-    * CSIRL defaults: fixed ``alpha = 0.01``, ``gamma = 0.99`` (TD(0)), squared-error
-      critic loss summed over critics.
+    * the CSIRL defaults (:data:`~torchrl_csirl.hyperparameters.CSIRL_DEFAULTS`); see
+      *Differences from SACLoss* below.
     * a **differentiable-reward mode** (:attr:`differentiable_reward` or the
       :meth:`differentiable_reward_mode` context manager): the critic target
       ``y = r + gamma (1 - terminated) V(s')`` keeps the graph of the reward ``r``
@@ -132,6 +174,23 @@ class EnsembleSACLoss(SACLoss):
     * :meth:`using_params`: evaluates the SAC losses with swapped-in (possibly
       non-leaf, graph-carrying) actor / critic parameters, including in the actor loss,
       which otherwise evaluates Q with *detached* critic parameters.
+
+    **Differences from SACLoss** (keyword defaults; logged once per process at construction,
+    naming those in effect):
+
+    * ``num_qvalue_nets=5`` critics (``SACLoss``: 2);
+    * ``alpha_init=0.01`` (``SACLoss``: 1.0); the temperature is learned (``fixed_alpha=False``) as
+      in ``SACLoss``, while the paper keeps it fixed (``fixed_alpha=True``, ``preset=paper``);
+    * ``loss_function="l2"`` (``SACLoss``: ``"smooth_l1"``), summed over the critics as ``SACLoss`` does;
+    * critics re-initialised independently (``SACLoss``: the given critic's parameters
+      resampled uniformly between their min and max);
+    * the TD(0) value estimator is made at construction with ``gamma=0.99`` (``SACLoss``'s default
+      estimator and discount, made on first use).
+
+    With ``fixed_alpha=True``, ``"loss_alpha"`` is still returned (its value
+    ``-log(alpha) * (log pi + target_entropy)`` measures the entropy gap) but ``log_alpha`` is a
+    buffer: the entry carries no gradient, and adding it to the total loss changes nothing; read it
+    as a diagnostic, not as a loss being minimised.
 
     Truncation is not termination: TorchRL's TD(0) estimator bootstraps with
     ``(1 - ("next", "terminated"))``, and only falls back on ``("next", "done")`` when no
@@ -165,10 +224,11 @@ class EnsembleSACLoss(SACLoss):
         fused_qvalue (bool, optional): evaluate the critics with a
             :class:`~torchrl_csirl.modules.FusedCriticEnsemble` (``True``; an error if the critic
             is not supported) or with SACLoss's ``torch.vmap`` (``False``). Defaults to ``None``:
-            fused when the critic is supported.
+            fused when the critic is supported (else a warning, once per process, says why not).
         fused (bool, optional): compute the losses on the fused path (``True``; an error if the
             actor or the critics are not supported) or on SACLoss's (``False``). Defaults to
-            ``None``: fused when supported (the results are bit-identical).
+            ``None``: fused when supported (the results are bit-identical; else a warning, once per
+            process, says why not).
         **kwargs: forwarded to :class:`~torchrl.objectives.SACLoss`.
 
     Examples:
@@ -234,6 +294,14 @@ class EnsembleSACLoss(SACLoss):
         self.__dict__["_fused_qvalue"] = ensemble
         self._make_vmap()
         self.__dict__["_fused_actor"] = self._make_fused_actor(actor_network, fused)
+        _log_sacloss_differences_once(
+            num_qvalue_nets=num_qvalue_nets, alpha_init=alpha_init, loss_function=loss_function,
+            reinitialized=reinitialize_qvalue and not isinstance(qvalue_network, (list, tuple)),
+        )
+        if fused_qvalue is None and not self.fused_qvalue:
+            _warn_unfused_once("critic", "the critic is not a make_qvalue ConcatMLP (critics evaluated by torch.vmap)")
+        elif fused is None and self.fused_qvalue and not self.fused:
+            _warn_unfused_once("actor", "the actor is not a make_actor tanh-Gaussian ProbabilisticActor")
 
     def _make_fused_actor(self, actor_network: TensorDictModule, fused: bool | None):
         if fused is False:

@@ -5,9 +5,10 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 import torch
-from tensordict import TensorDict, TensorDictBase
+from tensordict import TensorDict, TensorDictBase, is_tensor_collection
 from tensordict.nn import TensorDictModule
 from tensordict.utils import NestedKey
+from torchrl.data import ReplayBuffer
 from torchrl.objectives.common import LossModule
 from torchrl.objectives.value import TD0Estimator
 
@@ -16,6 +17,22 @@ from torchrl_csirl.hyperparameters import CSIRL_DEFAULTS, GRADIENT_BALANCES, MET
 from torchrl_csirl.objectives.ensemble_sac import EnsembleSACLoss
 
 __all__ = ["MetaRewardLoss", "balanced_meta_gradient"]
+
+def _nested(prefix: NestedKey, key: NestedKey) -> tuple[str, ...]:
+    """``key`` under ``prefix`` as one flat nested key."""
+    return (prefix if isinstance(prefix, tuple) else (prefix,)) + (key if isinstance(key, tuple) else (key,))
+
+
+def _check_flat(batch: TensorDictBase, name: str) -> None:
+    if batch.batch_dims != 1:
+        raise ValueError(f"Expected a flat {name} batch, got batch size {tuple(batch.batch_size)}.")
+
+
+def _broadcast(batch: TensorDictBase, batch_size: torch.Size, name: str) -> TensorDictBase:
+    """``batch`` ``[E]`` as an expanded view ``[*batch_size, E]`` (stored inside a batch of ``batch_size``)."""
+    _check_flat(batch, name)
+    return batch.expand(*batch_size, *batch.batch_size)
+
 
 def _leaves_like(params: TensorDictBase) -> TensorDict:
     """Detached copies (sharing storage) of ``params`` that are fresh autograd leaves (a plain TensorDict)."""
@@ -186,6 +203,24 @@ class MetaRewardLoss(LossModule):
     ``("next", sac_loss.tensor_keys.reward)``, the key the critic loss reads. With
     ``use_matching_reward=False`` only ``r_w`` is used. The entry ``("next", reward)`` of the input batch (if any) is ignored.
 
+    **No** :class:`~torchrl_csirl.transforms.IntrinsicReward` **needed for this loss.** ``r_w`` must
+    carry its graph here, so the loss evaluates it itself: the ``("next", "intrinsic_reward")``
+    and ``("next", "reward")`` that such a buffer transform writes are ignored, and on the batches
+    of the meta step (online and regulariser) that transform is wasted work. A buffer sampled only
+    for this loss needs the matching reward alone (e.g.
+    :class:`~torchrl_csirl.transforms.SubgoalMatchingReward`); keep ``IntrinsicReward`` +
+    ``CombineRewards`` where plain SAC steps read ``("next", "reward")`` from the same buffer
+    (:class:`~torchrl_csirl.trainers.MetaRewardUpdate` with ``meta_every > 1``).
+
+    **Calling it.** ``loss(td)`` with one TensorDict, TorchRL's way: the online batch at the root,
+    the expert batch at ``tensor_keys.expert`` and the regulariser's (optional) at
+    ``tensor_keys.regularizer`` (:meth:`meta_batch` packs three batches,
+    :meth:`sample_meta_batch` samples three replay buffers). ``loss(online, expert, regularizer)``
+    runs the same code. Either way the online batch's TD errors are written at
+    ``"td_error"`` (the SAC loss's ``tensor_keys.priority``) of the TensorDict passed first, so a
+    :class:`~torchrl.data.TensorDictPrioritizedReplayBuffer`'s ``update_tensordict_priority`` can
+    read them.
+
     **Balance of the two parts.** With ``gradient_balance="sum"`` (the paper) the reward network
     receives ``dL_meta/dw``, in which the regulariser's part is 3 to 10^5 times the
     imitation part (it does not pass through the two inner steps; docs/algorithm.md section 5);
@@ -263,6 +298,11 @@ class MetaRewardLoss(LossModule):
         >>> out["loss_meta"].backward()
         >>> reward.module[0].weight.grad is not None
         True
+        >>> td = meta.meta_batch(online, expert)  # one TensorDict: the expert batch at "expert"
+        >>> td["expert"].batch_size, td.batch_size
+        (torch.Size([6, 3]), torch.Size([6]))
+        >>> sorted(k for k in meta(td).keys() if k.startswith("loss_"))[:3], td["td_error"].shape
+        (['loss_imitation', 'loss_inner_actor', 'loss_inner_qvalue'], torch.Size([6]))
     """
 
     @dataclass
@@ -279,12 +319,19 @@ class MetaRewardLoss(LossModule):
                 Defaults to ``"observation"``.
             expert_action (NestedKey): action key of the expert batch.
                 Defaults to ``"action"``.
+            expert (NestedKey): where the one-tensordict call (``loss(td)``) finds the expert
+                batch. Defaults to ``"expert"``.
+            regularizer (NestedKey): where the one-tensordict call finds the batch of the
+                ``mean |r_w(s)|`` regulariser (optional; absent: the online batch).
+                Defaults to ``"regularizer"``.
         """
 
         matching_reward: NestedKey = "matching_reward"
         intrinsic_reward: NestedKey = "intrinsic_reward"
         expert_observation: NestedKey = "observation"
         expert_action: NestedKey = "action"
+        expert: NestedKey = "expert"
+        regularizer: NestedKey = "regularizer"
 
     default_keys = _AcceptedKeys
     tensor_keys: _AcceptedKeys
@@ -356,11 +403,89 @@ class MetaRewardLoss(LossModule):
 
     @property
     def in_keys(self) -> list[NestedKey]:
+        """The entries :meth:`forward` reads from a one-tensordict batch (:meth:`meta_batch`'s layout)."""
         keys = list(self.sac_loss.in_keys) + list(self.reward_network.in_keys)
         if self.use_matching_reward:
             keys.append(("next", self.tensor_keys.matching_reward))
         reward = ("next", self.sac_loss.tensor_keys.reward)
+        expert = self.tensor_keys.expert
+        keys += [_nested(expert, self.tensor_keys.expert_observation), _nested(expert, self.tensor_keys.expert_action)]
         return [k for k in dict.fromkeys(keys) if k != reward]
+
+    # ------------------------------------------------------------------ one-tensordict batches
+    def meta_batch(
+        self,
+        online: TensorDictBase,
+        expert: TensorDictBase,
+        regularizer: TensorDictBase | None = None,
+    ) -> TensorDictBase:
+        """The three batches of the meta-loss in one TensorDict, the layout ``loss(td)`` reads.
+
+        The root is (a shallow copy of) the online batch, with its batch size ``[B]``, so that
+        ``td_error`` and ``index`` sit where a prioritised buffer's ``update_tensordict_priority``
+        looks. The expert batch ``[E]`` (and the regulariser's ``[R]``) are stored at
+        ``tensor_keys.expert`` (``tensor_keys.regularizer``) broadcast along the online batch
+        (an expanded view ``[B, E]``, no copy); :meth:`split_meta_batch` takes them back.
+
+        Args:
+            online (TensorDictBase): online batch ``[B]``.
+            expert (TensorDictBase): expert pairs ``[E]``.
+            regularizer (TensorDictBase, optional): batch of the ``mean |r_w(s)|`` regulariser.
+
+        Returns:
+            a TensorDict of batch size ``[B]``.
+        """
+        _check_flat(online, "online")
+        td = online.copy()
+        td.set(self.tensor_keys.expert, _broadcast(expert, online.batch_size, "expert"))
+        if regularizer is not None:
+            td.set(self.tensor_keys.regularizer, _broadcast(regularizer, online.batch_size, "regularizer"))
+        return td
+
+    def sample_meta_batch(
+        self, online_rb: ReplayBuffer, expert_rb: ReplayBuffer, regularizer_rb: ReplayBuffer | None = None
+    ) -> TensorDictBase:
+        """Samples the online, expert and (optionally) regulariser buffers into one :meth:`meta_batch`.
+
+        Args:
+            online_rb (ReplayBuffer): the online transitions (with ``("next", matching_reward)``).
+            expert_rb (ReplayBuffer): the expert ``(observation, action)`` pairs.
+            regularizer_rb (ReplayBuffer, optional): sampled once more for the regulariser (the
+                published code and :class:`~torchrl_csirl.trainers.MetaRewardUpdate` use a second
+                online batch: pass ``online_rb``). Defaults to ``None``: the online batch.
+
+        Returns:
+            a TensorDict of the online batch size, for ``loss(td)``.
+        """
+        regularizer = None if regularizer_rb is None else regularizer_rb.sample()
+        return self.meta_batch(online_rb.sample(), expert_rb.sample(), regularizer)
+
+    def split_meta_batch(
+        self, tensordict: TensorDictBase
+    ) -> tuple[TensorDictBase, TensorDictBase, TensorDictBase | None]:
+        """``(online, expert, regularizer)`` of a one-tensordict batch (:meth:`meta_batch`).
+
+        The nested batches are read at ``tensor_keys.expert`` / ``tensor_keys.regularizer`` and
+        un-broadcast along the root's batch dims (index 0); the online batch is the rest of the
+        root, a view sharing its tensors. A root of batch size ``[]`` is read as an online batch
+        whose batch size is its entries' leading dimension.
+        """
+        keys = self.tensor_keys
+        expert = tensordict.get(keys.expert, None)
+        if not is_tensor_collection(expert):
+            raise KeyError(
+                f"The batch has no expert batch at {keys.expert!r}: build it with meta_batch / sample_meta_batch, "
+                "or call the loss with three arguments, loss(online, expert, regularizer)."
+            )
+        regularizer = tensordict.get(keys.regularizer, None)
+        online = tensordict.exclude(keys.expert, keys.regularizer)
+        if online.batch_dims == 0:
+            online.auto_batch_size_(batch_dims=1)
+        index = (0,) * tensordict.batch_dims
+        expert = expert[index] if index else expert
+        if regularizer is not None and index:
+            regularizer = regularizer[index]
+        return online, expert, regularizer
 
     # ------------------------------------------------------------------ pieces of the loss
     def intrinsic_reward(self, tensordict: TensorDictBase) -> torch.Tensor:
@@ -382,12 +507,19 @@ class MetaRewardLoss(LossModule):
         return r_m.detach() + r_w.reshape(r_m.shape)
 
     def inner_critic_step(self, tensordict: TensorDictBase, actor_params, qvalue_params):
-        """Eq. 12: ``phi' = phi - lr_in * grad_phi L_Q(phi, w)``, graph kept."""
+        """Eq. 12: ``phi' = phi - lr_in * grad_phi L_Q(phi, w)``, graph kept.
+
+        Returns ``phi'``, ``L_Q(phi, w)`` and ``grad_phi L_Q``.
+        """
+        return self._inner_critic_step(tensordict, actor_params, qvalue_params)[:3]
+
+    def _inner_critic_step(self, tensordict: TensorDictBase, actor_params, qvalue_params):
+        """:meth:`inner_critic_step`, and the per-sample TD errors of the critic loss (detached)."""
         sac = self.sac_loss
         with sac.using_params(actor_params, qvalue_params), sac.differentiable_reward_mode():
-            loss_q, _ = sac.qvalue_v2_loss(tensordict)
+            loss_q, metadata = sac.qvalue_v2_loss(tensordict)
         qvalue_params_new, grads = _sgd_lookahead_and_grads(loss_q, qvalue_params, self.lr_inner)
-        return qvalue_params_new, loss_q, grads
+        return qvalue_params_new, loss_q, grads, metadata["td_error"].detach()
 
     def inner_actor_step(self, tensordict: TensorDictBase, actor_params, qvalue_params_new):
         """Eq. 13: ``theta' = theta - lr_in * grad_theta L_pi(theta, phi')``, graph kept."""
@@ -412,22 +544,45 @@ class MetaRewardLoss(LossModule):
     def forward(
         self,
         tensordict: TensorDictBase,
-        expert: TensorDictBase,
+        expert: TensorDictBase | None = None,
         regularizer: TensorDictBase | None = None,
     ) -> TensorDictBase:
         """Computes ``L_meta`` and its gradient w.r.t. the reward network.
 
+        Called with one TensorDict (``loss(td)``, TorchRL's convention), ``td`` holds the three
+        batches (:meth:`meta_batch`, :meth:`sample_meta_batch`); called with two or three, the
+        online, expert and regulariser batches. Both run the same computation.
+
+        The online batch's TD errors (those of the current critics, the inner critic step's,
+        detached, one per sample: ``max_k |Q_k(s, a) - y|``) are written at the SAC loss's
+        ``tensor_keys.priority`` (``"td_error"``) of ``tensordict``, as :class:`SACLoss` does,
+        for a prioritised buffer's ``update_tensordict_priority(tensordict)``.
+
         Args:
             tensordict (TensorDictBase): online batch (the SAC loss's keys plus
-                ``("next", matching_reward)``).
-            expert (TensorDictBase): expert pairs (``observation``, ``action``), e.g. 32.
+                ``("next", matching_reward)``), or the one-tensordict batch.
+            expert (TensorDictBase, optional): expert pairs (``observation``, ``action``), e.g. 32.
+                Defaults to ``None``: ``tensordict`` is a one-tensordict batch.
             regularizer (TensorDictBase, optional): batch on which ``mean |r_w(s)|`` is
-                taken (the code uses a fresh online batch). Defaults to ``tensordict``.
+                taken (the code uses a fresh online batch). Defaults to the online batch.
 
         Returns:
             a TensorDict with ``"loss_meta"`` (backpropagates into the reward network only)
-            and detached diagnostics.
+            and detached diagnostics (and the SAC losses with ``joint_sac_update``).
         """
+        online = tensordict
+        if expert is None:
+            if regularizer is not None:
+                raise ValueError("A regularizer batch was given without an expert batch.")
+            online, expert, regularizer = self.split_meta_batch(tensordict)
+        out, td_error = self._meta_loss(online, expert, regularizer)
+        tensordict.set(self.sac_loss.tensor_keys.priority, td_error)
+        return out
+
+    def _meta_loss(
+        self, tensordict: TensorDictBase, expert: TensorDictBase, regularizer: TensorDictBase | None
+    ) -> tuple[TensorDictBase, torch.Tensor]:
+        """The losses on the three batches, and the online batch's TD errors."""
         if tensordict.ndim != 1 or expert.ndim != 1:
             raise ValueError(
                 f"Expected flat batches, got batch sizes {tensordict.batch_size} and {expert.batch_size}."
@@ -447,9 +602,9 @@ class MetaRewardLoss(LossModule):
         td.set(("next", sac.tensor_keys.reward), self.local_reward(tensordict, r_w.detach() if jvp else r_w))
 
         if jvp:
-            loss_q, grads_phi, loss_pi, loss_imitation, cotangent = self._jvp_chain(td, expert, theta, phi)
+            loss_q, grads_phi, loss_pi, loss_imitation, cotangent, td_error = self._jvp_chain(td, expert, theta, phi)
         else:
-            phi_new, loss_q, grads_phi = self.inner_critic_step(td, theta, phi)
+            phi_new, loss_q, grads_phi, td_error = self._inner_critic_step(td, theta, phi)
             theta_new, loss_pi = self.inner_actor_step(td, theta, phi_new)
             loss_imitation = self.imitation_loss(expert, theta_new)
 
@@ -492,17 +647,17 @@ class MetaRewardLoss(LossModule):
         }
         if self.joint_sac_update:
             out.update(self._sac_losses(td, loss_q, grads_phi))
-        return TensorDict(out, batch_size=[])
+        return TensorDict(out, batch_size=[]), td_error
 
     def _jvp_chain(
         self, td: TensorDictBase, expert: TensorDictBase, theta: TensorDictBase, phi: TensorDictBase
-    ) -> tuple[torch.Tensor, list[torch.Tensor], torch.Tensor, torch.Tensor, torch.Tensor]:
+    ) -> tuple[torch.Tensor, list[torch.Tensor], torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
         """The two inner steps and the imitation loss, the critic step differentiated in closed form.
 
-        Returns ``L_Q``, ``grad_phi L_Q``, ``L_pi``, the imitation loss and the cotangent
+        Returns ``L_Q``, ``grad_phi L_Q``, ``L_pi``, the imitation loss, the cotangent
         ``scale * 2 lr_in rho_i sum_k grad_phi_k Q_k(s_i, a_i) . g_k`` of ``r_w`` (shaped like
         ``r_w``'s output), whose backward through the reward network is the imitation part
-        of the meta-gradient.
+        of the meta-gradient, and the per-sample TD errors of ``L_Q`` (detached).
         """
         sac = self.sac_loss
         estimator = sac.value_estimator
@@ -516,7 +671,7 @@ class MetaRewardLoss(LossModule):
         # Eq. 12 without a graph: phi' are fresh leaves, reached by the outer gradient only
         activations = []  # the critics' hidden activations on the batch, for the forward-mode pass
         with sac.using_params(theta, phi):
-            loss_q, _ = sac.qvalue_v2_loss(td, activations=activations)
+            loss_q, metadata = sac.qvalue_v2_loss(td, activations=activations)
         grads_phi = _grads_or_zeros(loss_q, phi_list)
         phi_new = phi.empty()
         for key, tensor, grad in zip(keys, phi_list, grads_phi):
@@ -534,7 +689,7 @@ class MetaRewardLoss(LossModule):
             per_sample = dq.squeeze(-1).sum(0)  # sum_k grad_phi_k Q_k(s_i, a_i) . g_k
             rho = _reduction_weights(sac, per_sample, td)
             cotangent = (2 * self.lr_inner * self.scale) * rho * per_sample
-        return loss_q, grads_phi, loss_pi, loss_imitation, cotangent
+        return loss_q, grads_phi, loss_pi, loss_imitation, cotangent, metadata["td_error"].detach()
 
     def _sac_losses(
         self, td: TensorDictBase, loss_q: torch.Tensor, grads_phi: list[torch.Tensor]
