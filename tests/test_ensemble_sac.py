@@ -303,6 +303,12 @@ def test_differences_from_sacloss_logged_once(monkeypatch, caplog):
         EnsembleSACLoss(actor, [make_qvalue(3, 2, hidden=(4,)) for _ in range(2)], num_qvalue_nets=2,
                         alpha_init=1.0, loss_function="smooth_l1")
     assert not [r for r in caplog.records if "differs from SACLoss" in r.getMessage()]
+    from torchrl_csirl.objectives import make_csirl_learner
+
+    _fresh_notices(monkeypatch)
+    with caplog.at_level("INFO", logger="torchrl"):  # CSIRL's own learner: its settings are the recipe's on purpose
+        make_csirl_learner(3, 2, hidden=(4,))
+    assert not [r for r in caplog.records if "differs from SACLoss" in r.getMessage()]
 
 
 def test_unfused_path_warned_once_with_its_reason(monkeypatch):

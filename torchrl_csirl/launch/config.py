@@ -156,6 +156,9 @@ class EvalConfig:
         2_000_000, minimum=0,
         help="the periodic evaluations' (learning curve) episode i uses validation_seed + i, a range apart "
              "from the test episodes; null: the test seeds (runs recorded before this key)")
+    health_episodes: int = option(
+        5, minimum=0, help="CSIRL: the policy's episodes of the run's health report (health.json, health.png; "
+                           "docs/own-task.md#when-a-run-fails); 0: no report")
     video: bool = option(True, help="film the final evaluation's first episode into videos/ (mp4, or gif without "
                                     "imageio-ffmpeg) and log it to W&B; recipes/watch.py films more")
 

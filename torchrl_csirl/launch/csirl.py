@@ -19,6 +19,7 @@ Examples:
 from __future__ import annotations
 
 import os
+import sys
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
@@ -291,7 +292,24 @@ def finish(run: Run[CSIRLParts]) -> dict[str, object]:
     summary = final_summary(run, method_name(run.cfg), title=f"CSIRL on {run.spec.name}")
     summary.update(final_subgoal=run.parts.curriculum.subgoal, curriculum_length=run.parts.curriculum.length)
     summary["plots"] += curriculum_plots(run)
+    if run.cfg.eval.health_episodes:
+        summary.update(write_health(run, run.cfg.eval.health_episodes))
+        summary["plots"].append(summary["health_picture"])
     return summary
+
+
+def write_health(run: Run[CSIRLParts], episodes: int, metrics_dir: str | None = None,
+                 out_dir: str | None = None) -> dict[str, object]:
+    """The run's health report (:mod:`torchrl_csirl.diagnostics`) in ``health.json`` / ``health.png`` of
+    ``out_dir`` (default: the run's directory), one line naming the flagged checks; the summary's fields."""
+    from torchrl_csirl.diagnostics import health_report, write_health_report
+
+    report = health_report(run, method_name(run.cfg), episodes=episodes, metrics_dir=metrics_dir)
+    paths = write_health_report(report, out_dir)
+    if report.flagged:
+        print(f"health: {len(report.flagged)} of {len(report.checks)} checks flagged "
+              f"({', '.join(c.name for c in report.flagged)}): {paths['health']}", file=sys.stderr)
+    return {**paths, "health_flagged": [c.name for c in report.flagged]}
 
 
 def check_precision(cfg: DictConfig) -> None:

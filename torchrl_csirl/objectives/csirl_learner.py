@@ -23,7 +23,7 @@ from torchrl_csirl.modules import (
     make_qvalue,
     make_reward_network,
 )
-from torchrl_csirl.objectives.ensemble_sac import EnsembleSACLoss
+from torchrl_csirl.objectives.ensemble_sac import EnsembleSACLoss, _first_time
 from torchrl_csirl.objectives.meta_reward import MetaRewardLoss
 
 __all__ = ["CSIRL_DEFAULTS", "CSIRLHyperparameters", "CSIRLLearner", "make_csirl_learner"]
@@ -138,6 +138,7 @@ def make_csirl_learner(
     """
     hidden = tuple(hidden)
     actor = make_actor(obs_dim, action_dim, hidden=hidden, input_features=input_features)
+    _first_time("sacloss_differences")  # CSIRL's learner, built with its documented settings on purpose: no notice
     sac = EnsembleSACLoss(
         actor,
         make_qvalue(obs_dim, action_dim, hidden=hidden, input_features=input_features),

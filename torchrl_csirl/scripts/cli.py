@@ -8,6 +8,7 @@ Usage::
     torchrl-csirl expert [key=value ...]                  # SAC on a task's own reward, then its demonstrations
     torchrl-csirl expert ant [key=value ...]              # the AntMaze expert's walking ant
     torchrl-csirl expert demos --scenario <task> [...]    # demonstrations of a shipped scripted expert
+    torchrl-csirl diagnose <run dir>                      # why a run failed: its health report
 
 Each command is the script of the same name (``python -m torchrl_csirl.scripts.<name>``, ``recipes/<name>.py``):
 ``train`` is ``csirl_highway`` (``method=csirl``, the default, or ``csirl-b``) or ``imitation_highway`` (any other
@@ -36,6 +37,7 @@ COMMANDS = {
     "watch": "videos of a trained agent",
     "expert": "an expert for a task: SAC on its own reward (expert), the AntMaze walker (expert ant), "
               "a scripted expert's demonstrations (expert demos)",
+    "diagnose": "why a run failed: its health report (health.json, health.png) from its metrics and checkpoint",
 }
 
 
@@ -101,8 +103,14 @@ def _watch(argv: list[str]) -> None:
     run_script(partial(_script("watch").main, argv), known_errors=(VideoError,))
 
 
+def _diagnose(argv: list[str]) -> None:
+    from torchrl_csirl.launch.run import run_script
+
+    run_script(partial(_script("diagnose").main, argv))
+
+
 _RUNNERS: dict[str, Callable[[list[str]], None]] = {"train": _train, "benchmark": _benchmark, "watch": _watch,
-                                                    "expert": _expert}
+                                                    "expert": _expert, "diagnose": _diagnose}
 
 
 def main(argv: list[str] | None = None) -> None:

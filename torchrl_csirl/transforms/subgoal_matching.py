@@ -482,6 +482,11 @@ class SubgoalMatchingReward(TransitionRewardTransform):
         return int(self.expert_observations.shape[0])
 
     @property
+    def position_feature_indices(self) -> torch.Tensor:
+        """torch.Tensor: the observation entries of the matching features ``h(s)`` (the potential's)."""
+        return self._pos_idx
+
+    @property
     def subgoal_source(self) -> SubgoalSource | None:
         """The object owning the subgoal, or None when the transform holds a fixed one."""
         return self.__dict__.get("_source")

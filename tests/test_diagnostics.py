@@ -1,0 +1,127 @@
+"""The health report names what is wrong with a run: planted failures on a real merge learner (a sign-flipped
+matching reward, critics with an inflated bias), each check on its own figures, and the report written at the
+end of a run and by ``torchrl-csirl diagnose`` without touching the run."""
+from __future__ import annotations
+
+import json
+import os
+
+import pytest
+import torch
+
+from torchrl_csirl.diagnostics import (
+    action_saturation,
+    critic_calibration,
+    expert_transitions_reward,
+    health_report,
+    learned_reward_share,
+    policy_entropy,
+    reward_tracks_the_task,
+    subgoal_progress,
+    where_episodes_end,
+)
+from torchrl_csirl.launch import csirl
+from torchrl_csirl.scripts import csirl_highway, diagnose
+
+TINY = ["collector.frames_per_batch=100", "collector.cut_episodes=true", "collector.init_random_frames=100",
+        "collector.num_workers=1", "collector.main_threads=1", "replay_buffer.warmup_frames=100",
+        "replay_buffer.batch_size=64", "csirl.updates_per_round=20", "optim.utd_ratio=0.5", "eval.episodes=1",
+        "eval.final_episodes=2", "eval.video=false", "eval.health_episodes=2", "logger.progress_bar=false"]
+
+
+@pytest.fixture(scope="module")
+def merge_run(tmp_path_factory):
+    """A CSIRL merge learner, built (no training): the probe reads its networks as they are."""
+    out = tmp_path_factory.mktemp("learner")
+    cfg = csirl.load_config([*TINY, "logger.backend=none", f"logger.output_dir={out}"])
+    run = csirl.make_trainer(cfg, str(out))
+    yield run
+    run.close()
+
+
+def _critics_output_bias(run) -> list[torch.Tensor]:
+    """The output-layer biases of the trained critics (one value per critic)."""
+    params = run.parts.modules.sac.qvalue_network_params
+    return [t for key, t in params.items(True, True) if key[-1] == "bias" and t.shape[-1] == 1]
+
+
+def test_a_sign_flipped_matching_reward_is_named(merge_run):
+    control = health_report(merge_run, "csirl", episodes=1).check("matching_along_demonstrations")
+    assert control.ok is True
+    merge_run.parts.matching.sign = -1.0
+    try:
+        flipped = health_report(merge_run, "csirl", episodes=1)
+    finally:
+        merge_run.parts.matching.sign = 1.0
+    check = flipped.check("matching_along_demonstrations")
+    assert check.ok is False and "moving like the expert is punished" in check.message
+    assert check.figures["mean"] == pytest.approx(-control.figures["mean"], rel=1e-5)
+    assert "matching_along_demonstrations" in flipped.as_dict()["flagged"]
+
+
+def test_critics_with_an_inflated_bias_are_named_over_valued(merge_run):
+    control = health_report(merge_run, "csirl", episodes=1).check("critic_calibration_expert")
+    assert "over-value" not in control.message
+    biases = _critics_output_bias(merge_run)
+    assert biases, "no output-layer bias found in the critics' parameters"
+    with torch.no_grad():
+        for bias in biases:
+            bias += 1e4
+    try:
+        report = health_report(merge_run, "csirl", episodes=1)
+    finally:
+        with torch.no_grad():
+            for bias in biases:
+                bias -= 1e4
+    check = report.check("critic_calibration_expert")
+    assert check.ok is False and "over-value the expert's states" in check.message
+    assert check.figures["value_mean"] > 1e4 - 10
+    assert report.check("critic_calibration_policy").ok is False
+
+
+def test_each_check_flags_its_own_failure_and_passes_a_healthy_figure():
+    hacked = [{"frames": f, "matching_reward_mean": r, "eval_success_rate": 0.0, "eval_env_return": 1.0}
+              for f, r in ((1, 0.1), (2, 0.2), (3, 0.9))]
+    healthy = [dict(r, eval_success_rate=s) for r, s in zip(hacked, (0.0, 0.4, 0.9))]
+    assert reward_tracks_the_task(hacked).ok is False and reward_tracks_the_task(healthy).ok is True
+    assert reward_tracks_the_task(hacked[:2]).ok is None
+    returns = torch.full((10,), 30.0)
+    assert "over-value" in critic_calibration(torch.full((5, 10), 300.0), returns, "expert").message
+    assert "under-value" in critic_calibration(torch.full((5, 10), 3.0), returns, "expert").message
+    assert critic_calibration(torch.full((5, 10), 33.0), returns, "expert").ok is True
+    path = torch.stack([torch.arange(11.0), torch.zeros(11)], -1)
+    assert where_episodes_end(torch.tensor([[10.0, 0.0], [9.5, 0.1]]), path).ok is True
+    short = where_episodes_end(torch.tensor([[1.0, 0.0]]), path)
+    assert short.ok is False and short.figures["progress_median"] == pytest.approx(0.1)
+    assert subgoal_progress([5, 5, 5, 5], 40).ok is False and subgoal_progress([5, 9, 20], 40).ok is True
+    assert policy_entropy([{"entropy": -9.0, "alpha": 1e-4}], action_dim=2).ok is False
+    assert action_saturation(torch.ones(10, 2)).ok is False and action_saturation(torch.zeros(10, 2)).ok is True
+    assert learned_reward_share([{"intrinsic_reward_mean": 5.0, "matching_reward_mean": 0.1}]).ok is False
+    assert learned_reward_share([{"intrinsic_reward_mean": 0.2, "matching_reward_mean": 0.8}]).ok is True
+    assert expert_transitions_reward(torch.zeros(3), torch.ones(3), 0.25).ok is False
+
+
+def test_a_run_writes_its_report_and_diagnose_rewrites_it_without_touching_the_run(tmp_path):
+    summary = csirl_highway.main([*TINY, "collector.total_frames=300", "logger.backend=csv",
+                                  f"logger.output_dir={tmp_path}"])
+    run_dir = summary["run_dir"]
+    with open(os.path.join(run_dir, "health.json")) as f:
+        written = json.load(f)
+    assert summary["health"] == os.path.join(run_dir, "health.json") and os.path.getsize(summary["health_picture"]) > 0
+    assert written["flagged"] == summary["health_flagged"]
+    assert {c["name"] for c in written["checks"]} >= {"reward_tracks_the_task", "critic_calibration_expert",
+                                                      "matching_along_demonstrations", "where_episodes_end"}
+    before = {name: os.path.getmtime(os.path.join(run_dir, name)) for name in ("config.yaml", "metrics.jsonl")}
+    os.remove(os.path.join(run_dir, "health.json"))
+    report = diagnose.main([run_dir, "--episodes", "2"])
+    assert report["run_dir"] == run_dir and os.path.isfile(os.path.join(run_dir, "health.json"))
+    assert {c["name"] for c in report["checks"]} == {c["name"] for c in written["checks"]}
+    assert before == {name: os.path.getmtime(os.path.join(run_dir, name)) for name in before}
+    assert not os.path.exists(os.path.join(run_dir, "resumes.jsonl"))
+
+
+def test_diagnose_refuses_a_folder_that_is_not_a_run(tmp_path):
+    from torchrl_csirl.launch.config import ConfigError
+
+    with pytest.raises(ConfigError, match="not a run directory"):
+        diagnose.diagnose(str(tmp_path))

@@ -1,0 +1,54 @@
+"""Why a run failed: its health report (``health.json``, ``health.png``).
+
+* :mod:`~torchrl_csirl.diagnostics.checks`: each check, a named function of plain figures, flagged in plain
+  words when out of range (reward hacking, critics over- or under-valued, a curriculum that never moves,
+  a collapsed entropy, saturated actions, a learned reward too small or too large, a matching reward that
+  punishes the demonstrations, a reward that pays the policy more than the expert, episodes that end short
+  of the goal).
+* :mod:`~torchrl_csirl.diagnostics.probe`: the figures measured on a learner's own networks.
+* :mod:`~torchrl_csirl.diagnostics.report`: every check of a run, written at the end of each CSIRL run and by
+  ``torchrl-csirl diagnose <run dir>``.
+
+Examples:
+    >>> from torchrl_csirl.diagnostics import learned_reward_share
+    >>> check = learned_reward_share([{"intrinsic_reward_mean": 1e-4, "matching_reward_mean": 0.5}])
+    >>> check.ok, round(check.figures["share"], 4)
+    (False, 0.0002)
+"""
+from torchrl_csirl.diagnostics.checks import (
+    HealthCheck,
+    action_saturation,
+    critic_calibration,
+    expert_transitions_reward,
+    learned_reward_share,
+    matching_along_demonstrations,
+    policy_entropy,
+    reward_tracks_the_task,
+    subgoal_progress,
+    where_episodes_end,
+)
+from torchrl_csirl.diagnostics.probe import LearnerProbe, discounted_returns, measurable_states, probe_learner
+from torchrl_csirl.diagnostics.report import HEALTH_FILE, HEALTH_PICTURE, HealthReport, health_report, read_metrics, write_health_report
+
+__all__ = [
+    "HEALTH_FILE",
+    "HEALTH_PICTURE",
+    "HealthCheck",
+    "HealthReport",
+    "LearnerProbe",
+    "action_saturation",
+    "critic_calibration",
+    "discounted_returns",
+    "expert_transitions_reward",
+    "health_report",
+    "learned_reward_share",
+    "matching_along_demonstrations",
+    "measurable_states",
+    "policy_entropy",
+    "probe_learner",
+    "read_metrics",
+    "reward_tracks_the_task",
+    "subgoal_progress",
+    "where_episodes_end",
+    "write_health_report",
+]

@@ -1,0 +1,285 @@
+"""The health checks of a run, each one named function of plain figures (no run, no network).
+
+Each check returns a :class:`HealthCheck`: its figures, whether they are in range (``ok``; None when
+the run gives too little to say) and one sentence in plain words. Out of range, the sentence says
+what the figures mean for the run and what to look at. The thresholds are module constants, stated
+beside each check; they flag a figure worth a look, not a proof.
+
+Examples:
+    >>> rows = [{"frames": f, "matching_reward_mean": r, "eval_success_rate": 0.0, "eval_env_return": -5.0}
+    ...         for f, r in ((1000, 0.1), (2000, 0.5), (3000, 0.9))]
+    >>> check = reward_tracks_the_task(rows)
+    >>> check.ok, check.message.split(":")[0]
+    (False, 'reward hacking')
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import torch
+
+__all__ = [
+    "ENTROPY_FLOOR_PER_DIM",
+    "LEARNED_REWARD_SHARE_RANGE",
+    "SATURATION_LIMIT",
+    "VALUE_RATIO_LIMIT",
+    "HealthCheck",
+    "action_saturation",
+    "critic_calibration",
+    "expert_transitions_reward",
+    "learned_reward_share",
+    "matching_along_demonstrations",
+    "policy_entropy",
+    "reward_tracks_the_task",
+    "subgoal_progress",
+    "where_episodes_end",
+]
+
+#: the critics' mean value over the Monte Carlo return of the learner's own reward (or the inverse) above which
+#: the critics are called over- (under-) valued
+VALUE_RATIO_LIMIT = 3.0
+#: the share of actions at a bound (|a| > 0.99) above which the policy is called saturated
+SATURATION_LIMIT = 0.5
+#: entropy per action dimension below which the policy is called collapsed (a Tanh-Normal's entropy goes to -inf)
+ENTROPY_FLOOR_PER_DIM = -3.0
+#: below the first, the learned reward cannot move the policy; above the second, it drowns the matching reward
+LEARNED_REWARD_SHARE_RANGE = (0.01, 0.8)
+
+
+@dataclass
+class HealthCheck:
+    """One figure of a run's health.
+
+    Attributes:
+        name: the check's name (``reward_tracks_the_task``, ...).
+        ok: True in range, False out of range (flagged), None when the run gives too little to say.
+        message: one sentence in plain words; out of range, what it means and what to look at.
+        figures: the numbers behind it.
+    """
+
+    name: str
+    ok: bool | None
+    message: str
+    figures: dict[str, Any] = field(default_factory=dict)
+
+    def as_dict(self) -> dict[str, Any]:
+        """A JSON-ready dict."""
+        return asdict(self)
+
+
+def _mean(values: Sequence[float]) -> float:
+    values = [v for v in values if v is not None and not math.isnan(v)]
+    return sum(values) / len(values) if values else float("nan")
+
+
+def _thirds(rows: Sequence[dict], key: str) -> tuple[float, float]:
+    """The mean of ``key`` over the first and the last third of ``rows`` (those that have it)."""
+    values = [r[key] for r in rows if r.get(key) is not None]
+    third = max(1, len(values) // 3)
+    return _mean(values[:third]), _mean(values[-third:])
+
+
+def _rounds(rows: Sequence[dict]) -> list[dict]:
+    """The per-round rows of ``metrics.jsonl`` (the final test row dropped)."""
+    return [r for r in rows if "round" in r]
+
+
+def reward_tracks_the_task(rows: Sequence[dict]) -> HealthCheck:
+    """Reward hacking: the matching reward the learner collects rises while the task's success and return stay flat.
+
+    Args:
+        rows: ``metrics.jsonl``'s rows (``matching_reward_mean``, ``reward_mean``, ``eval_success_rate``,
+            ``eval_accomplish_rate``, ``eval_env_return``).
+    """
+    rows = [r for r in rows if r.get("matching_reward_mean") is not None]
+    name = "reward_tracks_the_task"
+    if len(rows) < 3:
+        return HealthCheck(name, None, "too few rounds to compare the training reward with the task's score")
+    m0, m1 = _thirds(rows, "matching_reward_mean")
+    s0, s1 = _thirds(rows, "eval_success_rate")
+    a0, a1 = _thirds(rows, "eval_accomplish_rate")
+    e0, e1 = _thirds(rows, "eval_env_return")
+    spread = max(abs(m0), abs(m1), 1e-8)
+    reward_rose = (m1 - m0) / spread > 0.25
+    task_flat = (math.isnan(s1) or s1 - s0 <= 0.05) and (math.isnan(a1) or a1 - a0 <= 0.05) and (
+        math.isnan(e1) or e1 - e0 <= 0.05 * max(abs(e0), abs(e1), 1e-8))
+    figures = {"matching_reward_first": m0, "matching_reward_last": m1, "success_first": s0, "success_last": s1,
+               "accomplish_first": a0, "accomplish_last": a1, "env_return_first": e0, "env_return_last": e1,
+               "reward_first": _thirds(rows, "reward_mean")[0], "reward_last": _thirds(rows, "reward_mean")[1]}
+    if reward_rose and task_flat:
+        return HealthCheck(name, False, (
+            f"reward hacking: the matching reward per step rose from {m0:.3g} to {m1:.3g} while the test success "
+            f"stayed at {s1:.2f} and the environment's return went from {e0:.3g} to {e1:.3g}; the matching features "
+            "(env.features, the task's position_feature_indices) reward something the task does not"), figures)
+    return HealthCheck(name, True, f"the matching reward went from {m0:.3g} to {m1:.3g}, the test success from "
+                                   f"{s0:.2f} to {s1:.2f}", figures)
+
+
+def critic_calibration(values: torch.Tensor, returns: torch.Tensor, where: str) -> HealthCheck:
+    """The critics' values against Monte Carlo returns of the learner's own reward on the same states.
+
+    Args:
+        values: ``[K, N]`` the ensemble's ``Q_k(s, a)`` (or ``[N]``).
+        returns: ``[N]`` the discounted return of the learner's reward from each ``(s, a)`` on.
+        where: whose states (``"expert"``, ``"policy"``): the check is named ``critic_calibration_<where>``.
+    """
+    name = f"critic_calibration_{where}"
+    if returns.numel() == 0:
+        return HealthCheck(name, None, f"no {where} states whose return could be measured")
+    values = values.reshape(-1, returns.numel()) if values.ndim > 1 else values[None]
+    q, g = float(values.mean()), float(returns.mean())
+    figures = {"value_mean": q, "value_min": float(values.min(0).values.mean()), "return_mean": g,
+               "critic_spread": float(values.std(0).mean()) if values.shape[0] > 1 else 0.0, "states": returns.numel()}
+    scale = max(float(returns.abs().mean()), 1e-3)
+    figures["bias_over_return"] = (q - g) / scale
+    over, under = q - g > (VALUE_RATIO_LIMIT - 1) * scale, g - q > (1 - 1 / VALUE_RATIO_LIMIT) * scale and g > 0
+    if over:
+        return HealthCheck(name, False, (
+            f"the critics over-value the {where}'s states: {q:.3g} on average where the learner's own reward "
+            f"returns {g:.3g}; the TD targets feed on this (try fewer critics in the minimum, csirl.num_qvalue_nets, "
+            "or a smaller csirl.gamma)"), figures)
+    if under:
+        return HealthCheck(name, False, (
+            f"the critics under-value the {where}'s states: {q:.3g} on average where the learner's own reward "
+            f"returns {g:.3g} (a short run, or the minimum over many critics, csirl.num_qvalue_nets)"), figures)
+    return HealthCheck(name, True, f"the critics value the {where}'s states at {q:.3g}, their return is {g:.3g}",
+                       figures)
+
+
+def where_episodes_end(final_features: torch.Tensor, path_features: torch.Tensor) -> HealthCheck:
+    """Where the policy's episodes end compared with the demonstrations' path (the matching features).
+
+    Args:
+        final_features: ``[E, F]`` the matching features of each episode's last state.
+        path_features: ``[L, F]`` the curriculum trajectory's matching features.
+    """
+    name = "where_episodes_end"
+    if final_features.numel() == 0 or path_features.shape[0] < 2:
+        return HealthCheck(name, None, "no episode or no path to compare")
+    distances = torch.cdist(final_features.float(), path_features.float())
+    nearest, index = distances.min(-1)
+    steps = (path_features[1:] - path_features[:-1]).norm(dim=-1)
+    extent = max(float(steps.sum()), 1e-8)
+    progress = index.float() / (path_features.shape[0] - 1)
+    figures = {"progress_median": float(progress.median()), "progress": progress.tolist(),
+               "distance_to_path_median": float(nearest.median()), "path_length": extent,
+               "distance_over_path_length": float(nearest.median()) / extent}
+    off_path = figures["distance_over_path_length"] > 0.2
+    if off_path or figures["progress_median"] < 0.5:
+        where = (f"{figures['distance_over_path_length']:.0%} of the path's length away from it" if off_path
+                 else "on the path")
+        return HealthCheck(name, False, (
+            f"the policy's episodes end {where}, {figures['progress_median']:.0%} of the way along the demonstration "
+            "(median): it stops short of the goal or leaves the path"), figures)
+    return HealthCheck(name, True, f"the policy's episodes end {figures['progress_median']:.0%} of the way along the "
+                                   "demonstration (median), near its path", figures)
+
+
+def subgoal_progress(subgoals: Sequence[int], curriculum_length: int) -> HealthCheck:
+    """The subgoal over rounds: a curriculum that never moves cannot lead anywhere.
+
+    Args:
+        subgoals: the subgoal of each round, in order.
+        curriculum_length: the curriculum trajectory's length.
+    """
+    name = "subgoal_progress"
+    if len(subgoals) < 3:
+        return HealthCheck(name, None, "too few rounds to follow the curriculum")
+    last = curriculum_length - 1
+    figures = {"subgoals": list(subgoals), "curriculum_length": curriculum_length,
+               "final_share": subgoals[-1] / max(last, 1)}
+    if max(subgoals) == min(subgoals) and subgoals[-1] < last:
+        return HealthCheck(name, False, (
+            f"the curriculum never moved: subgoal {subgoals[-1]} of {last} in every round; the critics' dispersion "
+            "never crossed csirl.delta"), figures)
+    return HealthCheck(name, True, f"the subgoal went from {subgoals[0]} to {subgoals[-1]} of {last}", figures)
+
+
+def policy_entropy(rows: Sequence[dict], action_dim: int) -> HealthCheck:
+    """Alpha and the policy's entropy over training: a collapsed entropy explores nothing more."""
+    rows = [r for r in rows if r.get("entropy") is not None]
+    name = "policy_entropy"
+    if not rows:
+        return HealthCheck(name, None, "no entropy was logged")
+    last = rows[-1]
+    figures = {"alpha": [r.get("alpha") for r in rows], "entropy": [r["entropy"] for r in rows],
+               "frames": [r.get("frames") for r in rows], "entropy_floor": ENTROPY_FLOOR_PER_DIM * action_dim}
+    if last["entropy"] < ENTROPY_FLOOR_PER_DIM * action_dim:
+        return HealthCheck(name, False, (
+            f"the policy's entropy collapsed to {last['entropy']:.3g} (alpha {last.get('alpha', float('nan')):.3g}): "
+            "it acts almost deterministically and stops exploring"), figures)
+    return HealthCheck(name, True, f"entropy {last['entropy']:.3g}, alpha {last.get('alpha', float('nan')):.3g} "
+                                   "at the end", figures)
+
+
+def action_saturation(actions: torch.Tensor) -> HealthCheck:
+    """The share of the policy's actions at a bound of ``[-1, 1]`` (a Tanh squashed to its ends)."""
+    name = "action_saturation"
+    if actions.numel() == 0:
+        return HealthCheck(name, None, "no action to look at")
+    share = float((actions.abs() > 0.99).float().mean())
+    figures = {"saturated_share": share, "per_dimension": (actions.abs() > 0.99).float().mean(0).tolist()}
+    if share > SATURATION_LIMIT:
+        return HealthCheck(name, False, f"{share:.0%} of the policy's actions sit at a bound: it pushes as hard "
+                                        "as it can, a sign of a reward that grows without limit", figures)
+    return HealthCheck(name, True, f"{share:.0%} of the policy's actions at a bound", figures)
+
+
+def learned_reward_share(rows: Sequence[dict]) -> HealthCheck:
+    """``r_w``'s magnitude and its share of the training reward (matching + learned)."""
+    rows = [r for r in rows if r.get("intrinsic_reward_mean") is not None]
+    name = "learned_reward_share"
+    if not rows:
+        return HealthCheck(name, None, "no learned reward (CSIRL-B, or none logged)")
+    third = rows[-max(1, len(rows) // 3):]
+    learned = _mean([abs(r["intrinsic_reward_mean"]) for r in third])
+    matching = _mean([abs(r.get("matching_reward_mean") or 0.0) for r in third])
+    share = learned / max(learned + matching, 1e-12)
+    figures = {"learned_abs_mean": learned, "matching_abs_mean": matching, "share": share}
+    low, high = LEARNED_REWARD_SHARE_RANGE
+    if share < low:
+        return HealthCheck(name, False, (
+            f"the learned reward r_w is {share:.1%} of the training reward: too small to move the policy "
+            "(csirl.reward_scale)"), figures)
+    if share > high:
+        return HealthCheck(name, False, (
+            f"the learned reward r_w is {share:.0%} of the training reward: it drowns the matching reward "
+            "(csirl.reward_scale, csirl.reward_l1_coef)"), figures)
+    return HealthCheck(name, True, f"the learned reward r_w is {share:.0%} of the training reward", figures)
+
+
+def matching_along_demonstrations(rewards: torch.Tensor) -> HealthCheck:
+    """The matching reward on the curriculum trajectory's own steps up to the subgoal: the expert moves toward it,
+    so a well-posed matching reward pays it (a negative mean: the reward's sign or features are wrong)."""
+    name = "matching_along_demonstrations"
+    if rewards.numel() == 0:
+        return HealthCheck(name, None, "the subgoal is the curriculum's start: no expert step leads to it")
+    mean, positive = float(rewards.mean()), float((rewards > 0).float().mean())
+    figures = {"mean": mean, "positive_share": positive, "steps": rewards.numel()}
+    if mean <= 0:
+        return HealthCheck(name, False, (
+            f"the matching reward pays the demonstration {mean:.3g} per step on its way to the subgoal "
+            f"({positive:.0%} of the steps positive): moving like the expert is punished, so the reward's sign, "
+            "scale or features are wrong"), figures)
+    return HealthCheck(name, True, f"the matching reward pays the demonstration {mean:.3g} per step on its way to "
+                                   "the subgoal", figures)
+
+
+def expert_transitions_reward(expert: torch.Tensor, policy: torch.Tensor, expert_fraction: float) -> HealthCheck:
+    """The learner's reward on expert transitions against its own, and the experts' share of each batch."""
+    name = "expert_transitions_reward"
+    if expert.numel() == 0 or policy.numel() == 0:
+        return HealthCheck(name, None, "no transitions to compare")
+    e, p = float(expert.mean()), float(policy.mean())
+    figures = {"expert_mean": e, "policy_mean": p, "expert_fraction": expert_fraction}
+    if e < p:
+        return HealthCheck(name, False, (
+            f"the learner's reward pays the policy's own transitions more than the expert's ({p:.3g} against {e:.3g} "
+            f"per step; expert transitions are {expert_fraction:.0%} of each batch): imitating the expert does not pay"),
+            figures)
+    return HealthCheck(name, True, f"the learner's reward pays the expert's transitions {e:.3g} per step, the "
+                                   f"policy's {p:.3g}; expert transitions are {expert_fraction:.0%} of each batch",
+                       figures)

@@ -1,0 +1,149 @@
+"""What a CSIRL learner does, measured on its own networks: the figures the health checks read.
+
+:func:`probe_learner` rolls the deterministic policy for a few seeded episodes, scores them and the
+demonstrations with the learner's own reward (the online buffer's transforms: matching reward, ``r_w``,
+their sum), and evaluates the critics on both, beside the Monte Carlo return of that reward.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import torch
+from tensordict import TensorDictBase
+from torchrl.envs import EnvBase, ExplorationType, set_exploration_type
+
+__all__ = ["LearnerProbe", "discounted_returns", "measurable_states", "probe_learner"]
+
+#: a return is measured where the rest of the episode weighs at least this share of the infinite horizon
+_HORIZON_WEIGHT = 0.95
+
+
+@dataclass
+class LearnerProbe:
+    """The figures :func:`probe_learner` measures (every tensor on the CPU).
+
+    Attributes:
+        policy_values: ``[K, N]`` the critics on the policy's measurable states and actions.
+        policy_returns: ``[N]`` the discounted return of the learner's reward from those states on.
+        expert_values: ``[K, M]`` the critics on the demonstrations' measurable states and actions.
+        expert_returns: ``[M]`` the same return along the demonstrations.
+        policy_rewards: ``[T]`` the learner's reward on every step of the policy's episodes.
+        expert_rewards: ``[U]`` the learner's reward on every demonstrated step.
+        matching_to_subgoal: the matching reward on the curriculum trajectory's steps up to the subgoal.
+        final_features: ``[E, F]`` the matching features of each episode's last state.
+        path_features: ``[L, F]`` the curriculum trajectory's matching features.
+        actions: ``[T, A]`` the policy's actions.
+    """
+
+    policy_values: torch.Tensor
+    policy_returns: torch.Tensor
+    expert_values: torch.Tensor
+    expert_returns: torch.Tensor
+    policy_rewards: torch.Tensor
+    expert_rewards: torch.Tensor
+    matching_to_subgoal: torch.Tensor
+    final_features: torch.Tensor
+    path_features: torch.Tensor
+    actions: torch.Tensor
+
+
+def discounted_returns(rewards: torch.Tensor, gamma: float) -> torch.Tensor:
+    """``G_t = sum_k gamma^k r_{t+k}`` over one episode's ``[T]`` rewards.
+
+    Examples:
+        >>> discounted_returns(torch.tensor([1.0, 1.0, 1.0]), 0.5)
+        tensor([1.7500, 1.5000, 1.0000])
+    """
+    out = torch.empty_like(rewards, dtype=torch.float64)
+    running = 0.0
+    for t in range(rewards.shape[0] - 1, -1, -1):
+        running = float(rewards[t]) + gamma * running
+        out[t] = running
+    return out.to(rewards.dtype)
+
+
+def measurable_states(length: int, terminated: bool, gamma: float) -> torch.Tensor:
+    """Which steps of an episode have a Monte Carlo return comparable to a critic's value: all of an episode that
+    terminated; of a truncated one, those with enough steps left that the cut-off tail weighs under 5 %.
+
+    Examples:
+        >>> measurable_states(3, True, 0.99).tolist(), measurable_states(6, False, 0.5).tolist()
+        ([True, True, True], [True, True, False, False, False, False])
+    """
+    if terminated:
+        return torch.ones(length, dtype=torch.bool)
+    horizon = math.ceil(math.log(1 - _HORIZON_WEIGHT) / math.log(gamma)) if 0 < gamma < 1 else length
+    remaining = torch.arange(length, 0, -1)
+    return remaining >= horizon
+
+
+def _learner_reward(transforms, transitions: TensorDictBase) -> TensorDictBase:
+    """``transitions`` with the learner's reward written by the online buffer's transforms (under no grad)."""
+    with torch.no_grad():
+        return transforms(transitions.clone())
+
+
+def _episode_figures(episode: TensorDictBase, transforms, loss, gamma: float
+                     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """(critic values ``[K, n]``, returns ``[n]``, rewards ``[T]``) of one episode's measurable steps."""
+    scored = _learner_reward(transforms, episode)
+    rewards = scored["next", "reward"].reshape(-1).float()
+    terminated = bool(scored["next", "terminated"].reshape(-1)[-1]) if ("next", "terminated") in scored.keys(True) else False
+    mask = measurable_states(rewards.shape[0], terminated, gamma)
+    returns = discounted_returns(rewards, gamma)[mask]
+    with torch.no_grad():
+        values = loss.qvalues(scored[mask]).float()
+    return values.cpu(), returns.cpu(), rewards.cpu()
+
+
+def probe_learner(*, env: EnvBase, policy, loss, transforms, matching, demos, gamma: float, max_steps: int,
+                  episodes: int = 5, seed: int = 0, demonstrations: int = 5, device: torch.device | str = "cpu"
+                  ) -> LearnerProbe:
+    """Rolls the deterministic policy and reads the learner's reward and critics on its episodes and on the
+    demonstrations.
+
+    Args:
+        env: an evaluation environment of the task.
+        policy: the actor.
+        loss: the ensemble SAC loss (``qvalues(td) -> [K, N]``).
+        transforms: the online buffer's transforms (matching reward, ``r_w``, their sum into ``("next", "reward")``).
+        matching: the :class:`~torchrl_csirl.transforms.SubgoalMatchingReward` (its subgoal and features).
+        demos: the :class:`~torchrl_csirl.data.ExpertDemonstrations` (trajectory 0: the curriculum's).
+        gamma: the learner's discount.
+        max_steps: the episode limit.
+        episodes: policy episodes, seeded ``seed + i``.
+        seed: the first episode's seed.
+        demonstrations: demonstrations scored (the first ones).
+        device: the learner's device.
+    """
+    policy_values, policy_returns, policy_rewards, finals, actions = [], [], [], [], []
+    position = matching.position_feature_indices.cpu()
+    with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
+        for i in range(episodes):
+            env.set_seed(seed + i)
+            episode = env.rollout(max_steps, policy, break_when_any_done=True)
+            values, returns, rewards = _episode_figures(episode.to(device), transforms, loss, gamma)
+            policy_values.append(values)
+            policy_returns.append(returns)
+            policy_rewards.append(rewards)
+            finals.append(episode["next", "observation"][-1].index_select(-1, position))
+            actions.append(episode["action"].reshape(episode.shape[0], -1))
+    expert_values, expert_returns, expert_rewards = [], [], []
+    for i in range(min(demonstrations, demos.num_trajectories)):
+        values, returns, rewards = _episode_figures(demos.trajectory(i).to(device), transforms, loss, gamma)
+        expert_values.append(values)
+        expert_returns.append(returns)
+        expert_rewards.append(rewards)
+    curriculum = demos.trajectory(0)[: matching.subgoal].to(device)
+    to_subgoal = torch.zeros(0)
+    if matching.subgoal:
+        with torch.no_grad():
+            to_subgoal = matching(curriculum.clone())["next", matching.out_key].reshape(-1).float().cpu()
+    return LearnerProbe(
+        policy_values=torch.cat(policy_values, -1), policy_returns=torch.cat(policy_returns),
+        expert_values=torch.cat(expert_values, -1), expert_returns=torch.cat(expert_returns),
+        policy_rewards=torch.cat(policy_rewards), expert_rewards=torch.cat(expert_rewards),
+        matching_to_subgoal=to_subgoal, final_features=torch.stack(finals).float(),
+        path_features=matching.expert_observations.index_select(-1, matching.position_feature_indices).float().cpu(),
+        actions=torch.cat(actions).float())

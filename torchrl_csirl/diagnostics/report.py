@@ -1,0 +1,142 @@
+"""A run's health report: every check of :mod:`~torchrl_csirl.diagnostics.checks` on one run, written as
+``health.json`` and ``health.png`` in its directory.
+
+:func:`health_report` reads a run's ``metrics.jsonl`` and, for a CSIRL run, probes its networks
+(:func:`~torchrl_csirl.diagnostics.probe.probe_learner`); :func:`write_health_report` writes the two files and
+returns the report. CSIRL writes it at the end of every run; ``torchrl-csirl diagnose <run dir>``
+(:mod:`torchrl_csirl.scripts.diagnose`) writes it for a finished or stopped run from its last checkpoint.
+"""
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from typing import Any
+
+from torchrl_csirl.diagnostics.checks import (
+    HealthCheck,
+    action_saturation,
+    critic_calibration,
+    expert_transitions_reward,
+    learned_reward_share,
+    matching_along_demonstrations,
+    policy_entropy,
+    reward_tracks_the_task,
+    subgoal_progress,
+    where_episodes_end,
+)
+from torchrl_csirl.diagnostics.probe import LearnerProbe, probe_learner
+
+__all__ = ["HEALTH_FILE", "HEALTH_PICTURE", "HealthReport", "health_report", "read_metrics", "write_health_report"]
+
+HEALTH_FILE = "health.json"
+HEALTH_PICTURE = "health.png"
+
+
+@dataclass
+class HealthReport:
+    """Every check of one run.
+
+    Attributes:
+        run_dir: the run directory.
+        task: the task's name.
+        method: the method (``csirl``, ``csirl-b``, ...).
+        checks: the checks, in the order they were made.
+        rows: the run's per-round metrics (the picture's curves).
+        probe: what the learner's networks measured (None: not probed).
+    """
+
+    run_dir: str
+    task: str
+    method: str
+    checks: list[HealthCheck] = field(default_factory=list)
+    rows: list[dict[str, Any]] = field(default_factory=list)
+    probe: LearnerProbe | None = None
+
+    @property
+    def flagged(self) -> list[HealthCheck]:
+        """The checks out of range."""
+        return [c for c in self.checks if c.ok is False]
+
+    def check(self, name: str) -> HealthCheck:
+        """The check called ``name``."""
+        for c in self.checks:
+            if c.name == name:
+                return c
+        raise KeyError(f"no check {name!r}; checks: {', '.join(c.name for c in self.checks)}")
+
+    def lines(self) -> list[str]:
+        """One line per check: ``FLAG``, ``ok`` or ``--`` (too little to say), its name and its sentence."""
+        marks = {False: "FLAG", True: "ok  ", None: "--  "}
+        return [f"{marks[c.ok]} {c.name}: {c.message}" for c in self.checks]
+
+    def as_dict(self) -> dict[str, Any]:
+        """A JSON-ready dict (``health.json``)."""
+        return {"run_dir": self.run_dir, "task": self.task, "method": self.method,
+                "flagged": [c.name for c in self.flagged], "checks": [c.as_dict() for c in self.checks]}
+
+
+def read_metrics(run_dir: str) -> list[dict[str, Any]]:
+    """The per-round rows of ``<run_dir>/metrics.jsonl`` (empty when there is none)."""
+    path = os.path.join(run_dir, "metrics.jsonl")
+    if not os.path.isfile(path):
+        return []
+    with open(path, encoding="utf-8") as f:
+        rows = [json.loads(line) for line in f if line.strip()]
+    return [r for r in rows if "round" in r]
+
+
+def _metrics_checks(rows: list[dict[str, Any]], action_dim: int, curriculum_length: int | None) -> list[HealthCheck]:
+    checks = [reward_tracks_the_task(rows), policy_entropy(rows, action_dim), learned_reward_share(rows)]
+    subgoals = [int(r["subgoal"]) for r in rows if r.get("subgoal") is not None]
+    if curriculum_length is not None:
+        checks.append(subgoal_progress(subgoals, curriculum_length))
+    return checks
+
+
+def _probe_checks(probe: LearnerProbe, expert_fraction: float) -> list[HealthCheck]:
+    return [
+        critic_calibration(probe.expert_values, probe.expert_returns, "expert"),
+        critic_calibration(probe.policy_values, probe.policy_returns, "policy"),
+        matching_along_demonstrations(probe.matching_to_subgoal),
+        expert_transitions_reward(probe.expert_rewards, probe.policy_rewards, expert_fraction),
+        where_episodes_end(probe.final_features, probe.path_features),
+        action_saturation(probe.actions),
+    ]
+
+
+def health_report(run: Any, method: str, *, episodes: int = 5, metrics_dir: str | None = None) -> HealthReport:
+    """The health report of a built CSIRL run (:class:`~torchrl_csirl.launch.assembly.Run` with
+    :class:`~torchrl_csirl.launch.csirl.CSIRLParts`), from its metrics and its networks as they are now.
+
+    Args:
+        run: the run.
+        method: its method's name.
+        episodes: the policy's probe episodes (seeded from ``eval.seed``).
+        metrics_dir: the directory whose ``metrics.jsonl`` holds the run's rounds (default: the run's).
+    """
+    cfg, parts = run.cfg, run.parts
+    rows = read_metrics(metrics_dir or run.run_dir)
+    report = HealthReport(metrics_dir or run.run_dir, run.spec.name, method, rows=rows)
+    report.checks += _metrics_checks(rows, run.spec.action_dim, parts.curriculum.length)
+    run.mirror.sync()
+    report.probe = probe_learner(
+        env=run.eval_env, policy=run.mirror.policy, loss=parts.modules.sac, transforms=run.online_buffer.transform,
+        matching=parts.matching, demos=run.demos, gamma=cfg.csirl.gamma, max_steps=run.spec.max_steps,
+        episodes=episodes, seed=cfg.eval.seed, device=run.device)
+    report.checks += _probe_checks(report.probe, cfg.replay_buffer.expert_fraction)
+    return report
+
+
+def write_health_report(report: HealthReport, run_dir: str | None = None) -> dict[str, str]:
+    """``health.json`` and ``health.png`` in ``run_dir`` (default: the report's); returns their paths."""
+    from torchrl_csirl.visualization import plot_health
+
+    run_dir = run_dir or report.run_dir
+    path = os.path.join(run_dir, HEALTH_FILE)
+    tmp = f"{path}.tmp"
+    with open(tmp, "w", encoding="utf-8") as f:
+        json.dump(report.as_dict(), f, indent=1, default=float)
+    os.replace(tmp, path)
+    picture = plot_health(report, os.path.join(run_dir, HEALTH_PICTURE))
+    return {"health": path, "health_picture": os.fspath(picture)}
