@@ -17,15 +17,27 @@ import os
 import numpy as np
 
 from torchrl_csirl._paths import EXPERTS_DIR
-from torchrl_csirl.envs.robotics.point_maze_expert import record_point_maze_demonstrations
+from torchrl_csirl.data import ExpertDemonstrations, record_demonstrations
+from torchrl_csirl.envs import make_gymnasium_task
+from torchrl_csirl.envs.expert_registry import make_expert
 
 POINT_MAZE_IDS = ("PointMaze_UMaze-v3", "PointMaze_Medium-v3")
 SHIPPED_TRAJECTORIES = 25
 
 
+def record(gym_id: str, episodes: int, seed: int, only_successful: bool = True) -> ExpertDemonstrations:
+    """The expert's episodes on the gymnasium task ``gym_id`` (:func:`~torchrl_csirl.data.record_demonstrations`
+    with the expert as the policy: episode ``i`` seeded ``seed + i``, ending where the ball reaches the goal)."""
+    make_gymnasium_task(gym_id)
+    expert = make_expert(gym_id)
+    demos = record_demonstrations(gym_id, expert, episodes, seed=seed, only_successful=only_successful)
+    return demos.with_metadata(generator=f"{type(expert).__module__}.{type(expert).__qualname__}",
+                               expert_settings=expert.settings, base_seed=seed, only_successful=only_successful)
+
+
 def measure(gym_id: str, episodes: int, seed: int) -> dict[str, float]:
     """Success rate and episode lengths of the expert over ``episodes`` seeded episodes (all kept)."""
-    rolled = record_point_maze_demonstrations(gym_id, episodes, seed=seed, only_successful=False).metadata["episodes"]
+    rolled = record(gym_id, episodes, seed, only_successful=False).metadata["episodes"]
     lengths = [e["length"] for e in rolled]
     return {"episodes": episodes, "first_seed": seed, "success_rate": float(np.mean([e["success"] for e in rolled])),
             "mean_length": float(np.mean(lengths)), "max_length": int(max(lengths))}
@@ -33,7 +45,7 @@ def measure(gym_id: str, episodes: int, seed: int) -> dict[str, float]:
 
 def ship(gym_id: str, out_dir: str) -> str:
     """Writes ``<out_dir>/<gym_id>/expert_25.npz``: the first 25 successful episodes from seed 0."""
-    demos = record_point_maze_demonstrations(gym_id, SHIPPED_TRAJECTORIES, seed=0)
+    demos = record(gym_id, SHIPPED_TRAJECTORIES, seed=0)
     demos = demos.with_metadata(curriculum="expert", num_trajectories=SHIPPED_TRAJECTORIES,
                                 command=f"python tools/point_maze_experts.py --ship --ids {gym_id}")
     os.makedirs(os.path.join(out_dir, gym_id), exist_ok=True)

@@ -18,28 +18,30 @@ GYM_ID_PROVIDERS: tuple[str, ...] = ("gymnasium_robotics",)
 
 
 def import_gym_provider(gym_id: str) -> str | None:
-    """Imports the provider of ``gym_id`` when gymnasium does not know the id yet; returns its module name.
+    """Imports the provider of ``gym_id`` when gymnasium does not know the id yet; returns the provider's name.
 
-    Returns None when the id was known already, or when no installed provider registers it (gymnasium
-    still does not know it then: the caller says so).
+    Returns the provider (one of :data:`GYM_ID_PROVIDERS`) whose environment the id is, imported now or
+    before; None for an id of gymnasium's own or of another package, and for an id no installed provider
+    registers (gymnasium still does not know it then: the caller says so).
 
     Examples:
         >>> import_gym_provider("Pendulum-v1") is None  # gymnasium's own
         True
-        >>> _ = import_gym_provider("PointMaze_UMaze-v3")  # "gymnasium_robotics", unless imported before
-        >>> "PointMaze_UMaze-v3" in gym.registry
-        True
+        >>> import_gym_provider("PointMaze_UMaze-v3"), "PointMaze_UMaze-v3" in gym.registry
+        ('gymnasium_robotics', True)
         >>> import_gym_provider("NoSuchEnv-v0") is None
         True
     """
-    if gym_id in gym.registry:
-        return None
     for name in GYM_ID_PROVIDERS:
+        if gym_id in gym.registry:
+            break
         try:
             module = importlib.import_module(name)
         except ImportError:  # not installed
             continue
         gym.register_envs(module)
-        if gym_id in gym.registry:
-            return name
-    return None
+    if gym_id not in gym.registry:
+        return None
+    entry_point = gym.spec(gym_id).entry_point
+    package = entry_point.split(".")[0].split(":")[0] if isinstance(entry_point, str) else entry_point.__module__.split(".")[0]
+    return package if package in GYM_ID_PROVIDERS else None

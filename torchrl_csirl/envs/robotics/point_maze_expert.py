@@ -137,25 +137,3 @@ def make_point_maze_expert(name: str, kp: float = 10.0, kd: float = 1.0) -> Poin
     return PointMazeExpert(maze_map, cell_size, kp, kd, position_slice=(ball, ball + 2),
                            goal_slice=layout.get("desired_goal", (6, 8)))
 
-
-def record_point_maze_demonstrations(gym_id: str, episodes: int, seed: int = 0, only_successful: bool = True,
-                                     **expert_options: float) -> Any:
-    """Demonstrations of the PointMaze expert on the gymnasium task ``gym_id`` (registered here if needed).
-
-    :func:`~torchrl_csirl.data.record_demonstrations` with the expert as the policy: episode ``i`` is seeded
-    ``seed + i`` (the kept ones, with ``only_successful``) and ends where the ball reaches the goal. The
-    metadata also names the expert (``generator``, ``expert_settings``).
-
-    Examples:
-        >>> demos = record_point_maze_demonstrations("PointMaze_UMaze-v3", episodes=2)
-        >>> demos.num_trajectories, demos.observation_dim, all(e["success"] for e in demos.metadata["episodes"])
-        (2, 8, True)
-    """
-    from torchrl_csirl.data.recording import record_demonstrations
-    from torchrl_csirl.envs.gymnasium_task import make_gymnasium_task
-
-    make_gymnasium_task(gym_id)
-    expert = make_point_maze_expert(gym_id, **expert_options)
-    demos = record_demonstrations(gym_id, expert, episodes, seed=seed, only_successful=only_successful)
-    return demos.with_metadata(generator=f"{__name__}.{PointMazeExpert.__qualname__}", expert_settings=expert.settings,
-                               base_seed=seed, only_successful=only_successful)
