@@ -5,8 +5,10 @@ driver): ``curriculum`` in ``"empty"`` (trajectory 0 recorded on an empty road, 
 and ``"traffic"`` (trajectory 0 recorded with traffic); both files share trajectories 1..24
 (successful expert episodes with traffic). Relocate (the DAPG policy), AntMaze (the waypoint-driven
 ant) and the locomotion tasks (their SAC experts, whole 1 000-step episodes): one file each,
-``"expert"``. The paper's dataset sizes N in {1, 5, 10, 15, 20, 25} are the nested prefixes: the
-dataset of size N is the first N trajectories, so every size contains the curriculum trajectory.
+``"expert"``; so do the gymnasium ids ``PointMaze_UMaze-v3`` and ``PointMaze_Medium-v3`` (their waypoint
+expert; ``<task>`` is the id), found once the id is a task (``env.gym_id=``). The paper's dataset
+sizes N in {1, 5, 10, 15, 20, 25} are the nested prefixes: the dataset of size N is the first N
+trajectories, so every size contains the curriculum trajectory.
 See ``docs/experts.md`` for how the files were generated.
 
 Examples:
@@ -60,11 +62,13 @@ def task_curricula() -> dict[str, tuple[str, ...]]:
 
 
 def available_expert_datasets() -> dict[str, list[str]]:
-    """Task -> curricula for which a shipped file exists.
+    """Task -> curricula for which a shipped file exists (a gymnasium id's, PointMaze's, once it is a task:
+    :func:`~torchrl_csirl.envs.make_gymnasium_task`).
 
     Examples:
-        >>> sorted(available_expert_datasets())
-        ['antmaze-umaze', 'halfcheetah', 'highway-fast', 'hopper', 'intersection', 'merge', 'relocate', 'roundabout']
+        >>> datasets = available_expert_datasets()
+        >>> datasets["merge"], datasets["antmaze-umaze"], "hopper" in datasets
+        (['empty', 'traffic'], ['expert'], True)
     """
     found: dict[str, list[str]] = {}
     for scenario, curricula_of_task in task_curricula().items():

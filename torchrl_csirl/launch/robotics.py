@@ -39,9 +39,11 @@ class RoboticsEnvConfig:
     gym_id: Optional[str] = option(
         None, help="any gymnasium id with flat Box spaces (e.g. MountainCarContinuous-v0): the task, by that name")
     features: Optional[str] = option(
-        None, help="env.gym_id: the matching features h(s), observation indices such as 0,2 (null: all entries)")
-    success: str = option("termination",
-                          help="env.gym_id: evaluation's success flag: termination | none | the name of an info entry")
+        None, help="env.gym_id: the matching features h(s), observation indices such as 0,2 or names (null: "
+                   "achieved_goal for a goal-conditioned task, else all entries)")
+    success: Optional[str] = option(
+        None, help="env.gym_id: evaluation's success flag: termination | none | the name of an info entry "
+                   "(null: the env's info success for a goal-conditioned task, else termination)")
     module: Optional[str] = option(
         None, help="a module to import first (dotted name): it registers tasks of your own with register_task")
 
@@ -106,8 +108,9 @@ def prepare_task(overrides: list[str] | None, run_dir: str | None = None) -> lis
         if gym_id == "null":
             return overrides
         features = given.get("env.features", "null")
+        success = given.get("env.success", "null")
         make_gymnasium_task(gym_id, features=None if features == "null" else features,
-                            success=given.get("env.success", "termination"))
+                            success=None if success == "null" else success)
     except ValueError as err:
         raise ConfigError(str(err)) from None
     named = override_strings(overrides)

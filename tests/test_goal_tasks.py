@@ -1,0 +1,115 @@
+"""Goal-conditioned gymnasium-robotics tasks by id (issue 87): PointMaze found without ``env.module``, its
+``Dict`` observation flattened, its waypoint expert, its shipped demonstrations, and CSIRL trained on it."""
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+from test_own_task import TINY
+
+from torchrl_csirl.data import load_expert_demonstrations, record_demonstrations
+from torchrl_csirl.envs import TASKS, make_env, make_gymnasium_task
+from torchrl_csirl.envs import registry as task_registry
+from torchrl_csirl.envs.expert_registry import make_expert
+from torchrl_csirl.launch.robotics import prepare_task
+from torchrl_csirl.scripts import csirl_highway
+
+UMAZE, MEDIUM = "PointMaze_UMaze-v3", "PointMaze_Medium-v3"
+LAYOUT = {"observation": (0, 4), "achieved_goal": (4, 6), "desired_goal": (6, 8)}
+CSIRL_TINY = [*(o for o in TINY if not o.startswith(("collector.num_workers", "expert.num_trajectories"))),
+              "expert.num_trajectories=5", "csirl.updates_per_round=10", "csirl.num_qvalue_nets=2",
+              "replay_buffer.batch_size=32"]
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _unregister_the_mazes():
+    """The maze tasks (they have an expert and shipped files) leave the registry after these tests."""
+    modules = dict(task_registry._TASK_MODULES)
+    yield
+    for name in (UMAZE, MEDIUM):
+        TASKS.pop(name, None)
+        task_registry._FACTORIES.pop(name, None)
+    task_registry._TASK_MODULES.clear()
+    task_registry._TASK_MODULES.update(modules)
+
+
+def test_a_gymnasium_robotics_id_is_found_without_env_module():
+    """A fresh interpreter: gymnasium_robotics is imported for the id, and recorded for the worker processes."""
+    code = ("import sys; from torchrl_csirl.launch.robotics import prepare_task; from torchrl_csirl.envs import registry\n"
+            "assert 'gymnasium_robotics' not in sys.modules\n"
+            f"print(prepare_task(['env.gym_id={UMAZE}'])[-1], list(registry._TASK_MODULES))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip().splitlines()[-1] == f"env.scenario={UMAZE} ['gymnasium_robotics']"
+
+
+def test_an_unknown_id_is_one_line():
+    with pytest.raises(ValueError, match=r"^env.gym_id=PointMaze_NoSuchMaze-v3: not a registered gymnasium id") as err:
+        make_gymnasium_task("PointMaze_NoSuchMaze-v3")
+    assert "\n" not in str(err.value)
+
+
+def test_a_dict_observation_is_flattened_with_matching_on_the_achieved_goal():
+    spec = make_gymnasium_task(UMAZE)
+    assert dict(spec.observation_layout) == LAYOUT and (spec.obs_dim, spec.action_dim, spec.max_steps) == (8, 2, 300)
+    assert spec.position_feature_indices == (4, 5) and spec.matching_features == ("achieved_goal[0]", "achieved_goal[1]")
+    assert spec.expert.endswith("point_maze_expert:make_point_maze_expert") and spec.family == "gymnasium"
+    assert make_gymnasium_task(UMAZE, features="desired_goal[0],desired_goal[1]").position_feature_indices == (6, 7)
+    spec = make_gymnasium_task(UMAZE)  # back to the default
+    env = make_env(UMAZE, seed=0)
+    rollout = env.rollout(spec.max_steps, make_expert(UMAZE), break_when_any_done=True)
+    obs = rollout["observation"]
+    assert obs.dtype == torch.float32 and torch.equal(obs[:, 0:2], obs[:, 4:6])  # achieved_goal: the ball's (x, y)
+    assert torch.equal(obs[:, 6:8], obs[:1, 6:8].expand(len(obs), 2))  # the goal stays put
+    # success from info["success"]; continuing_task=False: reaching the goal ends the episode
+    assert rollout["next", "success"][-1] and rollout["next", "terminated"][-1]
+    assert not rollout["next", "success"][:-1].any() and rollout.shape[0] < spec.max_steps
+    env.close()
+
+
+@pytest.mark.parametrize("gym_id", [UMAZE, MEDIUM])
+def test_the_experts_reach_the_goal(gym_id):
+    make_gymnasium_task(gym_id)
+    demos = record_demonstrations(gym_id, make_expert(gym_id), episodes=3, seed=5000)
+    assert [e["success"] for e in demos.metadata["episodes"]] == [True, True, True]
+    # the registry's expert also drives the gymnasium environment itself (reset(env), act(env))
+    env, expert = gym.make(gym_id, continuing_task=False), make_expert(gym_id)
+    env.reset(seed=5000)
+    expert.reset(env)
+    for _ in range(env.spec.max_episode_steps):
+        _, _, terminated, truncated, info = env.step(expert.act(env))
+        if terminated or truncated:
+            break
+    assert terminated and info["success"]
+    env.close()
+
+
+@pytest.mark.parametrize("gym_id", [UMAZE, MEDIUM])
+def test_the_shipped_demonstrations_are_found(gym_id):
+    make_gymnasium_task(gym_id)
+    demos = load_expert_demonstrations(gym_id, 25)
+    assert demos.num_trajectories == 25 and (demos.observation_dim, demos.action_dim) == (8, 2)
+    assert all(e["success"] for e in demos.metadata["episodes"])
+    assert [e["seed"] for e in demos.metadata["episodes"]][:3] == [0, 1, 2]
+    assert np.abs(demos.transitions()["action"].numpy()).max() <= 1.0
+
+
+def test_csirl_trains_on_point_maze_with_its_shipped_demonstrations(tmp_path):
+    summary = csirl_highway.main([f"env.gym_id={UMAZE}", *CSIRL_TINY, "collector.num_workers=1",
+                                  f"logger.output_dir={tmp_path}"])
+    assert summary["scenario"] == UMAZE and summary["frames"] == 400 and summary["updates"] > 0
+    assert summary["accomplish_rate"] == summary["success_rate"]
+
+
+def test_spawned_collector_workers_find_the_id(tmp_path):
+    summary = csirl_highway.main([f"env.gym_id={MEDIUM}", *CSIRL_TINY, "collector.num_workers=2",
+                                  f"logger.output_dir={tmp_path}"])
+    assert summary["scenario"] == MEDIUM and summary["frames"] == 400
+
+
+def test_prepare_task_names_the_id_as_the_scenario():
+    assert prepare_task([f"env.gym_id={MEDIUM}"]) == [f"env.gym_id={MEDIUM}", f"env.scenario={MEDIUM}"]
+    assert TASKS[MEDIUM].max_steps == 600
