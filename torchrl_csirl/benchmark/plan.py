@@ -127,8 +127,11 @@ def is_gymnasium_id(scenario: str) -> bool:
     names, or registered by ``make_gymnasium_task`` in this process."""
     import gymnasium as gym
 
+    from torchrl_csirl.envs.gym_ids import import_gym_provider
+
     if scenario in TASKS:
         return TASKS[scenario].family == "gymnasium"
+    import_gym_provider(scenario)  # an id of an installed package that registers ids when imported (PointMaze)
     return scenario in gym.registry
 
 

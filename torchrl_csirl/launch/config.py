@@ -64,7 +64,14 @@ __all__ = [
     "validate",
 ]
 
-SCENARIO_NAMES = ("highway-fast", "intersection", "merge", "roundabout")
+
+
+def driving_scenes() -> tuple[str, ...]:
+    """The driving scenes, read from the task registry when asked (``env.scenario``'s choices)."""
+    from torchrl_csirl.envs import task_names
+
+    return task_names(family="driving")
+
 PUBLISHED_END_AT = ("recording", "first_done", "termination")  # torchrl_csirl.data.END_AT
 DEVICES = ("cpu", "cuda", "auto")
 
@@ -76,7 +83,7 @@ class ConfigError(ValueError):
 # ---------------------------------------------------------------------------------------- shared sections
 @dataclass
 class EnvConfig:
-    scenario: str = option("merge", choices=SCENARIO_NAMES, help="the driving scenario")
+    scenario: str = option("merge", choices=driving_scenes, help="the driving scenario")
 
 
 @dataclass

@@ -67,6 +67,7 @@ from torchrl_csirl.launch.config import (
     UpdateRatioConfig,
     option,
 )
+from torchrl_csirl.launch.csirl import CSIRL_RECIPE
 from torchrl_csirl.launch.experts import load_experts
 from torchrl_csirl.launch.final import evaluation_summary, final_summary
 from torchrl_csirl.launch.recipes import Recipe, register_recipe
@@ -93,8 +94,8 @@ TRAINED_METHODS = ("sac", "bc", *LOSS_METHODS)
 #: reference rows: evaluated, not trained
 REFERENCE_METHODS = ("random", "expert")
 METHODS = (*TRAINED_METHODS, *REFERENCE_METHODS)
-#: methods of the benchmark trained by recipes/csirl_highway.py
-CSIRL_METHODS = ("csirl", "csirl-b")
+#: methods of the benchmark trained by recipes/csirl_highway.py (its recipe's)
+CSIRL_METHODS = CSIRL_RECIPE.methods
 
 
 # ---------------------------------------------------------------------------------------- config
