@@ -156,6 +156,7 @@ def main(argv: list[str] | None = None) -> dict[str, object]:
         partial(make_serial_env, SCENE, 2, seed=args.seed), policy=actor,
         frames_per_batch=args.frames_per_batch, total_frames=args.frames,
         init_random_frames=args.init_random_frames,
+        auto_register_policy_transforms=False,  # a feed-forward policy needs no InitTracker
     )
     eval_env = make_serial_env(SCENE, 2)  # episodes two at a time, each copy's first episode kept
     evaluate = partial(evaluate_policy, eval_env, actor, max_steps=spec.max_steps)
