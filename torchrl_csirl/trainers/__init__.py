@@ -8,7 +8,7 @@ from torchrl_csirl.trainers.checkpoint import (
     read_checkpoint_state,
 )
 from torchrl_csirl.trainers.collection import CollectorWorkerError, WorkerErrorLog, shutdown_collector, start_collector
-from torchrl_csirl.trainers.evaluation import evaluate_policy
+from torchrl_csirl.trainers.evaluation import episode_metrics, evaluate_episodes, evaluate_policy
 from torchrl_csirl.trainers.hooks import EvaluationHook, KeepBestPolicy, StopAtTarget, SubgoalSelectionHook
 from torchrl_csirl.trainers.imitation import (
     IMITATION_METHODS,
@@ -54,6 +54,8 @@ __all__ = [
     "ValueDICEUpdate",
     "WorkerErrorLog",
     "check_finite_losses",
+    "episode_metrics",
+    "evaluate_episodes",
     "evaluate_policy",
     "hyperparameters_class",
     "ignoring_interrupts",
