@@ -8,6 +8,7 @@ import sys
 
 import numpy as np
 import pytest
+import torch
 from omegaconf import OmegaConf
 from PIL import Image
 
@@ -94,7 +95,8 @@ def test_an_env_without_render_mode_is_named_as_the_cause_and_its_run_has_videos
 
 
 def _run_dir(tmp_path, task="relocate", policy=True):
-
+    """A run directory with the task's configuration and, with ``policy``, an untrained actor (seeded: the
+    episode it films does not depend on the tests run before)."""
     run_dir = tmp_path / "run"
     run_dir.mkdir()
     cfg = CSIRL_RECIPE.load_config([f"env.task={task}", "eval.seed=7"])
@@ -103,6 +105,7 @@ def _run_dir(tmp_path, task="relocate", policy=True):
         from torchrl_csirl.envs import resolve_scenario
 
         spec = resolve_scenario(task)
+        torch.manual_seed(0)
         save_policy(make_actor(spec.obs_dim, spec.action_dim), run_dir / "policy.pt", obs_dim=spec.obs_dim,
                     action_dim=spec.action_dim, scenario=task)
     return run_dir
