@@ -12,6 +12,7 @@ import torch
 from torchrl_csirl.diagnostics import (
     action_saturation,
     critic_calibration,
+    demonstrations_share_a_goal,
     expert_transitions_reward,
     health_report,
     learned_reward_share,
@@ -99,6 +100,10 @@ def test_each_check_flags_its_own_failure_and_passes_a_healthy_figure():
     assert learned_reward_share([{"intrinsic_reward_mean": 5.0, "matching_reward_mean": 0.1}]).ok is False
     assert learned_reward_share([{"intrinsic_reward_mean": 0.2, "matching_reward_mean": 0.8}]).ok is True
     assert expert_transitions_reward(torch.zeros(3), torch.ones(3), 0.25).ok is False
+    same_goal = torch.tensor([[10.0, 0.0], [10.2, 0.1], [9.9, -0.1]])
+    assert demonstrations_share_a_goal(same_goal, path).ok is True
+    spread = demonstrations_share_a_goal(torch.tensor([[10.0, 0.0], [0.0, 5.0], [3.0, -4.0]]), path)
+    assert spread.ok is False and "the goal changes from episode to episode" in spread.message
 
 
 def test_a_run_writes_its_report_and_diagnose_rewrites_it_without_touching_the_run(tmp_path):

@@ -5,7 +5,8 @@ rolls the expert (:mod:`torchrl_csirl.envs.robotics.point_maze_expert`) for ``--
 (seeds ``--seed, --seed + 1, ...``) of each gymnasium task and prints one JSON line: per id, the success rate
 (the ball within 0.45 m of the goal, ``info["success"]``) and the mean and longest episode length.
 
-``--ship`` instead writes the shipped files, ``torchrl_csirl/data/experts/<id>/expert_25.npz`` (or under
+``--module <name>`` imports a module first for the ids it registers (``tools/fixed_goal_mazes.py``'s fixed-goal
+mazes). ``--ship`` instead writes the shipped files, ``torchrl_csirl/data/experts/<id>/expert_25.npz`` (or under
 ``--out-dir``): the first 25 successful episodes from seed 0.
 """
 from __future__ import annotations
@@ -18,7 +19,7 @@ import numpy as np
 
 from torchrl_csirl._paths import EXPERTS_DIR
 from torchrl_csirl.data import ExpertDemonstrations, record_demonstrations
-from torchrl_csirl.envs import make_gymnasium_task
+from torchrl_csirl.envs import import_task_module, make_gymnasium_task
 from torchrl_csirl.envs.expert_registry import make_expert
 
 POINT_MAZE_IDS = ("PointMaze_UMaze-v3", "PointMaze_Medium-v3")
@@ -43,11 +44,12 @@ def measure(gym_id: str, episodes: int, seed: int) -> dict[str, float]:
             "mean_length": float(np.mean(lengths)), "max_length": int(max(lengths))}
 
 
-def ship(gym_id: str, out_dir: str) -> str:
+def ship(gym_id: str, out_dir: str, module: str | None = None) -> str:
     """Writes ``<out_dir>/<gym_id>/expert_25.npz``: the first 25 successful episodes from seed 0."""
     demos = record(gym_id, SHIPPED_TRAJECTORIES, seed=0)
     demos = demos.with_metadata(curriculum="expert", num_trajectories=SHIPPED_TRAJECTORIES,
-                                command=f"python tools/point_maze_experts.py --ship --ids {gym_id}")
+                                command=f"python tools/point_maze_experts.py --ship --ids {gym_id}"
+                                        + (f" --module {module}" if module else ""))
     os.makedirs(os.path.join(out_dir, gym_id), exist_ok=True)
     return demos.save(os.path.join(out_dir, gym_id, f"expert_{SHIPPED_TRAJECTORIES}.npz"))
 
@@ -59,9 +61,13 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--seed", type=int, default=1000, help="seed of the first measured episode")
     parser.add_argument("--ship", action="store_true", help="write the shipped demonstrations instead")
     parser.add_argument("--out-dir", default=EXPERTS_DIR, help="folder of --ship's files")
+    parser.add_argument("--module", default=None,
+                        help="a module to import first, for the ids it registers (e.g. fixed_goal_mazes, with examples/ on PYTHONPATH)")
     args = parser.parse_args(argv)
+    if args.module:
+        import_task_module(args.module)
     if args.ship:
-        result = {gym_id: ship(gym_id, args.out_dir) for gym_id in args.ids}
+        result = {gym_id: ship(gym_id, args.out_dir, args.module) for gym_id in args.ids}
     else:
         result = {gym_id: measure(gym_id, args.episodes, args.seed) for gym_id in args.ids}
     print(json.dumps(result, sort_keys=True))

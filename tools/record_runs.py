@@ -3,8 +3,8 @@
 A record is what a table, its curves and the figures quoted about a run's training are rebuilt from
 (``docs/runs/README.md``):
 
-* the run's ``summary.json`` and ``config.yaml``, and its ``resumes.jsonl`` where the run was resumed with
-  changed settings;
+* the run's ``summary.json``, ``config.yaml`` and ``health.json`` (its health report), and its ``resumes.jsonl``
+  where the run was resumed with changed settings;
 * ``metrics.jsonl`` trimmed to the evaluation rows (``frames``, ``updates``, ``round`` and the ``eval_*``
   keys: the curves of ``benchmark.py report``; the test is in the summary);
 * ``rounds.csv``: one row per round of training (:func:`round_rows`): the run's position at the round's
@@ -40,7 +40,7 @@ import shutil
 import sys
 
 #: the files a record copies as they are (``resumes.jsonl`` only where it exists)
-COPIED = ("summary.json", "config.yaml", "resumes.jsonl")
+COPIED = ("summary.json", "config.yaml", "resumes.jsonl", "health.json")
 #: the outputs of tools/ a record copies where the run has them: ``termination_probe.py`` writes its own; the
 #: others are the last line of ``locomotion_probe.py`` / ``policy_outcomes.py`` / ``robotics_outcomes.py`` redirected
 #: there; ``policy_scale.json`` is the one hand-made series a record holds (docs/benchmark.md)

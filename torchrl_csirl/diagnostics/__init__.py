@@ -4,7 +4,7 @@
   words when out of range (reward hacking, critics over- or under-valued, a curriculum that never moves,
   a collapsed entropy, saturated actions, a learned reward too small or too large, a matching reward that
   punishes the demonstrations, a reward that pays the policy more than the expert, episodes that end short
-  of the goal).
+  of the goal, demonstrations that do not share the curriculum trajectory's goal).
 * :mod:`~torchrl_csirl.diagnostics.probe`: the figures measured on a learner's own networks.
 * :mod:`~torchrl_csirl.diagnostics.report`: every check of a run, written at the end of each CSIRL run and by
   ``torchrl-csirl diagnose <run dir>``.
@@ -19,6 +19,7 @@ from torchrl_csirl.diagnostics.checks import (
     HealthCheck,
     action_saturation,
     critic_calibration,
+    demonstrations_share_a_goal,
     expert_transitions_reward,
     learned_reward_share,
     matching_along_demonstrations,
@@ -38,6 +39,7 @@ __all__ = [
     "LearnerProbe",
     "action_saturation",
     "critic_calibration",
+    "demonstrations_share_a_goal",
     "discounted_returns",
     "expert_transitions_reward",
     "health_report",

@@ -29,6 +29,7 @@ __all__ = [
     "HealthCheck",
     "action_saturation",
     "critic_calibration",
+    "demonstrations_share_a_goal",
     "expert_transitions_reward",
     "learned_reward_share",
     "matching_along_demonstrations",
@@ -176,6 +177,30 @@ def where_episodes_end(final_features: torch.Tensor, path_features: torch.Tensor
             "(median): it stops short of the goal or leaves the path"), figures)
     return HealthCheck(name, True, f"the policy's episodes end {figures['progress_median']:.0%} of the way along the "
                                    "demonstration (median), near its path", figures)
+
+
+def demonstrations_share_a_goal(final_features: torch.Tensor, path_features: torch.Tensor) -> HealthCheck:
+    """Whether the demonstrations end where the curriculum trajectory ends: CSIRL's matching reward leads every
+    episode along that one trajectory, so a task whose goal changes per episode cannot be matched.
+
+    Args:
+        final_features: ``[N, F]`` the matching features of each demonstration's last state.
+        path_features: ``[L, F]`` the curriculum trajectory's matching features (its last row: its end).
+    """
+    name = "demonstrations_share_a_goal"
+    if final_features.shape[0] < 2 or path_features.shape[0] < 2:
+        return HealthCheck(name, None, "fewer than two demonstrations")
+    extent = max(float((path_features[1:] - path_features[:-1]).norm(dim=-1).sum()), 1e-8)
+    distance = (final_features.float() - path_features[-1].float()).norm(dim=-1) / extent
+    near = float((distance < 0.1).float().mean())
+    figures = {"near_share": near, "end_distance_over_path_length": distance.tolist()}
+    if near < 0.5:
+        return HealthCheck(name, False, (
+            f"only {near:.0%} of the demonstrations end near the curriculum trajectory's end (within a tenth of its "
+            "length): the goal changes from episode to episode, and the matching reward leads every episode to the "
+            "first demonstration's goal; give the task one goal, or demonstrations that share it"), figures)
+    return HealthCheck(name, True, f"{near:.0%} of the demonstrations end near the curriculum trajectory's end",
+                       figures)
 
 
 def subgoal_progress(subgoals: Sequence[int], curriculum_length: int) -> HealthCheck:

@@ -32,6 +32,7 @@ class LearnerProbe:
         expert_rewards: ``[U]`` the learner's reward on every demonstrated step.
         matching_to_subgoal: the matching reward on the curriculum trajectory's steps up to the subgoal.
         final_features: ``[E, F]`` the matching features of each episode's last state.
+        demo_final_features: ``[N, F]`` the matching features of each demonstration's last state.
         path_features: ``[L, F]`` the curriculum trajectory's matching features.
         actions: ``[T, A]`` the policy's actions.
     """
@@ -44,6 +45,7 @@ class LearnerProbe:
     expert_rewards: torch.Tensor
     matching_to_subgoal: torch.Tensor
     final_features: torch.Tensor
+    demo_final_features: torch.Tensor
     path_features: torch.Tensor
     actions: torch.Tensor
 
@@ -135,6 +137,8 @@ def probe_learner(*, env: EnvBase, policy, loss, transforms, matching, demos, ga
         expert_values.append(values)
         expert_returns.append(returns)
         expert_rewards.append(rewards)
+    demo_finals = torch.stack([demos.trajectory(i)["next", "observation"][-1].index_select(-1, position)
+                               for i in range(demos.num_trajectories)]).float()
     curriculum = demos.trajectory(0)[: matching.subgoal].to(device)
     to_subgoal = torch.zeros(0)
     if matching.subgoal:
@@ -144,6 +148,6 @@ def probe_learner(*, env: EnvBase, policy, loss, transforms, matching, demos, ga
         policy_values=torch.cat(policy_values, -1), policy_returns=torch.cat(policy_returns),
         expert_values=torch.cat(expert_values, -1), expert_returns=torch.cat(expert_returns),
         policy_rewards=torch.cat(policy_rewards), expert_rewards=torch.cat(expert_rewards),
-        matching_to_subgoal=to_subgoal, final_features=torch.stack(finals).float(),
+        matching_to_subgoal=to_subgoal, final_features=torch.stack(finals).float(), demo_final_features=demo_finals.cpu(),
         path_features=matching.expert_observations.index_select(-1, matching.position_feature_indices).float().cpu(),
         actions=torch.cat(actions).float())
