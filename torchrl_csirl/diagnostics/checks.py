@@ -95,8 +95,11 @@ def reward_tracks_the_task(rows: Sequence[dict]) -> HealthCheck:
         rows: ``metrics.jsonl``'s rows (``matching_reward_mean``, ``reward_mean``, ``eval_success_rate``,
             ``eval_accomplish_rate``, ``eval_env_return``).
     """
-    rows = [r for r in rows if r.get("matching_reward_mean") is not None]
+    logged = [r for r in rows if r.get("matching_reward_mean") is not None]
     name = "reward_tracks_the_task"
+    if rows and not logged:
+        return HealthCheck(name, None, "no matching reward was logged (a method without one)")
+    rows = logged
     if len(rows) < 3:
         return HealthCheck(name, None, "too few rounds to compare the training reward with the task's score")
     m0, m1 = _thirds(rows, "matching_reward_mean")

@@ -30,6 +30,16 @@ def _is_csirl(run_dir: str) -> bool:
     return "csirl" in OmegaConf.load(os.path.join(run_dir, "config.yaml"))
 
 
+def _action_dim(cfg) -> int | None:
+    """The action size of a saved run's task (None: a task this process cannot resolve, e.g. an unimported module's)."""
+    from torchrl_csirl.envs import resolve_scenario
+
+    try:
+        return resolve_scenario(cfg.env.scenario).action_dim
+    except ValueError:
+        return None
+
+
 def _rebuilt(run_dir: str, workdir: str):
     """The CSIRL run rebuilt from a copy of its configuration and last checkpoint (one in-process collector)."""
     from torchrl_csirl.launch.csirl import CSIRL_RECIPE
@@ -58,8 +68,11 @@ def diagnose(run_dir: str, episodes: int = 5) -> dict[str, object]:
     if not _is_csirl(run_dir):  # a baseline: what its metrics say
         cfg = OmegaConf.load(os.path.join(run_dir, "config.yaml"))
         rows = read_metrics(run_dir)
-        report = HealthReport(run_dir, cfg.env.scenario, str(cfg.get("method")), rows=rows,
-                              checks=[reward_tracks_the_task(rows), policy_entropy(rows, action_dim=1)])
+        checks = [reward_tracks_the_task(rows)]
+        action_dim = _action_dim(cfg)
+        if action_dim is not None:
+            checks.append(policy_entropy(rows, action_dim))
+        report = HealthReport(run_dir, cfg.env.scenario, str(cfg.get("method")), rows=rows, checks=checks)
         write_health_report(report, run_dir)
         return report.as_dict() | {"lines": report.lines()}
     if not os.path.isfile(os.path.join(run_dir, "checkpoints", "last", "state.pt")):
