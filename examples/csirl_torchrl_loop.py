@@ -24,7 +24,8 @@ Run::
 
     python examples/csirl_torchrl_loop.py --frames 60000 --seed 0 --extras --out runs/torchrl-loop
 
-It ends with one JSON line: the test accomplish rate over 50 unseen episodes and the run's figures.
+It ends with one JSON line, also written as ``summary.json`` in its log folder: the test accomplish rate over 50
+unseen episodes (raw and over the demonstrations', as the recipe's tables report it) and the run's figures.
 """
 from __future__ import annotations
 
@@ -47,7 +48,8 @@ from torchrl.record.loggers.csv import CSVLogger
 
 from torchrl_csirl.curriculum import SubgoalCurriculum
 from torchrl_csirl.data import load_expert_demonstrations
-from torchrl_csirl.envs import SCENARIOS, make_serial_env
+from torchrl_csirl.envs import SCENARIOS, make_serial_env, normalized_accomplish_rate
+from torchrl_csirl.launch.run import expert_accomplish_rate
 from torchrl_csirl.modules import make_input_features, make_reward_network
 from torchrl_csirl.objectives import EnsembleSACLoss, MetaRewardLoss
 from torchrl_csirl.trainers import evaluate_policy
@@ -208,8 +210,21 @@ def main(argv: list[str] | None = None) -> dict[str, object]:
         "episode_length": test["episode_length"], "wall_s": round(time.perf_counter() - start, 1),
         "log_dir": os.path.join(args.out, logger.exp_name),
     }
+    result = run_summary(result, demos.metadata)
+    with open(os.path.join(result["log_dir"], "summary.json"), "w") as f:
+        json.dump(result, f, indent=1)
     print(json.dumps(result), flush=True)
     return result
+
+
+def run_summary(result: dict[str, object], expert_metadata: dict) -> dict[str, object]:
+    """The example's result with the fields of a recipe run's ``summary.json`` that the tables compare
+    (``scenario``, ``method``, ``normalized_accomplish_rate``: the test accomplish rate over the demonstrations'),
+    so that ``tools/compare_runs.py`` sets it beside the recipe's runs."""
+    expert = expert_accomplish_rate(expert_metadata)
+    normalized = round(float(normalized_accomplish_rate(result["accomplish_rate"], expert)), 4) if expert else None
+    return {"scenario": SCENE, "method": "csirl-torchrl-loop" + ("-extras" if result["extras"] else ""), **result,
+            "normalized_accomplish_rate": normalized}
 
 
 if __name__ == "__main__":

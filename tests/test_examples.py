@@ -26,3 +26,8 @@ def test_csirl_torchrl_loop_ends_with_its_json_line(tmp_path, extras):
     assert 0.0 <= result["accomplish_rate"] <= 1.0 and 0 <= result["final_subgoal"] < result["curriculum_length"]
     scalars = Path(result["log_dir"]) / "scalars"  # TorchRL's CSVLogger, one file per scalar
     assert {"subgoal.csv", "eval_accomplish_rate.csv", "loss_meta.csv", "loss_qvalue.csv"} <= {p.name for p in scalars.iterdir()}
+    with open(Path(result["log_dir"]) / "summary.json") as f:
+        summary = json.load(f)
+    assert summary == result and summary["scenario"] == "merge"
+    assert summary["method"] == ("csirl-torchrl-loop-extras" if extras else "csirl-torchrl-loop")
+    assert summary["normalized_accomplish_rate"] >= summary["accomplish_rate"]  # over the expert's rate (below 1)
