@@ -31,6 +31,7 @@ make_gymnasium_task("MountainCarContinuous-v0", features="0")
 pump = lambda td: td.set("action", torch.where(td["observation"][..., 1:] >= 0, 1.0, -1.0))
 record_demonstrations("MountainCarContinuous-v0", pump, episodes=3).save("car.npz")
 PY
-"$work/venv/bin/python" -m torchrl_csirl.scripts.csirl_robotics env.gym_id=MountainCarContinuous-v0 env.features=0 \
+# through the console command the wheel installs (torchrl-csirl train: the one CSIRL script, any task)
+"$work/venv/bin/torchrl-csirl" train env.gym_id=MountainCarContinuous-v0 env.features=0 \
   expert.path=car.npz expert.num_trajectories=3 csirl.matching_target=path "${tiny[@]}" | tail -1 \
   | "$work/venv/bin/python" -c "$check"
