@@ -29,7 +29,15 @@ from torchrl_csirl.diagnostics.checks import (
     where_episodes_end,
 )
 from torchrl_csirl.diagnostics.probe import LearnerProbe, discounted_returns, measurable_states, probe_learner
-from torchrl_csirl.diagnostics.report import HEALTH_FILE, HEALTH_PICTURE, HealthReport, health_report, read_metrics, write_health_report
+from torchrl_csirl.diagnostics.report import (
+    HEALTH_FILE,
+    HEALTH_PICTURE,
+    HealthReport,
+    check_line,
+    health_report,
+    read_metrics,
+    write_health_report,
+)
 
 __all__ = [
     "HEALTH_FILE",
@@ -38,6 +46,7 @@ __all__ = [
     "HealthReport",
     "LearnerProbe",
     "action_saturation",
+    "check_line",
     "critic_calibration",
     "demonstrations_share_a_goal",
     "discounted_returns",

@@ -28,7 +28,7 @@ from torchrl_csirl.diagnostics.checks import (
 )
 from torchrl_csirl.diagnostics.probe import LearnerProbe, probe_learner
 
-__all__ = ["HEALTH_FILE", "HEALTH_PICTURE", "HealthReport", "health_report", "read_metrics", "write_health_report"]
+__all__ = ["HEALTH_FILE", "HEALTH_PICTURE", "HealthReport", "check_line", "health_report", "read_metrics", "write_health_report"]
 
 HEALTH_FILE = "health.json"
 HEALTH_PICTURE = "health.png"
@@ -67,14 +67,25 @@ class HealthReport:
         raise KeyError(f"no check {name!r}; checks: {', '.join(c.name for c in self.checks)}")
 
     def lines(self) -> list[str]:
-        """One line per check: ``FLAG``, ``ok`` or ``--`` (too little to say), its name and its sentence."""
-        marks = {False: "FLAG", True: "ok  ", None: "--  "}
-        return [f"{marks[c.ok]} {c.name}: {c.message}" for c in self.checks]
+        """One line per check (:func:`check_line`)."""
+        return [check_line(c.as_dict()) for c in self.checks]
 
     def as_dict(self) -> dict[str, Any]:
         """A JSON-ready dict (``health.json``)."""
         return {"run_dir": self.run_dir, "task": self.task, "method": self.method,
                 "flagged": [c.name for c in self.flagged], "checks": [c.as_dict() for c in self.checks]}
+
+
+def check_line(check: dict[str, Any]) -> str:
+    """A check (a ``health.json`` entry) as one line: ``FLAG``, ``ok`` or ``--`` (too little to say), its name and
+    its sentence.
+
+    Examples:
+        >>> check_line({"ok": False, "name": "subgoal_progress", "message": "the curriculum never moved"})
+        'FLAG subgoal_progress: the curriculum never moved'
+    """
+    mark = {False: "FLAG", True: "ok  ", None: "--  "}[check["ok"]]
+    return f"{mark} {check['name']}: {check['message']}"
 
 
 def read_metrics(run_dir: str) -> list[dict[str, Any]]:

@@ -60,7 +60,14 @@ def diagnose(run_dir: str, episodes: int = 5) -> dict[str, object]:
     Raises:
         ConfigError: one line, for a folder that is not a run (no ``config.yaml``) or a CSIRL run without a checkpoint.
     """
-    from torchrl_csirl.diagnostics import HealthReport, policy_entropy, read_metrics, reward_tracks_the_task, write_health_report
+    from torchrl_csirl.diagnostics import (
+        HealthReport,
+        check_line,
+        policy_entropy,
+        read_metrics,
+        reward_tracks_the_task,
+        write_health_report,
+    )
 
     run_dir = os.path.abspath(run_dir)
     if not os.path.isfile(os.path.join(run_dir, "config.yaml")):
@@ -87,8 +94,7 @@ def diagnose(run_dir: str, episodes: int = 5) -> dict[str, object]:
             run.close()
     with open(os.path.join(run_dir, "health.json"), encoding="utf-8") as f:
         report = json.load(f)
-    marks = {False: "FLAG", True: "ok  ", None: "--  "}
-    return report | {"lines": [f"{marks[c['ok']]} {c['name']}: {c['message']}" for c in report["checks"]]}
+    return report | {"lines": [check_line(c) for c in report["checks"]]}
 
 
 def main(argv: list[str] | None = None) -> dict[str, object]:
