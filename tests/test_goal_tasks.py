@@ -113,3 +113,37 @@ def test_spawned_collector_workers_find_the_id(tmp_path):
 def test_prepare_task_names_the_id_as_the_scenario():
     assert prepare_task([f"env.gym_id={MEDIUM}"]) == [f"env.gym_id={MEDIUM}", f"env.scenario={MEDIUM}"]
     assert TASKS[MEDIUM].max_steps == 600
+
+
+def test_sac_from_demonstrations_mixes_the_experts_recorded_reward_into_each_batch():
+    """``sac.expert_fraction``: the maze table's "SAC with expert transitions" row, SAC on the sparse reward with a
+    quarter of each batch the demonstrations' transitions and their recorded environment reward."""
+    from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
+
+    from torchrl_csirl.launch import imitation
+
+    args = prepare_task([f"env.gym_id={UMAZE}", "method=sac", "sac.expert_fraction=0.25", "sac.batch_size=64"])
+    cfg = imitation.IMITATION_RECIPE.load_config(args)
+    spec = TASKS[UMAZE]
+    demos = imitation.load_experts(cfg.expert, spec)
+    method = imitation.make_sac(cfg, spec, torch.device("cpu"), None)
+    online = TensorDictReplayBuffer(storage=LazyTensorStorage(100), batch_size=64)
+    env = make_env(UMAZE, seed=0)
+    try:
+        online.extend(env.rollout(50).exclude("success", ("next", "success")))
+    finally:
+        env.close()
+    expert = demos.as_replay_buffer(batch_size=32)
+    batch = method.make_update_step(online, expert).sample(None)
+    assert batch.batch_size == (64,)
+    expert_part = batch[-16:]  # the expert transitions come last
+    recorded = demos.transitions()
+    rows = (expert_part["observation"][:, None] == recorded["observation"][None]).all(-1).float().argmax(1)
+    assert (recorded["observation"][rows] == expert_part["observation"]).all()
+    assert (recorded["next", "reward"][rows] == expert_part["next", "reward"]).all()  # the recorded reward
+    assert recorded["next", "reward"].sum() > 0  # the demonstrations reach the goal: a reward of 1 there
+    without = demos.transitions().exclude(("next", "reward"))
+    bare = TensorDictReplayBuffer(storage=LazyTensorStorage(len(without)), batch_size=32)
+    bare.extend(without)
+    with pytest.raises(imitation.ConfigError, match=r"sac.expert_fraction=0.25: the demonstrations of .* hold no reward"):
+        method.make_update_step(online, bare)

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import json
 import os
+import subprocess
+import sys
 
 import pytest
 import torch
@@ -257,3 +259,17 @@ def test_the_console_command_trains_csirl_on_the_hopper(tmp_path):
     assert (summary["scenario"], summary["method"], summary["frames"]) == ("hopper", "csirl", 400)
     bad = subprocess.run([sys.executable, "-m", "torchrl_csirl", "train", "method=nope"], capture_output=True, text=True)
     assert bad.returncode == 2 and bad.stderr.strip().startswith("error: method=nope: unknown; one of bc, csirl, csirl-b")
+
+
+def test_the_benchmark_knows_the_tasks_an_env_module_override_registers(tmp_path):
+    """A fresh interpreter: ``--scenarios own-pendulum`` is known once ``env.module=own_task_module`` (an
+    override of the sweep) is imported, as the cells will import it; a module that cannot be imported is one line."""
+    code = ("import sys; from torchrl_csirl.benchmark.plan import plan_cells, BenchmarkError\n"
+            f"todo, _ = plan_cells(['bc'], ['own-pendulum'], [0], {str(tmp_path)!r}, ['env.module=own_task_module'])\n"
+            "print([c.name for c in todo], 'env.module=own_task_module' in todo[0].command)\n"
+            "try:\n    plan_cells(['bc'], ['own-pendulum'], [0], '.', ['bc:env.module=no_such_module_here'])\n"
+            "except BenchmarkError as err:\n    print(err)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         cwd=os.path.dirname(__file__)).stdout.strip().splitlines()
+    assert out[-2] == "['own-pendulum-bc-s0'] True"
+    assert out[-1].startswith("env.module=no_such_module_here: cannot import it")

@@ -17,13 +17,13 @@ import sys
 from dataclasses import dataclass
 
 from torchrl_csirl.benchmark.published import PAPER_TABLE
-from torchrl_csirl.envs import LOCOMOTION_TASKS, TASKS, resolve_scenario, task_names
+from torchrl_csirl.envs import LOCOMOTION_TASKS, TASKS, import_task_module, resolve_scenario, task_names
 from torchrl_csirl.launch.imitation import METHODS, REFERENCE_METHODS
 
 __all__ = ["ABLATIONS", "CSIRL_METHODS", "CSIRL_RECIPE", "CSIRL_ROBOTICS_RECIPE", "IMITATION_RECIPE",
            "IMITATION_ROBOTICS_RECIPE", "LOCOMOTION_ORDER", "LOCOMOTION_TITLES", "METHOD_ORDER", "PAPER_ROBOTICS_METHODS",
            "RECIPES", "REFERENCE_METHODS", "ROBOTICS_ORDER", "SCENARIO_ORDER", "SEED_FREE_METHODS", "TABLE_BUDGETS",
-           "TASK_OVERRIDES", "BenchmarkError", "Cell", "has_checkpoint", "is_gymnasium_id", "is_robotics",
+           "TASK_OVERRIDES", "BenchmarkError", "Cell", "has_checkpoint", "import_override_modules", "is_gymnasium_id", "is_robotics",
            "known_methods", "make_cell", "plan_cells", "recipe_of", "return_task_order", "score_key", "split_overrides",
            "table_overrides"]
 
@@ -239,12 +239,29 @@ def make_cell(method: str, scenario: str, seed: int, output_dir: str, overrides:
     return Cell(method, scenario, seed, run_dir, (sys.executable, "-m", recipe, *args), resumed)
 
 
+def import_override_modules(overrides: list[str]) -> None:
+    """Imports every ``env.module=<module>`` among ``overrides`` (plain or scoped to a method), so that the tasks
+    and gymnasium ids the module registers are known here, as they will be in the cells.
+
+    Raises:
+        BenchmarkError: one line when a module cannot be imported.
+    """
+    for item in overrides:
+        key, sep, value = item.rpartition(":")[2].partition("=")
+        if sep and key.strip() == "env.module" and value.strip():
+            try:
+                import_task_module(value.strip())
+            except ValueError as err:
+                raise BenchmarkError(str(err)) from None
+
+
 def plan_cells(methods: list[str], scenarios: list[str], seeds: list[int], output_dir: str,
                overrides: list[str]) -> tuple[list[Cell], list[str]]:
     """(cells to run, names of the cells already done)."""
     unknown = [m for m in methods if m not in known_methods()]
     if unknown:
         raise BenchmarkError(f"--methods {' '.join(unknown)}: unknown; known: {', '.join(known_methods())}")
+    import_override_modules(overrides)
     bad = [s for s in scenarios if s not in TASKS and not is_gymnasium_id(s)]
     if bad:
         raise BenchmarkError(f"--scenarios {' '.join(bad)}: unknown; known: {', '.join(task_names())}, or a gymnasium "

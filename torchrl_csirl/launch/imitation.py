@@ -49,7 +49,7 @@ from torchrl.envs import Compose
 from torchrl.envs.utils import RandomPolicy
 from torchrl.objectives import BCLoss, SoftUpdate
 
-from torchrl_csirl.data import ExpertDemonstrations
+from torchrl_csirl.data import DemonstrationMixer, ExpertDemonstrations
 from torchrl_csirl.envs import ScenarioSpec, TaskSpec, resolve_scenario
 from torchrl_csirl.launch.assembly import Run, assemble_trainer, make_logger, make_online_buffer, model_input_features
 from torchrl_csirl.launch.collection import check_collector_config, make_eval_env
@@ -110,6 +110,10 @@ class SACBaselineConfig(SACHyperparameters):
 
     reward_scale: Optional[float] = option(
         None, above=0.0, help="progress reward per unit of normalised distance (null: the scenario's matching scale)")
+    expert_fraction: float = option(
+        0.0, minimum=0.0, below=1.0,
+        help="share of each batch drawn from the demonstrations, rewarded as the online part is (SAC from "
+             "demonstrations); 0: SAC")
 
 
 @dataclass
@@ -189,9 +193,10 @@ def check_named_method(cfg: DictConfig) -> None:
 # ---------------------------------------------------------------------------------------- data
 # ---------------------------------------------------------------------------------------- methods
 def sac_hyperparameters(section: DictConfig) -> SACHyperparameters:
-    """The SAC learner's settings of the ``sac`` section (its ``reward_scale`` aside)."""
+    """The SAC learner's settings of the ``sac`` section (its ``reward_scale`` and ``expert_fraction`` aside)."""
     values = OmegaConf.to_container(section)
     values.pop("reward_scale")
+    values.pop("expert_fraction")
     return SACHyperparameters(**values)
 
 
@@ -209,14 +214,33 @@ def true_reward_transforms(cfg: DictConfig, spec: TaskSpec, device: torch.device
 
 
 def make_sac(cfg: DictConfig, spec: TaskSpec, device: torch.device, features: nn.Module | None) -> ImitationMethod:
-    """SAC on the task's true reward (:func:`true_reward_transforms`; the paper's "SAC (true distance reward)")."""
+    """SAC on the task's true reward (:func:`true_reward_transforms`; the paper's "SAC (true distance reward)");
+    with ``sac.expert_fraction`` > 0 a share of each batch is expert transitions, rewarded by the same reward
+    (on a robotics task the demonstrations' recorded environment reward)."""
     hp = sac_hyperparameters(cfg.sac)
     actor = make_actor(spec.obs_dim, spec.action_dim, input_features=features)
     loss = make_sac_learner(actor, make_qvalue(spec.obs_dim, spec.action_dim, input_features=features), hp).to(device)
     optimizer = torch.optim.Adam([p for p in loss.parameters() if p.requires_grad], lr=hp.lr)
-    update = SACUpdate(loss, optimizer, SoftUpdate(loss, tau=hp.tau), hp.max_grad_norm)
+    target_updater = SoftUpdate(loss, tau=hp.tau)
+
+    def make_update_step(online, expert) -> SACUpdate:
+        sample = None
+        if cfg.sac.expert_fraction > 0:
+            check_recorded_reward(expert, spec, cfg.sac.expert_fraction)
+            sample = DemonstrationMixer(online, expert, cfg.sac.expert_fraction, batch_size=hp.batch_size).sample
+        return SACUpdate(loss, optimizer, target_updater, hp.max_grad_norm, sample=sample)
+
     return ImitationMethod("sac", actor, true_reward_transforms(cfg, spec, device), [],
-                           {"loss": loss, "optim_sac": optimizer}, lambda online, expert: update, hp)
+                           {"loss": loss, "optim_sac": optimizer}, make_update_step, hp)
+
+
+def check_recorded_reward(expert: TensorDictReplayBuffer, spec: TaskSpec, fraction: float) -> None:
+    """On a task trained on the environment's own reward, the demonstrations must carry it (``("next", "reward")``)."""
+    if isinstance(spec, ScenarioSpec):  # the progress reward is computed for the expert part too
+        return
+    if ("next", "reward") not in expert.storage[:1].keys(True):
+        raise ConfigError(f"sac.expert_fraction={fraction}: the demonstrations of {spec.name} hold no reward "
+                          "(\"next\", \"reward\"); record them with their environment reward, or set 0")
 
 
 def make_bc(cfg: DictConfig, spec: TaskSpec, device: torch.device, features: nn.Module | None) -> ImitationMethod:
