@@ -2,6 +2,7 @@
 ``Dict`` observation flattened, its waypoint expert, its shipped demonstrations, and CSIRL trained on it."""
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 
@@ -9,6 +10,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch
+from tensordict import TensorDict
 from test_own_task import TINY
 
 from torchrl_csirl.data import load_expert_demonstrations, record_demonstrations
@@ -102,6 +104,10 @@ def test_csirl_trains_on_point_maze_with_its_shipped_demonstrations(tmp_path):
                                   f"logger.output_dir={tmp_path}"])
     assert summary["scenario"] == UMAZE and summary["frames"] == 400 and summary["updates"] > 0
     assert summary["accomplish_rate"] == summary["success_rate"]
+    with open(f"{summary['run_dir']}/health.json") as f:  # the matching reward follows each episode's goal
+        checks = {c["name"]: c for c in json.load(f)["checks"]}
+    assert checks["demonstrations_share_a_goal"]["ok"] and "demonstration of its goal" in \
+        checks["demonstrations_share_a_goal"]["message"]
 
 
 def test_spawned_collector_workers_find_the_id(tmp_path):
@@ -147,3 +153,51 @@ def test_sac_from_demonstrations_mixes_the_experts_recorded_reward_into_each_bat
     bare.extend(without)
     with pytest.raises(imitation.ConfigError, match=r"sac.expert_fraction=0.25: the demonstrations of .* hold no reward"):
         method.make_update_step(online, bare)
+
+
+def test_the_matching_reward_follows_the_demonstration_of_each_episodes_goal():
+    """PointMaze's matching reward (``csirl.goal_conditioned`` null: on, the observation has a desired_goal): each
+    transition is rewarded as the plain matching reward on the demonstration of its goal would, toward the
+    curriculum's subgoal as the same share of that demonstration; ``false`` gives the first demonstration's."""
+    from torchrl_csirl.launch import csirl
+    from torchrl_csirl.transforms import GoalConditionedMatchingReward, SubgoalMatchingReward, subgoal_on_demonstration
+
+    args = prepare_task([f"env.gym_id={UMAZE}"])
+    cfg = csirl.CSIRL_RECIPE.load_config(args)
+    spec = TASKS[UMAZE]
+    demos = csirl.load_experts(cfg.expert, spec)
+    first = demos.trajectory_observations(0, include_final=True)
+    matching = csirl.make_matching(cfg, spec, first, 10, demos)
+    assert isinstance(matching, GoalConditionedMatchingReward) and matching.num_demonstrations == 25
+    for k in (0, 3, 7):
+        episode = demos.trajectory(k)
+        assert (matching.demonstration_of(episode["observation"]) == k).all()
+        alone = SubgoalMatchingReward(demos.trajectory_observations(k, include_final=True),
+                                      subgoal=subgoal_on_demonstration(10, first.shape[0], matching.lengths[k]),
+                                      ego_feature_indices=spec.position_feature_indices,
+                                      position_feature_indices=spec.position_feature_indices,
+                                      scale=spec.matching_scale, target=cfg.csirl.matching_target)
+        assert torch.equal(matching(episode.clone())["next", "matching_reward"],
+                           alone(episode.clone())["next", "matching_reward"])
+    off = csirl.CSIRL_RECIPE.load_config([*args, "csirl.goal_conditioned=false"])
+    assert type(csirl.make_matching(off, spec, first, 10, demos)) is SubgoalMatchingReward
+    with pytest.raises(csirl.ConfigError, match="csirl.goal_conditioned=true: merge's observation has no desired_goal"):
+        csirl.goal_features(csirl.CSIRL_RECIPE.load_config(["csirl.goal_conditioned=true"]).csirl, TASKS["merge"])
+
+
+def test_goal_conditioned_matching_reduces_to_the_plain_one_with_one_demonstration_and_checks_its_input():
+    from torchrl_csirl.transforms import GoalConditionedMatchingReward, SubgoalMatchingReward
+
+    torch.manual_seed(0)
+    path = torch.randn(12, 4, dtype=torch.float64)
+    batch = TensorDict({"observation": torch.randn(64, 4, dtype=torch.float64),
+                        "next": {"observation": torch.randn(64, 4, dtype=torch.float64)}}, [64])
+    for target in ("next", "final", "path"):
+        kwargs = dict(subgoal=5, ego_feature_indices=[0, 1], position_feature_indices=[0, 1], scale=3.0, target=target)
+        one = GoalConditionedMatchingReward([path], goal_feature_indices=[2, 3], **kwargs)
+        assert torch.equal(one(batch.clone())["next", "matching_reward"],
+                           SubgoalMatchingReward(path, **kwargs)(batch.clone())["next", "matching_reward"])
+    with pytest.raises(ValueError, match=r"demonstrations \[1\]: each must have shape \[L, 4\]"):
+        GoalConditionedMatchingReward([path, torch.zeros(3, 5)], goal_feature_indices=[2])
+    with pytest.raises(ValueError, match="goal_feature_indices .* out of range"):
+        GoalConditionedMatchingReward([path], goal_feature_indices=[9])

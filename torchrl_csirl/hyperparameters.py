@@ -100,6 +100,10 @@ class CSIRLHyperparameters:
     matching_target: str = option("final", choices=("final", "next", "path"),
                                   help="final (the paper's text) | next (published code) | path (final's targets, "
                                        "distances along the expert's path)")
+    goal_conditioned: Optional[bool] = option(
+        None, help="match each transition against the demonstration of its goal (desired_goal; "
+                   "GoalConditionedMatchingReward) instead of the first one only; null: on where the observation "
+                   "has a desired_goal entry")
     matching_features: str = option("position", choices=("ego", "position"),
                                     help="nearest expert state on: position | ego (the whole ego row: paper, code)")
     failure_resets_progress: bool = option(

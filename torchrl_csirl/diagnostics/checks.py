@@ -182,13 +182,16 @@ def where_episodes_end(final_features: torch.Tensor, path_features: torch.Tensor
                                    "demonstration (median), near its path", figures)
 
 
-def demonstrations_share_a_goal(final_features: torch.Tensor, path_features: torch.Tensor) -> HealthCheck:
+def demonstrations_share_a_goal(final_features: torch.Tensor, path_features: torch.Tensor,
+                                goal_conditioned: bool = False) -> HealthCheck:
     """Whether the demonstrations end where the curriculum trajectory ends: CSIRL's matching reward leads every
-    episode along that one trajectory, so a task whose goal changes per episode cannot be matched.
+    episode along that one trajectory, so a task whose goal changes per episode cannot be matched (unless the
+    matching reward is goal-conditioned: each transition against the demonstration of its goal).
 
     Args:
         final_features: ``[N, F]`` the matching features of each demonstration's last state.
         path_features: ``[L, F]`` the curriculum trajectory's matching features (its last row: its end).
+        goal_conditioned: the matching reward follows the demonstration of each episode's goal.
     """
     name = "demonstrations_share_a_goal"
     if final_features.shape[0] < 2 or path_features.shape[0] < 2:
@@ -197,6 +200,9 @@ def demonstrations_share_a_goal(final_features: torch.Tensor, path_features: tor
     distance = (final_features.float() - path_features[-1].float()).norm(dim=-1) / extent
     near = float((distance < 0.1).float().mean())
     figures = {"near_share": near, "end_distance_over_path_length": distance.tolist()}
+    if goal_conditioned:
+        return HealthCheck(name, True, (f"{near:.0%} of the demonstrations end near the curriculum trajectory's end; "
+                                        "each transition is matched against the demonstration of its goal"), figures)
     if near < 0.5:
         return HealthCheck(name, False, (
             f"only {near:.0%} of the demonstrations end near the curriculum trajectory's end (within a tenth of its "

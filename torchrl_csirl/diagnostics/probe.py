@@ -35,6 +35,8 @@ class LearnerProbe:
         demo_final_features: ``[N, F]`` the matching features of each demonstration's last state.
         path_features: ``[L, F]`` the curriculum trajectory's matching features.
         actions: ``[T, A]`` the policy's actions.
+        goal_conditioned: the matching reward follows the demonstration of each episode's goal
+            (:class:`~torchrl_csirl.transforms.GoalConditionedMatchingReward`), not the first one only.
     """
 
     policy_values: torch.Tensor
@@ -48,6 +50,7 @@ class LearnerProbe:
     demo_final_features: torch.Tensor
     path_features: torch.Tensor
     actions: torch.Tensor
+    goal_conditioned: bool = False
 
 
 def discounted_returns(rewards: torch.Tensor, gamma: float) -> torch.Tensor:
@@ -150,4 +153,4 @@ def probe_learner(*, env: EnvBase, policy, loss, transforms, matching, demos, ga
         policy_rewards=torch.cat(policy_rewards), expert_rewards=torch.cat(expert_rewards),
         matching_to_subgoal=to_subgoal, final_features=torch.stack(finals).float(), demo_final_features=demo_finals.cpu(),
         path_features=matching.expert_observations.index_select(-1, matching.position_feature_indices).float().cpu(),
-        actions=torch.cat(actions).float())
+        actions=torch.cat(actions).float(), goal_conditioned=hasattr(matching, "demonstration_of"))

@@ -56,7 +56,7 @@ from torchrl_csirl.launch.run import ExpertDataError, resolve_device
 from torchrl_csirl.modules import LearnerPrecision, PrecisionUnsupported, expert_reference_states
 from torchrl_csirl.objectives import ActorBehaviourCloning, CSIRLLearner, make_csirl_learner
 from torchrl_csirl.trainers import MetaRewardUpdate, SACUpdate, SubgoalSelectionHook
-from torchrl_csirl.transforms import CombineRewards, IntrinsicReward, SubgoalMatchingReward
+from torchrl_csirl.transforms import CombineRewards, GoalConditionedMatchingReward, IntrinsicReward, SubgoalMatchingReward
 
 __all__ = ["CSIRL_RECIPE", "ConfigError", "CSIRLConfig", "CSIRLHighwayConfig", "CSIRLParts", "CSIRLRoboticsConfig", "CSIRLTaskConfig",
            "ExpertDataError", "finish", "load_config", "load_run_config", "make_trainer"]
@@ -170,10 +170,11 @@ def matching_feature_indices(cfg: DictConfig, spec: ScenarioSpec) -> tuple[int, 
     return spec.ego_feature_indices if cfg.csirl.matching_features == "ego" else spec.position_feature_indices
 
 
-def make_matching(cfg: DictConfig, spec: ScenarioSpec, curriculum_obs: torch.Tensor, subgoal: Any) -> SubgoalMatchingReward:
-    """The matching reward toward ``subgoal`` (an index, or the curriculum that owns it) of the curriculum trajectory."""
-    return SubgoalMatchingReward(
-        curriculum_obs,
+def make_matching(cfg: DictConfig, spec: ScenarioSpec, curriculum_obs: torch.Tensor, subgoal: Any,
+                  demos: ExpertDemonstrations | None = None) -> SubgoalMatchingReward:
+    """The matching reward toward ``subgoal`` (an index, or the curriculum that owns it) of the curriculum trajectory;
+    on a goal-conditioned task (:func:`goal_features`) each transition against the demonstration of its goal."""
+    kwargs = dict(
         subgoal=subgoal,
         ego_feature_indices=matching_feature_indices(cfg, spec),
         position_feature_indices=spec.position_feature_indices,
@@ -181,6 +182,29 @@ def make_matching(cfg: DictConfig, spec: ScenarioSpec, curriculum_obs: torch.Ten
         target=cfg.csirl.matching_target,
         failure_keys=FAILURE_KEYS if cfg.csirl.failure_resets_progress else (),
     )
+    goal = goal_features(cfg.csirl, spec)
+    if goal is None or demos is None:
+        return SubgoalMatchingReward(curriculum_obs, **kwargs)
+    demonstrations = [curriculum_obs, *(demos.trajectory_observations(k, include_final=True).to(curriculum_obs.device)
+                                        for k in range(1, demos.num_trajectories))]
+    return GoalConditionedMatchingReward(demonstrations, goal_feature_indices=goal, **kwargs)
+
+
+def goal_features(csirl: DictConfig, spec: ScenarioSpec) -> tuple[int, ...] | None:
+    """The observation entries of the episode's goal when the matching reward is goal-conditioned
+    (``csirl.goal_conditioned``; null: where the task's observation has a ``desired_goal``), else None.
+
+    Raises:
+        ConfigError: ``csirl.goal_conditioned=true`` on a task without a ``desired_goal`` entry.
+    """
+    layout = getattr(spec, "observation_layout", None) or {}
+    if csirl.goal_conditioned is False or (csirl.goal_conditioned is None and "desired_goal" not in layout):
+        return None
+    if "desired_goal" not in layout:
+        raise ConfigError(f"csirl.goal_conditioned=true: {spec.name}'s observation has no desired_goal entry "
+                          "(a goal-conditioned task's Dict observation has one)")
+    start, stop = layout["desired_goal"]
+    return tuple(range(start, stop))
 
 
 def make_reward_transforms(cfg: DictConfig, matching: SubgoalMatchingReward, modules: CSIRLLearner) -> list:
@@ -239,7 +263,7 @@ def make_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume_fra
     curriculum = SubgoalCurriculum(curriculum_obs, modules.sac, modules.actor, delta=cfg.csirl.delta,
                                    sigma=cfg.csirl.sigma, dispersion=cfg.csirl.dispersion, seed=cfg.seed,
                                    initial_subgoal=first_subgoal(cfg.csirl, curriculum_obs.shape[0]))
-    matching = make_matching(cfg, spec, curriculum_obs, curriculum)
+    matching = make_matching(cfg, spec, curriculum_obs, curriculum, demos)
     online = make_online_buffer(cfg.replay_buffer.size, cfg.replay_buffer.batch_size,
                                 make_reward_transforms(cfg, matching, modules), device)
     expert = demos.as_replay_buffer(batch_size=cfg.expert.batch_size, device=device)

@@ -39,6 +39,11 @@ from torchrl_csirl.transforms.absorbing_states import AbsorbingStates, absorbing
 from torchrl_csirl.transforms.combine_rewards import CombineRewards
 from torchrl_csirl.transforms.constant_reward import ConstantReward
 from torchrl_csirl.transforms.discriminator_reward import DiscriminatorReward, discriminator_reward
+from torchrl_csirl.transforms.goal_matching import (
+    GoalConditionedMatchingReward,
+    nearest_goal_demonstration,
+    subgoal_on_demonstration,
+)
 from torchrl_csirl.transforms.intrinsic_reward import IntrinsicReward
 from torchrl_csirl.transforms.progress_reward import ProgressReward, progress_reward
 from torchrl_csirl.transforms.subgoal_matching import (
@@ -57,6 +62,7 @@ __all__ = [
     "CombineRewards",
     "ConstantReward",
     "DiscriminatorReward",
+    "GoalConditionedMatchingReward",
     "IntrinsicReward",
     "ProgressReward",
     "SubgoalMatchingReward",
@@ -68,7 +74,9 @@ __all__ = [
     "matching_reward",
     "matching_target_index",
     "nearest_expert_index",
+    "nearest_goal_demonstration",
     "path_potential",
     "progress_reward",
     "project_on_path",
+    "subgoal_on_demonstration",
 ]

@@ -512,15 +512,7 @@ class SubgoalMatchingReward(TransitionRewardTransform):
     def _transition_reward(
         self, tensordict: TensorDictBase, next_tensordict: TensorDictBase
     ) -> torch.Tensor:
-        key = self.in_keys[0]
-        obs = tensordict.get(key)
-        next_obs = next_tensordict.get(key)
-        batch_shape = obs.shape[:-1]
-        obs = obs.reshape(-1, obs.shape[-1])
-        next_obs = next_obs.reshape(-1, next_obs.shape[-1])
-        dtype = self.expert_observations.dtype
-        if obs.dtype != dtype:
-            obs, next_obs = obs.to(dtype), next_obs.to(dtype)
+        obs, next_obs, batch_shape = self._flat_observations(tensordict, next_tensordict)
         reward = _matching_reward_from_features(
             obs.index_select(-1, self._ego_idx),
             obs.index_select(-1, self._pos_idx),
@@ -534,6 +526,20 @@ class SubgoalMatchingReward(TransitionRewardTransform):
             self._failed(next_tensordict, obs.shape[0]),
         )
         return reward.reshape(batch_shape).to(torch.float32)
+
+    def _flat_observations(self, tensordict: TensorDictBase, next_tensordict: TensorDictBase
+                           ) -> tuple[torch.Tensor, torch.Tensor, torch.Size]:
+        """``(s [B, D], s' [B, D], the batch shape)``, in the expert states' dtype."""
+        key = self.in_keys[0]
+        obs = tensordict.get(key)
+        next_obs = next_tensordict.get(key)
+        batch_shape = obs.shape[:-1]
+        obs = obs.reshape(-1, obs.shape[-1])
+        next_obs = next_obs.reshape(-1, next_obs.shape[-1])
+        dtype = self.expert_observations.dtype
+        if obs.dtype != dtype:
+            obs, next_obs = obs.to(dtype), next_obs.to(dtype)
+        return obs, next_obs, batch_shape
 
     def _failed(self, next_tensordict: TensorDictBase, numel: int) -> torch.Tensor | None:
         """``[B]`` bool: the transitions flagged by any of ``failure_keys`` (None without keys or flags)."""

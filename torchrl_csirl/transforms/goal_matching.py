@@ -1,0 +1,163 @@
+"""The matching reward of a goal-conditioned task: each transition matched against the demonstration of its goal.
+
+CSIRL (paper and published code) follows one curriculum trajectory: every episode is shaped toward that
+demonstration's states and goal. A goal-conditioned task (PointMaze: a new goal cell every episode, read from the
+observation's ``desired_goal``) then pays the policy for going to the first demonstration's goal whatever the
+episode's own (docs/studies/outside-driving.md measures it). This extension of ours keeps the curriculum on the
+first demonstration and matches each transition against the demonstration whose goal is nearest the transition's:
+
+1. :func:`nearest_goal_demonstration`: ``k = argmin_k || goal(s) - goal(tau_k) ||`` on the goal features;
+2. :func:`subgoal_on_demonstration`: the curriculum's subgoal ``g`` on the first demonstration (length ``L_0``) as
+   the same fraction of demonstration ``k``: ``g_k = round(g (L_k - 1) / (L_0 - 1))``;
+3. the matching reward of :mod:`~torchrl_csirl.transforms.subgoal_matching` on ``tau_k`` toward ``g_k``.
+
+With demonstrations that share one goal the first one is not always chosen (their goals differ by the task's
+noise), which is as good: each is a path to that goal.
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import torch
+from tensordict import TensorDictBase
+
+from torchrl_csirl._validation import SubgoalSource
+from torchrl_csirl.transforms.subgoal_matching import (
+    SubgoalMatchingReward,
+    _check_indices,
+    _matching_reward_from_features,
+    distinct_expert_states,
+)
+
+__all__ = ["GoalConditionedMatchingReward", "nearest_goal_demonstration", "subgoal_on_demonstration"]
+
+
+def nearest_goal_demonstration(goals: torch.Tensor, demonstration_goals: torch.Tensor) -> torch.Tensor:
+    """Index of the demonstration whose goal is nearest each goal (Euclidean; ties to the first).
+
+    Args:
+        goals (torch.Tensor): ``[B, G]`` the transitions' goals.
+        demonstration_goals (torch.Tensor): ``[K, G]`` each demonstration's goal.
+
+    Returns:
+        torch.Tensor: ``[B]`` int64 indices in ``[0, K-1]``.
+
+    Examples:
+        >>> import torch
+        >>> nearest_goal_demonstration(torch.tensor([[0.9, 0.0], [0.0, 0.2]]), torch.tensor([[0.0, 0.0], [1.0, 0.0]]))
+        tensor([1, 0])
+    """
+    return torch.cdist(goals, demonstration_goals.to(goals.dtype)).argmin(dim=-1)
+
+
+def subgoal_on_demonstration(subgoal: int, curriculum_length: int, length: int) -> int:
+    """The curriculum's subgoal (on a trajectory of ``curriculum_length`` states) as the same share of a
+    demonstration of ``length`` states.
+
+    Examples:
+        >>> subgoal_on_demonstration(50, 101, 41), subgoal_on_demonstration(100, 101, 41), subgoal_on_demonstration(3, 1, 9)
+        (20, 40, 8)
+    """
+    if curriculum_length <= 1:
+        return length - 1
+    return min(length - 1, round(subgoal * (length - 1) / (curriculum_length - 1)))
+
+
+class GoalConditionedMatchingReward(SubgoalMatchingReward):
+    """:class:`SubgoalMatchingReward` over several demonstrations, each transition matched against the
+    demonstration of its goal (:func:`nearest_goal_demonstration`), toward the curriculum's subgoal as a share of
+    that demonstration (:func:`subgoal_on_demonstration`).
+
+    The first demonstration is the curriculum trajectory: :attr:`subgoal`, :attr:`length` and
+    :attr:`expert_observations` are its, as in :class:`SubgoalMatchingReward`, so a
+    :class:`~torchrl_csirl.curriculum.SubgoalCurriculum` drives this transform as it drives that one.
+
+    Args:
+        demonstrations: ``[L_k, D]`` observation tensors, the curriculum trajectory first.
+
+    Keyword Args:
+        goal_feature_indices (sequence of int): the observation entries of the episode's goal (a
+            goal-conditioned task's ``desired_goal``); constant along an episode.
+        **kwargs: as :class:`SubgoalMatchingReward` (``subgoal``, ``ego_feature_indices``,
+            ``position_feature_indices``, ``scale``, ``target``, ``sign``, ``in_key``, ``out_key``,
+            ``failure_keys``).
+
+    Examples:
+        >>> import torch
+        >>> from tensordict import TensorDict
+        >>> # [x, goal]: two demonstrations from 0, one to the goal +2, one to the goal -2
+        >>> right = torch.tensor([[0.0, 2.0], [1.0, 2.0], [2.0, 2.0]])
+        >>> left = torch.tensor([[0.0, -2.0], [-1.0, -2.0], [-2.0, -2.0]])
+        >>> t = GoalConditionedMatchingReward([right, left], goal_feature_indices=[1], subgoal=2,
+        ...                                   ego_feature_indices=[0], position_feature_indices=[0])
+        >>> td = TensorDict({"observation": torch.tensor([[0.0, 2.0], [0.0, -2.0]]),
+        ...                  "next": {"observation": torch.tensor([[-0.5, 2.0], [-0.5, -2.0]])}}, [2])
+        >>> t(td)["next", "matching_reward"].squeeze(-1)  # moving left: away from +2, toward -2
+        tensor([-0.5000,  0.5000])
+    """
+
+    def __init__(self, demonstrations: Sequence[torch.Tensor], *, goal_feature_indices: Sequence[int],
+                 subgoal: int | SubgoalSource = 0, **kwargs: Any) -> None:
+        demonstrations = [torch.as_tensor(d) for d in demonstrations]
+        if not demonstrations:
+            raise ValueError("demonstrations: at least one [L, D] tensor is needed.")
+        super().__init__(demonstrations[0], subgoal=subgoal, **kwargs)
+        dim = self.expert_observations.shape[-1]
+        bad = [k for k, d in enumerate(demonstrations) if d.ndim != 2 or d.shape[0] < 1 or d.shape[-1] != dim]
+        if bad:
+            raise ValueError(f"demonstrations {bad}: each must have shape [L, {dim}] with L >= 1 (the first's width), "
+                             f"got {[tuple(demonstrations[k].shape) for k in bad]}.")
+        if not all(torch.isfinite(d).all() for d in demonstrations):
+            raise ValueError("demonstrations contain NaN or infinite values.")
+        goal = _check_indices(goal_feature_indices, dim, "goal_feature_indices")
+        if goal is None:
+            raise ValueError("goal_feature_indices: the observation entries of the goal are required.")
+        device, dtype = self.expert_observations.device, self.expert_observations.dtype
+        goal = goal.to(device)
+        self.register_buffer("_goal_idx", goal)
+        states = [d.detach().to(device=device, dtype=dtype) for d in demonstrations]
+        self.register_buffer("_demonstration_goals", torch.stack([d[0].index_select(-1, goal) for d in states]))
+        self.lengths = tuple(int(d.shape[0]) for d in states)
+        for k, d in enumerate(states):
+            rows, row_index = distinct_expert_states(d.index_select(-1, self._ego_idx))
+            self.register_buffer(f"_demo{k}_rows", rows)
+            self.register_buffer(f"_demo{k}_row_index", row_index)
+            self.register_buffer(f"_demo{k}_pos", d.index_select(-1, self._pos_idx))
+
+    @property
+    def num_demonstrations(self) -> int:
+        """int: the demonstrations matched against (the curriculum trajectory included)."""
+        return len(self.lengths)
+
+    def demonstration_of(self, observation: torch.Tensor) -> torch.Tensor:
+        """``[*B]`` the demonstration each observation's goal selects."""
+        goals = observation.reshape(-1, observation.shape[-1]).to(self._demonstration_goals.dtype)
+        chosen = nearest_goal_demonstration(goals.index_select(-1, self._goal_idx), self._demonstration_goals)
+        return chosen.reshape(observation.shape[:-1])
+
+    def _transition_reward(self, tensordict: TensorDictBase, next_tensordict: TensorDictBase) -> torch.Tensor:
+        obs, next_obs, batch_shape = self._flat_observations(tensordict, next_tensordict)
+        failed = self._failed(next_tensordict, obs.shape[0])
+        chosen = self.demonstration_of(obs)
+        reward = obs.new_zeros(obs.shape[0])
+        subgoal = self.subgoal
+        for k in chosen.unique().tolist():
+            rows = (chosen == k).nonzero().squeeze(-1)
+            part = obs.index_select(0, rows)
+            reward[rows] = _matching_reward_from_features(
+                part.index_select(-1, self._ego_idx),
+                part.index_select(-1, self._pos_idx),
+                next_obs.index_select(0, rows).index_select(-1, self._pos_idx),
+                getattr(self, f"_demo{k}_rows"),
+                getattr(self, f"_demo{k}_row_index"),
+                getattr(self, f"_demo{k}_pos"),
+                subgoal_on_demonstration(subgoal, self.length, self.lengths[k]),
+                self.target,
+                self.sign * self.scale,
+                None if failed is None else failed.index_select(0, rows),
+            )
+        return reward.reshape(batch_shape).to(torch.float32)
+
+    def __repr__(self) -> str:
+        return super().__repr__()[:-1] + f", demonstrations={self.num_demonstrations})"
