@@ -94,6 +94,12 @@ def test_each_check_flags_its_own_failure_and_passes_a_healthy_figure():
     assert where_episodes_end(torch.tensor([[10.0, 0.0], [9.5, 0.1]]), path).ok is True
     short = where_episodes_end(torch.tensor([[1.0, 0.0]]), path)
     assert short.ok is False and short.figures["progress_median"] == pytest.approx(0.1)
+    # a goal-conditioned matching reward: each episode against the demonstration of its goal (here, leftward)
+    left = -path
+    ends = torch.tensor([[10.0, 0.0], [-10.0, 0.0]])
+    assert where_episodes_end(ends, path).ok is False  # the second episode is 20 away from the first path's end
+    own = where_episodes_end(ends, path, [path, left])
+    assert own.ok is True and own.figures["progress"] == [1.0, 1.0] and "of its goal" in own.message
     assert subgoal_progress([5, 5, 5, 5], 40).ok is False and subgoal_progress([5, 9, 20], 40).ok is True
     assert policy_entropy([{"entropy": -9.0, "alpha": 1e-4}], action_dim=2).ok is False
     assert action_saturation(torch.ones(10, 2)).ok is False and action_saturation(torch.zeros(10, 2)).ok is True

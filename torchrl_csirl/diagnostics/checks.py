@@ -153,33 +153,41 @@ def critic_calibration(values: torch.Tensor, returns: torch.Tensor, where: str) 
                        figures)
 
 
-def where_episodes_end(final_features: torch.Tensor, path_features: torch.Tensor) -> HealthCheck:
+def where_episodes_end(final_features: torch.Tensor, path_features: torch.Tensor,
+                       episode_paths: Sequence[torch.Tensor] = ()) -> HealthCheck:
     """Where the policy's episodes end compared with the demonstrations' path (the matching features).
 
     Args:
         final_features: ``[E, F]`` the matching features of each episode's last state.
         path_features: ``[L, F]`` the curriculum trajectory's matching features.
+        episode_paths: ``[L_e, F]`` per episode, the path to compare it with (the demonstration of its goal, with a
+            goal-conditioned matching reward); empty: ``path_features`` for every episode.
     """
     name = "where_episodes_end"
-    if final_features.numel() == 0 or path_features.shape[0] < 2:
+    paths = list(episode_paths) if episode_paths else [path_features] * final_features.shape[0]
+    if final_features.numel() == 0 or min(p.shape[0] for p in paths) < 2:
         return HealthCheck(name, None, "no episode or no path to compare")
-    distances = torch.cdist(final_features.float(), path_features.float())
-    nearest, index = distances.min(-1)
-    steps = (path_features[1:] - path_features[:-1]).norm(dim=-1)
-    extent = max(float(steps.sum()), 1e-8)
-    progress = index.float() / (path_features.shape[0] - 1)
-    figures = {"progress_median": float(progress.median()), "progress": progress.tolist(),
-               "distance_to_path_median": float(nearest.median()), "path_length": extent,
-               "distance_over_path_length": float(nearest.median()) / extent}
+    nearest, progress, extents = [], [], []
+    for final, path in zip(final_features.float(), paths):
+        distance, index = torch.cdist(final[None], path.float())[0].min(-1)
+        nearest.append(float(distance))
+        progress.append(float(index) / (path.shape[0] - 1))
+        extents.append(max(float((path[1:] - path[:-1]).norm(dim=-1).sum()), 1e-8))
+    nearest_t, progress_t = torch.tensor(nearest), torch.tensor(progress)
+    extent = float(torch.tensor(extents).median())
+    figures = {"progress_median": float(progress_t.median()), "progress": progress,
+               "distance_to_path_median": float(nearest_t.median()), "path_length": extent,
+               "distance_over_path_length": float(nearest_t.median()) / extent}
+    which = "the demonstration of its goal" if episode_paths else "the demonstration"
     off_path = figures["distance_over_path_length"] > 0.2
     if off_path or figures["progress_median"] < 0.5:
         where = (f"{figures['distance_over_path_length']:.0%} of the path's length away from it" if off_path
                  else "on the path")
         return HealthCheck(name, False, (
-            f"the policy's episodes end {where}, {figures['progress_median']:.0%} of the way along the demonstration "
+            f"the policy's episodes end {where}, {figures['progress_median']:.0%} of the way along {which} "
             "(median): it stops short of the goal or leaves the path"), figures)
-    return HealthCheck(name, True, f"the policy's episodes end {figures['progress_median']:.0%} of the way along the "
-                                   "demonstration (median), near its path", figures)
+    return HealthCheck(name, True, f"the policy's episodes end {figures['progress_median']:.0%} of the way along "
+                                   f"{which} (median), near its path", figures)
 
 
 def demonstrations_share_a_goal(final_features: torch.Tensor, path_features: torch.Tensor,

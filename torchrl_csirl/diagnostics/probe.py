@@ -34,6 +34,8 @@ class LearnerProbe:
         final_features: ``[E, F]`` the matching features of each episode's last state.
         demo_final_features: ``[N, F]`` the matching features of each demonstration's last state.
         path_features: ``[L, F]`` the curriculum trajectory's matching features.
+        episode_paths: ``[L_e, F]`` per episode, the matching features of the demonstration its goal selects
+            (a goal-conditioned matching reward), else empty.
         actions: ``[T, A]`` the policy's actions.
         goal_conditioned: the matching reward follows the demonstration of each episode's goal
             (:class:`~torchrl_csirl.transforms.GoalConditionedMatchingReward`), not the first one only.
@@ -51,6 +53,7 @@ class LearnerProbe:
     path_features: torch.Tensor
     actions: torch.Tensor
     goal_conditioned: bool = False
+    episode_paths: tuple[torch.Tensor, ...] = ()
 
 
 def discounted_returns(rewards: torch.Tensor, gamma: float) -> torch.Tensor:
@@ -122,7 +125,7 @@ def probe_learner(*, env: EnvBase, policy, loss, transforms, matching, demos, ga
         demonstrations: demonstrations scored (the first ones).
         device: the learner's device.
     """
-    policy_values, policy_returns, policy_rewards, finals, actions = [], [], [], [], []
+    policy_values, policy_returns, policy_rewards, finals, actions, paths = [], [], [], [], [], []
     position = matching.position_feature_indices.cpu()
     with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
         for i in range(episodes):
@@ -134,6 +137,9 @@ def probe_learner(*, env: EnvBase, policy, loss, transforms, matching, demos, ga
             policy_rewards.append(rewards)
             finals.append(episode["next", "observation"][-1].index_select(-1, position))
             actions.append(episode["action"].reshape(episode.shape[0], -1))
+            if hasattr(matching, "demonstration_of"):  # goal-conditioned: the path of the episode's goal
+                chosen = int(matching.demonstration_of(episode["observation"][:1].to(device)).reshape(-1)[0])
+                paths.append(matching.demonstration_positions(chosen).float().cpu())
     expert_values, expert_returns, expert_rewards = [], [], []
     for i in range(min(demonstrations, demos.num_trajectories)):
         values, returns, rewards = _episode_figures(demos.trajectory(i).to(device), transforms, loss, gamma)
@@ -153,4 +159,4 @@ def probe_learner(*, env: EnvBase, policy, loss, transforms, matching, demos, ga
         policy_rewards=torch.cat(policy_rewards), expert_rewards=torch.cat(expert_rewards),
         matching_to_subgoal=to_subgoal, final_features=torch.stack(finals).float(), demo_final_features=demo_finals.cpu(),
         path_features=matching.expert_observations.index_select(-1, matching.position_feature_indices).float().cpu(),
-        actions=torch.cat(actions).float(), goal_conditioned=hasattr(matching, "demonstration_of"))
+        actions=torch.cat(actions).float(), goal_conditioned=hasattr(matching, "demonstration_of"), episode_paths=tuple(paths))

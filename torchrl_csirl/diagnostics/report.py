@@ -112,7 +112,7 @@ def _probe_checks(probe: LearnerProbe, expert_fraction: float) -> list[HealthChe
         critic_calibration(probe.policy_values, probe.policy_returns, "policy"),
         matching_along_demonstrations(probe.matching_to_subgoal),
         expert_transitions_reward(probe.expert_rewards, probe.policy_rewards, expert_fraction),
-        where_episodes_end(probe.final_features, probe.path_features),
+        where_episodes_end(probe.final_features, probe.path_features, probe.episode_paths),
         demonstrations_share_a_goal(probe.demo_final_features, probe.path_features, probe.goal_conditioned),
         action_saturation(probe.actions),
     ]

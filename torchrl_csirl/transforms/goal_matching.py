@@ -136,6 +136,10 @@ class GoalConditionedMatchingReward(SubgoalMatchingReward):
         chosen = nearest_goal_demonstration(goals.index_select(-1, self._goal_idx), self._demonstration_goals)
         return chosen.reshape(observation.shape[:-1])
 
+    def demonstration_positions(self, index: int) -> torch.Tensor:
+        """``[L_k, P]`` demonstration ``index``'s matching (position) features."""
+        return getattr(self, f"_demo{index}_pos")
+
     def _transition_reward(self, tensordict: TensorDictBase, next_tensordict: TensorDictBase) -> torch.Tensor:
         obs, next_obs, batch_shape = self._flat_observations(tensordict, next_tensordict)
         failed = self._failed(next_tensordict, obs.shape[0])
@@ -151,7 +155,7 @@ class GoalConditionedMatchingReward(SubgoalMatchingReward):
                 next_obs.index_select(0, rows).index_select(-1, self._pos_idx),
                 getattr(self, f"_demo{k}_rows"),
                 getattr(self, f"_demo{k}_row_index"),
-                getattr(self, f"_demo{k}_pos"),
+                self.demonstration_positions(k),
                 subgoal_on_demonstration(subgoal, self.length, self.lengths[k]),
                 self.target,
                 self.sign * self.scale,
