@@ -48,3 +48,18 @@ def test_compare_runs_sets_two_seed_sets_side_by_side_with_welchs_test(capsys):
     assert row["first"]["mean"] == pytest.approx(sum(values[0]) / 3)
     assert row["test"]["t"] == pytest.approx(welch_test(values[1], values[0])["t"])
     assert "| merge" in table.splitlines()[-1] and json.loads(last.splitlines()[-1])["labels"] == ["csirl", "csirl-b"]
+
+
+def test_compare_runs_across_scenarios_sets_a_task_against_its_variant():
+    """``--across-scenarios``: the merge runs against the roundabout ones as two groups (a task against its variant)."""
+    import compare_runs
+
+    runs = os.path.join(ROOT, "docs", "runs", "csirl")
+    first = [os.path.join(runs, f"merge-csirl-s{s}") for s in range(3)]
+    second = [os.path.join(runs, f"roundabout-csirl-s{s}") for s in range(3)]
+    assert compare_runs.compare([], [], by_scenario=False) == []
+    per_task = compare_runs.main([*first, "--against", *second, "--metrics", "success_rate", "--across-scenarios"])
+    (row,) = per_task["rows"]
+    assert row["scenario"] == "merge / roundabout" and row["n"] == [3, 3]
+    with pytest.raises(SystemExit):  # without it the two sides share no scenario
+        compare_runs.main([*first, "--against", *second, "--metrics", "success_rate"])

@@ -40,9 +40,18 @@ def _methods(summaries: list[dict]) -> str:
     return "+".join(sorted({s["method"] for s in summaries}))
 
 
-def compare(first: list[dict], second: list[dict], metrics: tuple[str, ...] = METRICS) -> list[dict]:
-    """One row per (scenario, metric) both sides have: each side's methods, mean and std; Welch's test of second - first."""
-    a, b = _grouped(first), _grouped(second)
+def compare(first: list[dict], second: list[dict], metrics: tuple[str, ...] = METRICS,
+            by_scenario: bool = True) -> list[dict]:
+    """One row per (scenario, metric) both sides have: each side's methods, mean and std; Welch's test of second - first.
+
+    With ``by_scenario=False`` each side is one group whatever its tasks (a task against its variant, e.g. a maze
+    with a random goal against the same maze with a fixed one), named ``<first's tasks> / <second's tasks>``.
+    """
+    if by_scenario:
+        a, b = _grouped(first), _grouped(second)
+    else:
+        key = " / ".join("+".join(sorted({s["scenario"] for s in side})) for side in (first, second))
+        a, b = {key: first}, {key: second}
     rows = []
     for key in sorted(set(a) & set(b)):
         for metric in metrics:
@@ -86,8 +95,10 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--against", nargs="+", required=True, help="run directories (or folders): the second side")
     parser.add_argument("--labels", nargs=2, default=("first", "second"), help="the two columns' names")
     parser.add_argument("--metrics", nargs="+", default=list(METRICS), help="summary.json fields to compare")
+    parser.add_argument("--across-scenarios", action="store_true",
+                        help="each side as one group whatever its tasks (a task against its variant)")
     args = parser.parse_args(argv)
-    rows = compare(_load(args.runs), _load(args.against), tuple(args.metrics))
+    rows = compare(_load(args.runs), _load(args.against), tuple(args.metrics), by_scenario=not args.across_scenarios)
     if not rows:
         parser.error("the two sides share no scenario with the metrics asked for")
     print(markdown(rows, tuple(args.labels)), file=sys.stderr)
