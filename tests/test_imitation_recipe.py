@@ -287,3 +287,19 @@ def test_curve_figures_say_which_episodes_their_points_played(tmp_path):
     assert benchmark.evaluation_schedule([validation]) == "30 validation episodes per point"
     assert benchmark.evaluation_schedule([old]) == "10 test episodes per point"
     assert "differing" in benchmark.evaluation_schedule([validation, old])
+
+
+def test_benchmark_runs_a_baseline_variant_as_its_base_method_with_its_switch_and_a_row_of_its_own(tmp_path):
+    """``sac-exp``: SAC with a quarter of each batch expert transitions (issue 87's maze table), run by the
+    baselines' recipe as ``method=sac`` with ``sac.expert_fraction=0.25``, its summary saying ``sac``."""
+    (cell,), _ = benchmark.plan_cells(["sac-exp"], ["merge"], [0], str(tmp_path), ["sac-exp:sac.lr=0.001"])
+    assert cell.command[1:3] == ("-m", "torchrl_csirl.scripts.imitation_highway") and cell.name == "merge-sac-exp-s0"
+    args = list(cell.command)
+    assert args[3] == "method=sac" and args.index("sac.expert_fraction=0.25") > args.index("sac.lr=0.001")
+    for method in ("sac", "sac-exp"):
+        run_dir = tmp_path / f"merge-{method}-s0"
+        run_dir.mkdir()
+        (run_dir / "summary.json").write_text(json.dumps({
+            "scenario": "merge", "method": "sac", "seed": 0, "normalized_accomplish_rate": 0.5,
+            "accomplish_rate": 0.5, "success_rate": 0.5, "crash_rate": 0.1, "total_wall_s": 600.0}))
+    assert sorted(r["method"] for r in benchmark.read_runs([str(tmp_path)])) == ["sac", "sac-exp"]

@@ -20,7 +20,7 @@ from torchrl_csirl.benchmark.published import PAPER_TABLE
 from torchrl_csirl.envs import LOCOMOTION_TASKS, TASKS, import_task_module, resolve_scenario, task_names
 from torchrl_csirl.launch.imitation import METHODS, REFERENCE_METHODS
 
-__all__ = ["ABLATIONS", "CSIRL_METHODS", "CSIRL_RECIPE", "CSIRL_ROBOTICS_RECIPE", "IMITATION_RECIPE",
+__all__ = ["ABLATIONS", "BASELINE_VARIANTS", "CSIRL_METHODS", "CSIRL_RECIPE", "CSIRL_ROBOTICS_RECIPE", "IMITATION_RECIPE",
            "IMITATION_ROBOTICS_RECIPE", "LOCOMOTION_ORDER", "LOCOMOTION_TITLES", "METHOD_ORDER", "PAPER_ROBOTICS_METHODS",
            "RECIPES", "REFERENCE_METHODS", "ROBOTICS_ORDER", "SCENARIO_ORDER", "SEED_FREE_METHODS", "TABLE_BUDGETS",
            "TASK_OVERRIDES", "BenchmarkError", "Cell", "has_checkpoint", "import_override_modules", "is_gymnasium_id", "is_robotics",
@@ -46,8 +46,14 @@ CSIRL_METHODS: dict[str, tuple[str, ...]] = {
     # (docs/studies/index.md "Relocate and AntMaze: behavioural cloning against CSIRL")
     "csirl-bc": ("csirl.actor_bc_coef=10",),
 }
+#: baselines with one setting changed, each a row of its own: ``name -> (the baselines' method, its switches)``
+BASELINE_VARIANTS: dict[str, tuple[str, tuple[str, ...]]] = {
+    # SAC from demonstrations: a quarter of each batch the expert's transitions with their recorded reward; against
+    # SAC it measures what the expert transitions alone give, against CSIRL-B what the matching reward adds
+    "sac-exp": ("sac", ("sac.expert_fraction=0.25",)),
+}
 #: the ablation and variant rows (not in the paper's table, so not in a default sweep): after csirl in a report
-ABLATIONS = ("csirl-nocur", "csirl-noexp", "csirl-bc")
+ABLATIONS = ("csirl-nocur", "csirl-noexp", "csirl-bc", *BASELINE_VARIANTS)
 #: methods whose run does not depend on the seed (the expert driver is deterministic): first seed only
 SEED_FREE_METHODS = ("expert",)
 #: the table's columns: the task registry's driving scenes (:func:`~torchrl_csirl.envs.task_names`), in the
@@ -154,8 +160,8 @@ def score_key(scenario: str) -> str:
 
 
 def known_methods() -> tuple[str, ...]:
-    """Every method a cell can run: CSIRL's and those ``imitation_highway.py`` accepts."""
-    return (*CSIRL_METHODS, *METHODS)
+    """Every method a cell can run: CSIRL's, those ``imitation_highway.py`` accepts and their variants."""
+    return (*CSIRL_METHODS, *METHODS, *BASELINE_VARIANTS)
 
 
 @dataclass(frozen=True)
@@ -226,10 +232,13 @@ def make_cell(method: str, scenario: str, seed: int, output_dir: str, overrides:
     recipe = f"torchrl_csirl.scripts.{recipe_of(method, scenario)}"
     task = f"env.gym_id={scenario}" if is_gymnasium_id(scenario) else f"env.scenario={scenario}"
     args = [task, f"seed={seed}", "logger.progress_bar=false", *overrides]
-    if method not in CSIRL_METHODS:
-        args.insert(0, f"method={method}")
-    else:
+    if method in CSIRL_METHODS:
         args += CSIRL_METHODS[method]
+    elif method in BASELINE_VARIANTS:
+        base, switches = BASELINE_VARIANTS[method]
+        args = [f"method={base}", *args, *switches]
+    else:
+        args.insert(0, f"method={method}")
     resumed = has_checkpoint(run_dir)
     if resumed:
         args = [f"checkpoint.resume={run_dir}", *(a for a in args if not a.startswith("method="))]
