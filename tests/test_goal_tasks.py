@@ -201,3 +201,33 @@ def test_goal_conditioned_matching_reduces_to_the_plain_one_with_one_demonstrati
         GoalConditionedMatchingReward([path, torch.zeros(3, 5)], goal_feature_indices=[2])
     with pytest.raises(ValueError, match="goal_feature_indices .* out of range"):
         GoalConditionedMatchingReward([path], goal_feature_indices=[9])
+
+
+def test_the_actor_warm_start_clones_the_demonstrations_into_the_learners_actor(capsys):
+    """``csirl.actor_pretrain_updates``: behavioural cloning of the actor before training (the AntMaze study's one
+    change); the SAC loss acts with the same parameters, and the default does nothing."""
+    from torchrl.envs.utils import ExplorationType, set_exploration_type
+
+    from torchrl_csirl.launch import csirl
+
+    args = prepare_task([f"env.gym_id={UMAZE}", "csirl.num_qvalue_nets=2"])
+    spec = TASKS[UMAZE]
+    for updates in (0, 300):
+        cfg = csirl.CSIRL_RECIPE.load_config([*args, f"csirl.actor_pretrain_updates={updates}", "optim.lr=0.001"])
+        demos = csirl.load_experts(cfg.expert, spec)
+        torch.manual_seed(0)
+        modules = csirl.make_loss_modules(cfg, spec, torch.device("cpu"), demos)
+        before = [p.detach().clone() for p in modules.actor.parameters()]
+        csirl.warm_start_actor(cfg, modules, demos.as_replay_buffer(batch_size=32))
+        batch = demos.transitions()
+        with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
+            error = (modules.actor(batch.select("observation").clone())["action"] - batch["action"]).pow(2).mean()
+        moved = any(not torch.equal(a, b.detach()) for a, b in zip(before, modules.actor.parameters()))
+        if updates == 0:
+            assert not moved and "warm-started" not in capsys.readouterr().err
+            untrained = error
+        else:
+            assert moved and error < 0.5 * untrained
+            assert "actor warm-started: 300 behavioural-cloning updates" in capsys.readouterr().err
+            sac_params = set(map(id, modules.sac.actor_network_params.values(True, True)))
+            assert all(id(p) in sac_params for p in modules.actor.parameters())

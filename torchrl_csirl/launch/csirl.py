@@ -54,7 +54,7 @@ from torchrl_csirl.launch.recipes import Recipe, register_recipe
 from torchrl_csirl.launch.robotics import RoboticsExpertConfig, RoboticsSections
 from torchrl_csirl.launch.run import ExpertDataError, resolve_device
 from torchrl_csirl.modules import LearnerPrecision, PrecisionUnsupported, expert_reference_states
-from torchrl_csirl.objectives import ActorBehaviourCloning, CSIRLLearner, make_csirl_learner
+from torchrl_csirl.objectives import ActorBehaviourCloning, CSIRLLearner, make_csirl_learner, pretrain_actor
 from torchrl_csirl.trainers import MetaRewardUpdate, SACUpdate, SubgoalSelectionHook
 from torchrl_csirl.transforms import CombineRewards, GoalConditionedMatchingReward, IntrinsicReward, SubgoalMatchingReward
 
@@ -243,6 +243,16 @@ def make_update_step(cfg: DictConfig, modules: CSIRLLearner, optimizers: dict, o
                             meta_every=cfg.csirl.meta_every)
 
 
+def warm_start_actor(cfg: DictConfig, modules: CSIRLLearner, expert: TensorDictReplayBuffer) -> None:
+    """``csirl.actor_pretrain_updates`` behavioural-cloning updates of the actor before training (none by default)."""
+    updates = cfg.csirl.actor_pretrain_updates
+    if updates:
+        error = pretrain_actor(modules.actor, expert, updates, lr=cfg.optim.lr,
+                               batch_size=cfg.csirl.actor_pretrain_batch_size)
+        print(f"actor warm-started: {updates} behavioural-cloning updates, last batch's error {error:.4f}",
+              file=sys.stderr)
+
+
 def first_subgoal(cfg: DictConfig, length: int) -> int | None:
     """The curriculum's first subgoal: the last state with ``fixed_subgoal`` (it can never move
     on from there), else None (drawn in ``[1, 5]`` as in the paper)."""
@@ -267,6 +277,8 @@ def make_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume_fra
     online = make_online_buffer(cfg.replay_buffer.size, cfg.replay_buffer.batch_size,
                                 make_reward_transforms(cfg, matching, modules), device)
     expert = demos.as_replay_buffer(batch_size=cfg.expert.batch_size, device=device)
+    if not frames_done:  # a resumed run's actor comes from its checkpoint
+        warm_start_actor(cfg, modules, expert)
     selection = SubgoalSelectionHook(curriculum)
     states: dict[str, Any] = {"loss": modules.sac, "reward_network": modules.reward_network, **optimizers,
                               "subgoal_selection": selection}

@@ -4,7 +4,7 @@ baselines (docs/baselines.md)."""
 from __future__ import annotations
 
 from torchrl_csirl.objectives._imitation import SACHyperparameters, make_sac_learner, orthogonal_regularization
-from torchrl_csirl.objectives.behaviour_cloning import ActorBehaviourCloning
+from torchrl_csirl.objectives.behaviour_cloning import ActorBehaviourCloning, pretrain_actor
 from torchrl_csirl.objectives.csirl_learner import CSIRL_DEFAULTS, CSIRLHyperparameters, CSIRLLearner, make_csirl_learner
 from torchrl_csirl.objectives.dac import (
     AbsorbingLogit,
@@ -55,6 +55,7 @@ __all__ = [
     "make_gail_discriminator",
     "make_sac_learner",
     "orthogonal_regularization",
+    "pretrain_actor",
     "qvalue_dispersion",
     "reinitialize_module",
     "sqil_batch",
