@@ -197,6 +197,22 @@ def test_goal_conditioned_matching_reduces_to_the_plain_one_with_one_demonstrati
         one = GoalConditionedMatchingReward([path], goal_feature_indices=[2, 3], **kwargs)
         assert torch.equal(one(batch.clone())["next", "matching_reward"],
                            SubgoalMatchingReward(path, **kwargs)(batch.clone())["next", "matching_reward"])
+    # two demonstrations of different lengths and goals: each transition gets its own demonstration's plain reward,
+    # on every target rule and with a failure flag (the potential of its own demonstration's start)
+    other = torch.randn(7, 4, dtype=torch.float64)
+    path[:, 2:], other[:, 2:] = 1.0, -1.0
+    mixed = batch.clone()
+    mixed["observation"][:, 2:] = mixed["next", "observation"][:, 2:] = torch.where(
+        torch.arange(64)[:, None] % 2 == 0, 1.0, -1.0).double()
+    mixed["next", "crashed"] = torch.arange(64)[:, None] % 3 == 0
+    for target in ("next", "final", "path"):
+        kwargs = dict(ego_feature_indices=[0, 1], position_feature_indices=[0, 1], scale=3.0, target=target,
+                      failure_keys=("crashed",))
+        both = GoalConditionedMatchingReward([path, other], goal_feature_indices=[2, 3], subgoal=6, **kwargs)
+        reward = both(mixed.clone())["next", "matching_reward"]
+        for rows, demo, subgoal in ((slice(0, None, 2), path, 6), (slice(1, None, 2), other, 3)):  # 6 of 11 -> 3 of 6
+            alone = SubgoalMatchingReward(demo, subgoal=subgoal, **kwargs)(mixed[rows].clone())["next", "matching_reward"]
+            torch.testing.assert_close(reward[rows], alone, rtol=1e-6, atol=1e-6)
     with pytest.raises(ValueError, match=r"demonstrations \[1\]: each must have shape \[L, 4\]"):
         GoalConditionedMatchingReward([path, torch.zeros(3, 5)], goal_feature_indices=[2])
     with pytest.raises(ValueError, match="goal_feature_indices .* out of range"):

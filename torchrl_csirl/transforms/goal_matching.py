@@ -26,8 +26,10 @@ from torchrl_csirl._validation import SubgoalSource
 from torchrl_csirl.transforms.subgoal_matching import (
     SubgoalMatchingReward,
     _check_indices,
-    _matching_reward_from_features,
+    _path_geometry,
     distinct_expert_states,
+    failed_termination_potential,
+    matching_potential,
 )
 
 __all__ = ["GoalConditionedMatchingReward", "nearest_goal_demonstration", "subgoal_on_demonstration"]
@@ -51,6 +53,14 @@ def nearest_goal_demonstration(goals: torch.Tensor, demonstration_goals: torch.T
     return torch.cdist(goals, demonstration_goals.to(goals.dtype)).argmin(dim=-1)
 
 
+def subgoals_on_demonstrations(subgoal: int, curriculum_length: int, lengths: torch.Tensor) -> torch.Tensor:
+    """:func:`subgoal_on_demonstration` for a ``[B]`` tensor of demonstration lengths (the same rounding)."""
+    if curriculum_length <= 1:
+        return lengths - 1
+    share = torch.round(subgoal * (lengths - 1).double() / (curriculum_length - 1)).long()
+    return torch.minimum(share, lengths - 1)
+
+
 def subgoal_on_demonstration(subgoal: int, curriculum_length: int, length: int) -> int:
     """The curriculum's subgoal (on a trajectory of ``curriculum_length`` states) as the same share of a
     demonstration of ``length`` states.
@@ -64,6 +74,14 @@ def subgoal_on_demonstration(subgoal: int, curriculum_length: int, length: int) 
     return min(length - 1, round(subgoal * (length - 1) / (curriculum_length - 1)))
 
 
+def _padded(tensors: list[torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
+    """``[K, N_max, *]`` the tensors padded with zeros along their first dimension, and ``[K, N_max]`` the real rows."""
+    padded = torch.nn.utils.rnn.pad_sequence(tensors, batch_first=True)
+    valid = torch.arange(padded.shape[1], device=padded.device) < torch.tensor(
+        [t.shape[0] for t in tensors], device=padded.device).unsqueeze(-1)
+    return padded, valid
+
+
 class GoalConditionedMatchingReward(SubgoalMatchingReward):
     """:class:`SubgoalMatchingReward` over several demonstrations, each transition matched against the
     demonstration of its goal (:func:`nearest_goal_demonstration`), toward the curriculum's subgoal as a share of
@@ -71,7 +89,9 @@ class GoalConditionedMatchingReward(SubgoalMatchingReward):
 
     The first demonstration is the curriculum trajectory: :attr:`subgoal`, :attr:`length` and
     :attr:`expert_observations` are its, as in :class:`SubgoalMatchingReward`, so a
-    :class:`~torchrl_csirl.curriculum.SubgoalCurriculum` drives this transform as it drives that one.
+    :class:`~torchrl_csirl.curriculum.SubgoalCurriculum` drives this transform as it drives that one. A batch is
+    computed at once: each transition's distances to the states of its own demonstration, ``[B, L_max]`` (the
+    demonstrations padded to the longest).
 
     Args:
         demonstrations: ``[L_k, D]`` observation tensors, the curriculum trajectory first.
@@ -114,21 +134,42 @@ class GoalConditionedMatchingReward(SubgoalMatchingReward):
         if goal is None:
             raise ValueError("goal_feature_indices: the observation entries of the goal are required.")
         device, dtype = self.expert_observations.device, self.expert_observations.dtype
-        goal = goal.to(device)
-        self.register_buffer("_goal_idx", goal)
+        self.register_buffer("_goal_idx", goal.to(device))
         states = [d.detach().to(device=device, dtype=dtype) for d in demonstrations]
-        self.register_buffer("_demonstration_goals", torch.stack([d[0].index_select(-1, goal) for d in states]))
-        self.lengths = tuple(int(d.shape[0]) for d in states)
-        for k, d in enumerate(states):
-            rows, row_index = distinct_expert_states(d.index_select(-1, self._ego_idx))
-            self.register_buffer(f"_demo{k}_rows", rows)
-            self.register_buffer(f"_demo{k}_row_index", row_index)
-            self.register_buffer(f"_demo{k}_pos", d.index_select(-1, self._pos_idx))
+        self._register_demonstrations(states)
+
+    def _register_demonstrations(self, states: list[torch.Tensor]) -> None:
+        """Every demonstration's goal, positions, distinct search rows and path segments; the rows and segments
+        padded to the longest demonstration's (``[K, R, F]``, with a mask of the real ones)."""
+        lengths = torch.tensor([d.shape[0] for d in states], device=states[0].device)
+        self.register_buffer("_lengths", lengths)
+        self.register_buffer("_offsets", torch.cat([lengths.new_zeros(1), lengths.cumsum(0)[:-1]]))
+        self.register_buffer("_demonstration_goals", torch.stack([d[0].index_select(-1, self._goal_idx) for d in states]))
+        distinct = [distinct_expert_states(d.index_select(-1, self._ego_idx)) for d in states]  # by decreasing index
+        rows, valid = _padded([r for r, _ in distinct])
+        self.register_buffer("_rows", rows)
+        self.register_buffer("_row_valid", valid)
+        self.register_buffer("_row_index", _padded([i for _, i in distinct])[0])
+        positions = [d.index_select(-1, self._pos_idx) for d in states]
+        self.register_buffer("_positions", torch.cat(positions))
+        geometry = [_path_geometry(p) for p in positions]  # (start, step, length, cumulative) per demonstration
+        self.register_buffer("_segment_start", _padded([g[0] for g in geometry])[0])
+        self.register_buffer("_segment_step", _padded([g[1] for g in geometry])[0])
+        length, segment_valid = _padded([g[2] for g in geometry])
+        self.register_buffer("_segment_length", length)
+        self.register_buffer("_segment_valid", segment_valid)
+        self.register_buffer("_segment_arc", _padded([g[3][:-1] for g in geometry])[0])  # arc length at its start
+        self.register_buffer("_arc", torch.cat([g[3][: p.shape[0]] for g, p in zip(geometry, positions)]))
+
+    @property
+    def lengths(self) -> tuple[int, ...]:
+        """tuple of int: each demonstration's length ``L_k`` (the curriculum trajectory's first)."""
+        return tuple(self._lengths.tolist())
 
     @property
     def num_demonstrations(self) -> int:
         """int: the demonstrations matched against (the curriculum trajectory included)."""
-        return len(self.lengths)
+        return int(self._lengths.shape[0])
 
     def demonstration_of(self, observation: torch.Tensor) -> torch.Tensor:
         """``[*B]`` the demonstration each observation's goal selects."""
@@ -138,29 +179,52 @@ class GoalConditionedMatchingReward(SubgoalMatchingReward):
 
     def demonstration_positions(self, index: int) -> torch.Tensor:
         """``[L_k, P]`` demonstration ``index``'s matching (position) features."""
-        return getattr(self, f"_demo{index}_pos")
+        start = int(self._offsets[index])
+        return self._positions[start: start + int(self._lengths[index])]
+
+    def _nearest(self, ego: torch.Tensor, chosen: torch.Tensor) -> torch.Tensor:
+        """``[B]`` the nearest state's index within each transition's demonstration (ties: the later one)."""
+        rows = self._rows.to(ego.dtype)[chosen]  # [B, R, F]
+        scores = (rows * rows).sum(-1) - 2.0 * (rows @ ego.unsqueeze(-1)).squeeze(-1)
+        scores.masked_fill_(~self._row_valid[chosen], float("inf"))
+        return self._row_index[chosen].gather(-1, scores.argmin(dim=-1, keepdim=True)).squeeze(-1)
+
+    def _path_potential(self, positions: torch.Tensor, chosen: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+        """:func:`~torchrl_csirl.transforms.subgoal_matching.path_potential` along each transition's demonstration."""
+        start, step, length = (t.to(positions.dtype)[chosen] for t in (self._segment_start, self._segment_step,
+                                                                         self._segment_length))
+        along = ((positions.unsqueeze(-2) - start) * step).sum(-1) / (length * length).clamp_min(1e-12)
+        along = along.clamp(0.0, 1.0)  # [B, S]: where on each segment the closest point lies
+        distance = torch.linalg.vector_norm(positions.unsqueeze(-2) - (start + along.unsqueeze(-1) * step), dim=-1)
+        distance.masked_fill_(~self._segment_valid[chosen], float("inf"))
+        offset, segment = distance.min(dim=-1, keepdim=True)
+        arc = (self._segment_arc.to(positions.dtype)[chosen].gather(-1, segment)
+               + along.gather(-1, segment) * length.gather(-1, segment)).squeeze(-1)
+        return offset.squeeze(-1) + (self._arc.to(positions.dtype)[self._offsets[chosen] + target] - arc).abs()
 
     def _transition_reward(self, tensordict: TensorDictBase, next_tensordict: TensorDictBase) -> torch.Tensor:
         obs, next_obs, batch_shape = self._flat_observations(tensordict, next_tensordict)
         failed = self._failed(next_tensordict, obs.shape[0])
         chosen = self.demonstration_of(obs)
-        reward = obs.new_zeros(obs.shape[0])
-        subgoal = self.subgoal
-        for k in chosen.unique().tolist():
-            rows = (chosen == k).nonzero().squeeze(-1)
-            part = obs.index_select(0, rows)
-            reward[rows] = _matching_reward_from_features(
-                part.index_select(-1, self._ego_idx),
-                part.index_select(-1, self._pos_idx),
-                next_obs.index_select(0, rows).index_select(-1, self._pos_idx),
-                getattr(self, f"_demo{k}_rows"),
-                getattr(self, f"_demo{k}_row_index"),
-                self.demonstration_positions(k),
-                subgoal_on_demonstration(subgoal, self.length, self.lengths[k]),
-                self.target,
-                self.sign * self.scale,
-                None if failed is None else failed.index_select(0, rows),
-            )
+        lengths = self._lengths[chosen]
+        subgoals = subgoals_on_demonstrations(self.subgoal, self.length, lengths)
+        nearest = self._nearest(obs.index_select(-1, self._ego_idx), chosen)
+        past = torch.clamp(nearest + 1, max=lengths - 1) if self.target == "next" else lengths - 1
+        target = torch.where(nearest < subgoals, subgoals, past)
+        position, next_position = obs.index_select(-1, self._pos_idx), next_obs.index_select(-1, self._pos_idx)
+        if self.target == "path":
+            def potential(x: torch.Tensor) -> torch.Tensor:
+                return self._path_potential(x, chosen, target)
+        else:
+            target_position = self._positions.to(obs.dtype)[self._offsets[chosen] + target]
+
+            def potential(x: torch.Tensor) -> torch.Tensor:
+                return matching_potential(x, target_position)
+        next_potential = potential(next_position)
+        if failed is not None:
+            start = self._positions.to(obs.dtype)[self._offsets[chosen]]
+            next_potential = failed_termination_potential(next_potential, potential(start), failed)
+        reward = (potential(position) - next_potential).mul_(self.sign * self.scale)
         return reward.reshape(batch_shape).to(torch.float32)
 
     def __repr__(self) -> str:
