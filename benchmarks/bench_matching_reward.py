@@ -2,7 +2,9 @@
 
 Compares, in the same process, :class:`~torchrl_csirl.transforms.SubgoalMatchingReward` on a
 sampled batch with a transition-by-transition numpy loop of the same equations (the published
-code's cost per transition, for scale, is in docs/performance.md). Prints one JSON line at the end.
+code's cost per transition, for scale, is in docs/performance.md); and, on PointMaze U-maze's 25 shipped
+demonstrations, the goal-conditioned matching reward (each transition against the demonstration of its goal)
+against the plain one on the first demonstration. Prints one JSON line at the end.
 
 Usage::
 
@@ -49,6 +51,27 @@ def _time(fn, repeats: int, inner: int) -> float:
     return statistics.median(samples)
 
 
+def goal_conditioned_costs(batch: int, repeats: int) -> dict[str, float]:
+    """Seconds per batch of the goal-conditioned and the plain matching reward on PointMaze U-maze's demonstrations
+    (the recipe's builder, the subgoal a quarter of the way), on ``batch`` demonstrated transitions."""
+    from torchrl_csirl.envs import TASKS
+    from torchrl_csirl.launch import csirl
+    from torchrl_csirl.launch.robotics import prepare_task
+
+    args = prepare_task(["env.gym_id=PointMaze_UMaze-v3"])
+    spec = TASKS["PointMaze_UMaze-v3"]
+    cfg = csirl.CSIRL_RECIPE.load_config(args)
+    demos = csirl.load_experts(cfg.expert, spec)
+    first = demos.trajectory_observations(0, include_final=True)
+    subgoal = first.shape[0] // 4
+    goal = csirl.make_matching(cfg, spec, first, subgoal, demos)
+    plain = csirl.make_matching(csirl.CSIRL_RECIPE.load_config([*args, "csirl.goal_conditioned=false"]), spec, first,
+                                subgoal, demos)
+    td = demos.transitions()[torch.randint(0, len(demos), (batch,), generator=torch.Generator().manual_seed(0))]
+    return {"goal": _time(lambda: goal(td), repeats, 50), "plain": _time(lambda: plain(td), repeats, 50),
+            "demonstrations": goal.num_demonstrations}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--batch", type=int, default=256)
@@ -76,6 +99,7 @@ def main() -> None:
     # same numbers from both implementations
     ref = numpy_loop_reward(obs_np, next_np, expert_np, transform.subgoal, ego, pos, 700.0)
     max_abs_diff = float(np.abs(transform(td)["next", "matching_reward"].squeeze(-1).double().numpy() - ref).max())
+    goal = goal_conditioned_costs(args.batch, args.repeats)
     result = {
         "benchmark": "matching_reward",
         "batch": args.batch,
@@ -88,6 +112,9 @@ def main() -> None:
         "speedup_vs_loop": round(loop_s / vec_s, 1),
         "published_code_ms_per_transition": 13.0,
         "max_abs_diff_vs_loop": max_abs_diff,
+        "pointmaze_goal_conditioned_ms_per_batch": round(goal["goal"] * 1e3, 3),
+        "pointmaze_plain_ms_per_batch": round(goal["plain"] * 1e3, 3),
+        "pointmaze_goal_conditioned_over_plain": round(goal["goal"] / goal["plain"], 2),
         # context for absolute numbers on a shared machine
         "load_average_1min": round(os.getloadavg()[0], 2),
     }
