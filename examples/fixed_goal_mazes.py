@@ -1,8 +1,9 @@
 """PointMaze with one goal and one start cell: the single change of the goal-conditioned study
-(docs/studies/goal-conditioned.md), registered as gymnasium ids when imported (``env.module=fixed_goal_mazes``).
+(docs/studies/outside-driving.md), registered as gymnasium ids when imported (``env.module=fixed_goal_mazes``).
 
 gymnasium-robotics' ``PointMaze_UMaze-v3`` and ``PointMaze_Medium-v3`` draw the goal and the start cell anew each
-episode; CSIRL follows one curriculum trajectory (the demonstrations' first), toward that trajectory's goal.
+episode; CSIRL's published matching (``csirl.goal_conditioned=false``) follows one curriculum trajectory (the
+demonstrations' first), toward that trajectory's goal.
 These ids are the same mazes, the same environment class and episode limits, with the goal cell (``g``) and the
 start cell (``r``) fixed as in D4RL's AntMaze U-maze, the paper's robotics maze: start bottom-left, goal top-left
 around the U (U-maze); start top-left, goal bottom-right (Medium). The ball still starts and the goal still sits

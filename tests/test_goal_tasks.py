@@ -247,3 +247,21 @@ def test_the_actor_warm_start_clones_the_demonstrations_into_the_learners_actor(
             assert "actor warm-started: 300 behavioural-cloning updates" in capsys.readouterr().err
             sac_params = set(map(id, modules.sac.actor_network_params.values(True, True)))
             assert all(id(p) in sac_params for p in modules.actor.parameters())
+
+
+def test_the_one_goal_mazes_of_the_example_keep_their_goal_and_start_and_their_expert_reaches_it(monkeypatch):
+    """``examples/fixed_goal_mazes.py``, the U-maze study's one change: the goal and the start cell fixed."""
+    import os
+
+    monkeypatch.syspath_prepend(os.path.join(os.path.dirname(os.path.dirname(__file__)), "examples"))
+    import fixed_goal_mazes
+
+    for gym_id in fixed_goal_mazes.FIXED_GOAL_IDS:
+        make_gymnasium_task(gym_id)
+        demos = record_demonstrations(gym_id, make_expert(gym_id), episodes=2, seed=7000)
+        assert [e["success"] for e in demos.metadata["episodes"]] == [True, True]
+        goals = demos.transitions()["observation"][:, 6:8]
+        starts = torch.stack([demos.trajectory(k)["observation"][0, :2] for k in range(2)])
+        assert (goals - goals[0]).abs().max() <= 0.5 and (starts[0] - starts[1]).abs().max() <= 0.5  # +-0.25 noise
+        TASKS.pop(gym_id)
+        task_registry._FACTORIES.pop(gym_id, None)
