@@ -86,6 +86,8 @@ def test_each_check_flags_its_own_failure_and_passes_a_healthy_figure():
     healthy = [dict(r, eval_success_rate=s) for r, s in zip(hacked, (0.0, 0.4, 0.9))]
     assert reward_tracks_the_task(hacked).ok is False and reward_tracks_the_task(healthy).ok is True
     assert reward_tracks_the_task(hacked[:2]).ok is None
+    solved = [dict(r, eval_success_rate=1.0) for r in hacked]  # flat at the top: the policy got better at the task
+    assert reward_tracks_the_task(solved).ok is True
     returns = torch.full((10,), 30.0)
     assert "over-value" in critic_calibration(torch.full((5, 10), 300.0), returns, "expert").message
     assert "under-value" in critic_calibration(torch.full((5, 10), 3.0), returns, "expert").message

@@ -88,8 +88,13 @@ def _rounds(rows: Sequence[dict]) -> list[dict]:
     return [r for r in rows if "round" in r]
 
 
+#: a test success (or accomplish rate) from which the task counts as solved: a score flat there is not a failure
+SOLVED = 0.9
+
+
 def reward_tracks_the_task(rows: Sequence[dict]) -> HealthCheck:
-    """Reward hacking: the matching reward the learner collects rises while the task's success and return stay flat.
+    """Reward hacking: the matching reward the learner collects rises while the task's success and return stay flat
+    (below :data:`SOLVED`).
 
     Args:
         rows: ``metrics.jsonl``'s rows (``matching_reward_mean``, ``reward_mean``, ``eval_success_rate``,
@@ -113,7 +118,8 @@ def reward_tracks_the_task(rows: Sequence[dict]) -> HealthCheck:
     figures = {"matching_reward_first": m0, "matching_reward_last": m1, "success_first": s0, "success_last": s1,
                "accomplish_first": a0, "accomplish_last": a1, "env_return_first": e0, "env_return_last": e1,
                "reward_first": _thirds(rows, "reward_mean")[0], "reward_last": _thirds(rows, "reward_mean")[1]}
-    if reward_rose and task_flat:
+    solved = any(not math.isnan(v) and v >= SOLVED for v in (s1, a1))  # flat at the top is not hacking
+    if reward_rose and task_flat and not solved:
         return HealthCheck(name, False, (
             f"reward hacking: the matching reward per step rose from {m0:.3g} to {m1:.3g} while the test success "
             f"stayed at {s1:.2f} and the environment's return went from {e0:.3g} to {e1:.3g}; the matching features "
