@@ -27,9 +27,11 @@ from torchrl_csirl.transforms.subgoal_matching import (
     SubgoalMatchingReward,
     _check_indices,
     _path_geometry,
+    _project,
     distinct_expert_states,
     failed_termination_potential,
     matching_potential,
+    matching_target_index,
 )
 
 __all__ = ["GoalConditionedMatchingReward", "nearest_goal_demonstration", "subgoal_on_demonstration"]
@@ -69,9 +71,7 @@ def subgoal_on_demonstration(subgoal: int, curriculum_length: int, length: int) 
         >>> subgoal_on_demonstration(50, 101, 41), subgoal_on_demonstration(100, 101, 41), subgoal_on_demonstration(3, 1, 9)
         (20, 40, 8)
     """
-    if curriculum_length <= 1:
-        return length - 1
-    return min(length - 1, round(subgoal * (length - 1) / (curriculum_length - 1)))
+    return int(subgoals_on_demonstrations(subgoal, curriculum_length, torch.tensor([length]))[0])
 
 
 def _padded(tensors: list[torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
@@ -191,16 +191,10 @@ class GoalConditionedMatchingReward(SubgoalMatchingReward):
 
     def _path_potential(self, positions: torch.Tensor, chosen: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
         """:func:`~torchrl_csirl.transforms.subgoal_matching.path_potential` along each transition's demonstration."""
-        start, step, length = (t.to(positions.dtype)[chosen] for t in (self._segment_start, self._segment_step,
-                                                                         self._segment_length))
-        along = ((positions.unsqueeze(-2) - start) * step).sum(-1) / (length * length).clamp_min(1e-12)
-        along = along.clamp(0.0, 1.0)  # [B, S]: where on each segment the closest point lies
-        distance = torch.linalg.vector_norm(positions.unsqueeze(-2) - (start + along.unsqueeze(-1) * step), dim=-1)
-        distance.masked_fill_(~self._segment_valid[chosen], float("inf"))
-        offset, segment = distance.min(dim=-1, keepdim=True)
-        arc = (self._segment_arc.to(positions.dtype)[chosen].gather(-1, segment)
-               + along.gather(-1, segment) * length.gather(-1, segment)).squeeze(-1)
-        return offset.squeeze(-1) + (self._arc.to(positions.dtype)[self._offsets[chosen] + target] - arc).abs()
+        segments = (t.to(positions.dtype)[chosen] for t in (self._segment_start, self._segment_step,
+                                                             self._segment_length, self._segment_arc))
+        arc, offset = _project(positions, *segments, valid=self._segment_valid[chosen])
+        return offset + (self._arc.to(positions.dtype)[self._offsets[chosen] + target] - arc).abs()
 
     def _transition_reward(self, tensordict: TensorDictBase, next_tensordict: TensorDictBase) -> torch.Tensor:
         obs, next_obs, batch_shape = self._flat_observations(tensordict, next_tensordict)
@@ -209,8 +203,7 @@ class GoalConditionedMatchingReward(SubgoalMatchingReward):
         lengths = self._lengths[chosen]
         subgoals = subgoals_on_demonstrations(self.subgoal, self.length, lengths)
         nearest = self._nearest(obs.index_select(-1, self._ego_idx), chosen)
-        past = torch.clamp(nearest + 1, max=lengths - 1) if self.target == "next" else lengths - 1
-        target = torch.where(nearest < subgoals, subgoals, past)
+        target = matching_target_index(nearest, subgoals, lengths, self.target)
         position, next_position = obs.index_select(-1, self._pos_idx), next_obs.index_select(-1, self._pos_idx)
         if self.target == "path":
             def potential(x: torch.Tensor) -> torch.Tensor:

@@ -99,8 +99,8 @@ def matching_target_index(
 
     Args:
         nearest (torch.Tensor): ``[B]`` nearest expert indices ``j*``.
-        subgoal (int): the current subgoal ``g``.
-        length (int): the curriculum trajectory length ``L``.
+        subgoal (int or torch.Tensor): the current subgoal ``g`` (or ``[B]``, one per transition).
+        length (int or torch.Tensor): the curriculum trajectory length ``L`` (or ``[B]``).
         rule (str): ``"next"`` (default), ``"final"`` or ``"path"``.
 
     Examples:
@@ -110,13 +110,15 @@ def matching_target_index(
         >>> matching_target_index(torch.tensor([0, 2]), subgoal=2, length=5, rule="final").tolist()
         [2, 4]
     """
+    last = torch.as_tensor(length, device=nearest.device) - 1
     if rule == "next":
-        past = torch.clamp(nearest + 1, max=length - 1)
+        past = torch.minimum(nearest + 1, last)
     elif rule in ("final", "path"):
-        past = torch.full_like(nearest, length - 1)
+        past = last.expand_as(nearest)
     else:
         raise ValueError(f"target rule must be one of {_TARGET_RULES}, got {rule!r}.")
-    return torch.where(nearest < subgoal, torch.full_like(nearest, subgoal), past)
+    subgoal = torch.as_tensor(subgoal, device=nearest.device).expand_as(nearest)
+    return torch.where(nearest < subgoal, subgoal, past)
 
 
 def matching_potential(positions: torch.Tensor, target_positions: torch.Tensor) -> torch.Tensor:
@@ -166,14 +168,18 @@ def _path_geometry(path: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torc
 
 
 def _project(positions: torch.Tensor, start: torch.Tensor, step: torch.Tensor, length: torch.Tensor,
-             cumulative: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """:func:`project_on_path` on the segments of :func:`_path_geometry`."""
+             cumulative: torch.Tensor, valid: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+    """:func:`project_on_path` on the segments of :func:`_path_geometry` (``[S, ...]``, or ``[B, S, ...]``: each
+    position its own path, with ``valid`` ``[B, S]`` marking its real segments among padded ones)."""
     along = ((positions.unsqueeze(-2) - start) * step).sum(-1) / (length * length).clamp_min(1e-12)
-    along = along.clamp(0.0, 1.0)  # [B, L-1]: where on each segment the closest point lies
+    along = along.clamp(0.0, 1.0)  # [B, S]: where on each segment the closest point lies
     distance = torch.linalg.vector_norm(positions.unsqueeze(-2) - (start + along.unsqueeze(-1) * step), dim=-1)
-    offset, segment = distance.min(dim=-1)
-    arc = cumulative[segment] + along.gather(-1, segment.unsqueeze(-1)).squeeze(-1) * length[segment]
-    return arc, offset
+    if valid is not None:
+        distance = distance.masked_fill(~valid, float("inf"))
+    offset, segment = distance.min(dim=-1, keepdim=True)
+    arc_at_start = cumulative[..., : length.shape[-1]].expand_as(along)
+    arc = arc_at_start.gather(-1, segment) + along.gather(-1, segment) * length.expand_as(along).gather(-1, segment)
+    return arc.squeeze(-1), offset.squeeze(-1)
 
 
 def path_potential(positions: torch.Tensor, path: torch.Tensor, target_index: torch.Tensor) -> torch.Tensor:
