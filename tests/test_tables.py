@@ -215,3 +215,26 @@ def test_the_sweep_runs_every_cell_at_its_scenes_budget(tmp_path):
     rows = benchmark.table_rows([r for r in runs if r["scenario"] == "roundabout"])
     assert rows and all(benchmark.off_budget(r) == (r["frames"] == "110000") for r in rows)
     assert "(110000 frames)" in benchmark.markdown_table(rows)
+
+
+def test_point_maze_table_is_its_records():
+    """The point mazes' table (issue 87, part 5): every row's success rate and its difference from CSIRL's."""
+    runs = benchmark.read_runs([os.path.join(ROOT, "docs", "runs", "pointmaze")])
+    rows = {(r["method"], r["scenario"]): r for r in benchmark.table_rows(runs)}
+    table = markdown_table("docs/benchmark.md", "| method | U-maze success")
+    assert set(table) == {method for method, _ in rows}
+    for method, columns in table.items():
+        for maze, scenario in (("U-maze", "PointMaze_UMaze-v3"), ("Medium", "PointMaze_Medium-v3")):
+            row = rows.get((method, scenario))
+            success, difference = columns[f"{maze} success"], columns[f"− csirl, {maze}"]
+            if row is None:  # not run yet: empty cells
+                assert success == difference == "", (method, maze, columns)
+                continue
+            shown = numbers(success)
+            assert agrees(shown[0], row["success_rate_mean"]) and agrees(shown[1], row["success_rate_std"]), (method, maze)
+            if row["vs_csirl"] is None:  # csirl itself, or fewer than two seeds on a side
+                assert difference == "—", (method, maze, difference)
+                continue
+            change, t = numbers(difference)
+            assert agrees(change, row["vs_csirl"]) and agrees(t, row["vs_csirl_t"]), (method, maze, difference)
+            assert difference.startswith("**") == row["vs_csirl_beyond_noise"], (method, maze, difference)
