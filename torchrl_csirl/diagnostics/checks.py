@@ -121,11 +121,12 @@ def reward_tracks_the_task(rows: Sequence[dict]) -> HealthCheck:
     solved = any(not math.isnan(v) and v >= SOLVED for v in (s1, a1))  # flat at the top is not hacking
     if reward_rose and task_flat and not solved:
         return HealthCheck(name, False, (
-            f"reward hacking: the matching reward per step rose from {m0:.3g} to {m1:.3g} while the test success "
-            f"stayed at {s1:.2f} and the environment's return went from {e0:.3g} to {e1:.3g}; the matching features "
+            f"reward hacking: the matching reward per step rose from {m0:.3g} to {m1:.3g} while the evaluations' "
+            f"success went from {s0:.2f} to {s1:.2f} and the environment's return from {e0:.3g} to {e1:.3g} (first "
+            "and last third of the run); the matching features "
             "(env.features, the task's position_feature_indices) reward something the task does not"), figures)
-    return HealthCheck(name, True, f"the matching reward went from {m0:.3g} to {m1:.3g}, the test success from "
-                                   f"{s0:.2f} to {s1:.2f}", figures)
+    return HealthCheck(name, True, f"the matching reward went from {m0:.3g} to {m1:.3g}, the evaluations' success "
+                                   f"from {s0:.2f} to {s1:.2f}", figures)
 
 
 def critic_calibration(values: torch.Tensor, returns: torch.Tensor, where: str) -> HealthCheck:
