@@ -679,6 +679,7 @@ def test_resume_merges_schema_saved_config_and_command_line(tmp_path):
     assert resumed.seed == 4 and resumed.csirl.meta_every == 3 and resumed.csirl.updates_per_round == 20000
     assert resumed.collector.total_frames == 9000 and resumed.logger.overwrite is False
     assert resumed.checkpoint.resume is None and resumed.preset == "paper"
+    assert resumed.csirl.goal_conditioned is None  # saved with the key: its value
     with pytest.raises(config.ConfigError, match="a resumed run keeps its preset"):
         csirl.load_run_config(str(tmp_path), ["preset=default"])
     with pytest.raises(config.ConfigError, match="csirl.meta_every=0: must be an integer > 0"):
@@ -687,6 +688,16 @@ def test_resume_merges_schema_saved_config_and_command_line(tmp_path):
     OmegaConf.save(OmegaConf.create(saved), tmp_path / "config.yaml")
     with pytest.raises(config.ConfigError, match=r"csirl.meta_every=often: must be an integer > 0 \(in .*config.yaml\)"):
         csirl.load_run_config(str(tmp_path))
+
+
+def test_a_resumed_run_keeps_the_behaviour_of_a_setting_it_predates(tmp_path):
+    """A run made before ``csirl.goal_conditioned`` existed matched one demonstration: resumed or diagnosed, it still
+    does (the key's later default, null, would switch goal-conditioned matching on)."""
+    saved = OmegaConf.to_container(csirl.load_config(["env.gym_id=PointMaze_UMaze-v3"]))
+    del saved["csirl"]["goal_conditioned"]
+    OmegaConf.save(OmegaConf.create(saved), tmp_path / "config.yaml")
+    assert csirl.load_run_config(str(tmp_path)).csirl.goal_conditioned is False
+    assert csirl.load_run_config(str(tmp_path), ["csirl.goal_conditioned=true"]).csirl.goal_conditioned is True
 
 
 def test_device_is_read_and_a_missing_gpu_is_a_config_error():
