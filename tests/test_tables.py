@@ -52,16 +52,20 @@ def markdown_table(path: str, header: str, occurrence: int = 0) -> dict[str, dic
     return rows
 
 
+def table_cells(*groups: str) -> dict[tuple[str, str], dict]:
+    """``(method, scenario) -> table row`` of the records in ``docs/runs/<group>`` for each group, by the report's code."""
+    runs = benchmark.read_runs([os.path.join(ROOT, "docs", "runs", g) for g in groups])
+    return {(r["method"], r["scenario"]): r for r in benchmark.table_rows(runs)}
+
+
 @pytest.fixture(scope="module")
 def driving() -> dict[tuple[str, str], dict]:
-    runs = benchmark.read_runs([os.path.join(ROOT, "docs", "runs", g) for g in DRIVING_GROUPS])
-    return {(r["method"], r["scenario"]): r for r in benchmark.table_rows(runs)}
+    return table_cells(*DRIVING_GROUPS)
 
 
 @pytest.fixture(scope="module")
 def robotics() -> dict[tuple[str, str], dict]:
-    runs = benchmark.read_runs([os.path.join(ROOT, "docs", "runs", "robotics")])
-    return {(r["method"], r["scenario"]): r for r in benchmark.table_rows(runs)}
+    return table_cells("robotics")
 
 
 def test_table_one_is_its_records_at_one_budget_per_scene(driving):
@@ -117,8 +121,7 @@ def test_robotics_table_is_its_records(robotics):
 
 
 def test_locomotion_results_are_their_records():
-    runs = benchmark.read_runs([os.path.join(ROOT, "docs", "runs", "mujoco")])
-    rows = {(r["method"], r["scenario"]): r for r in benchmark.table_rows(runs)}
+    rows = table_cells("mujoco")
     table = markdown_table("docs/benchmark.md", "| method | Hopper R / R_expert")
     assert set(table) == {method for method, _ in rows}
     for method, columns in table.items():
@@ -138,8 +141,7 @@ def test_locomotion_results_are_their_records():
 
 
 def test_locomotion_differences_are_their_records():
-    runs = benchmark.read_runs([os.path.join(ROOT, "docs", "runs", "mujoco")])
-    rows = {(r["method"], r["scenario"]): r for r in benchmark.table_rows(runs)}
+    rows = table_cells("mujoco")
     table = markdown_table("docs/benchmark.md", "| − csirl, test return |")
     assert set(table) == {m for m, _ in rows} - {"expert", "random", "csirl"}
     for method, columns in table.items():
@@ -156,8 +158,7 @@ def test_locomotion_differences_are_their_records():
 def test_published_comparison_is_its_data_and_its_records_in_raw_returns():
     """The published table: the papers' raw returns and experts as :data:`benchmark.PUBLISHED_LOCOMOTION` holds
     them, ours the records' raw mean returns (final and best evaluation), each gap divided by the paper's expert."""
-    runs = benchmark.read_runs([os.path.join(ROOT, "docs", "runs", "mujoco")])
-    rows = {(r["method"], r["scenario"]): r for r in benchmark.table_rows(runs)}
+    rows = table_cells("mujoco")
     table = markdown_table("docs/benchmark.md", "| method | Hopper: paper")
     assert set(table) == {m for m in benchmark.PUBLISHED_LOCOMOTION if any((m, s) in rows for s in ("hopper", "halfcheetah"))}
     for method, columns in table.items():
@@ -219,8 +220,7 @@ def test_the_sweep_runs_every_cell_at_its_scenes_budget(tmp_path):
 
 def test_point_maze_table_is_its_records():
     """The point mazes' table (issue 87, part 5): every row's success rate and its difference from CSIRL's."""
-    runs = benchmark.read_runs([os.path.join(ROOT, "docs", "runs", "pointmaze")])
-    rows = {(r["method"], r["scenario"]): r for r in benchmark.table_rows(runs)}
+    rows = table_cells("pointmaze")
     table = markdown_table("docs/benchmark.md", "| method | U-maze success")
     assert set(table) == {method for method, _ in rows}
     for method, columns in table.items():
