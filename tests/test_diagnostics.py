@@ -88,6 +88,13 @@ def test_each_check_flags_its_own_failure_and_passes_a_healthy_figure():
     assert reward_tracks_the_task(hacked[:2]).ok is None
     solved = [dict(r, eval_success_rate=1.0) for r in hacked]  # flat at the top: the policy got better at the task
     assert reward_tracks_the_task(solved).ok is True
+    # the last third's 10-episode evaluations dip while the final test (50 episodes) solves the task: no hacking; a
+    # test that confirms the dip still flags
+    dipped = [dict(r, eval_success_rate=s) for r, s in zip(hacked, (1.0, 0.9, 0.6))]
+    assert reward_tracks_the_task(dipped).ok is False
+    held = reward_tracks_the_task(dipped, test={"success_rate": 0.96, "return": 0.96})
+    assert held.ok is True and held.figures["test_success"] == 0.96
+    assert reward_tracks_the_task(dipped, test={"success_rate": 0.6, "return": 0.6}).ok is False
     returns = torch.full((10,), 30.0)
     assert "over-value" in critic_calibration(torch.full((5, 10), 300.0), returns, "expert").message
     assert "under-value" in critic_calibration(torch.full((5, 10), 3.0), returns, "expert").message

@@ -15,7 +15,7 @@ Examples:
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -92,13 +92,20 @@ def _rounds(rows: Sequence[dict]) -> list[dict]:
 SOLVED = 0.9
 
 
-def reward_tracks_the_task(rows: Sequence[dict]) -> HealthCheck:
+def reward_tracks_the_task(rows: Sequence[dict], test: Mapping[str, Any] | None = None) -> HealthCheck:
     """Reward hacking: the matching reward the learner collects rises while the task's success and return stay flat
-    (below :data:`SOLVED`).
+    (below :data:`SOLVED`, in the last third's evaluations and in the final test).
 
     Args:
         rows: ``metrics.jsonl``'s rows (``matching_reward_mean``, ``reward_mean``, ``eval_success_rate``,
             ``eval_accomplish_rate``, ``eval_env_return``).
+        test: the run's final test (``summary.json``: ``success_rate``, ``accomplish_rate``), where it has one: a
+            test at or above :data:`SOLVED` clears the run, whatever its last few 10-episode evaluations said.
+
+    Examples:
+        >>> rows = [{"matching_reward_mean": r, "eval_success_rate": s} for r, s in ((0.1, 1.0), (0.2, 0.9), (0.9, 0.6))]
+        >>> reward_tracks_the_task(rows).ok, reward_tracks_the_task(rows, test={"success_rate": 0.96}).ok
+        (False, True)
     """
     logged = [r for r in rows if r.get("matching_reward_mean") is not None]
     name = "reward_tracks_the_task"
@@ -118,7 +125,9 @@ def reward_tracks_the_task(rows: Sequence[dict]) -> HealthCheck:
     figures = {"matching_reward_first": m0, "matching_reward_last": m1, "success_first": s0, "success_last": s1,
                "accomplish_first": a0, "accomplish_last": a1, "env_return_first": e0, "env_return_last": e1,
                "reward_first": _thirds(rows, "reward_mean")[0], "reward_last": _thirds(rows, "reward_mean")[1]}
-    solved = any(not math.isnan(v) and v >= SOLVED for v in (s1, a1))  # flat at the top is not hacking
+    tested = [float(test[k]) for k in ("success_rate", "accomplish_rate") if (test or {}).get(k) is not None]
+    figures["test_success"] = max(tested) if tested else None
+    solved = any(not math.isnan(v) and v >= SOLVED for v in (s1, a1, *tested))  # flat at the top is not hacking
     if reward_rose and task_flat and not solved:
         return HealthCheck(name, False, (
             f"reward hacking: the matching reward per step rose from {m0:.3g} to {m1:.3g} while the evaluations' "

@@ -98,8 +98,9 @@ def read_metrics(run_dir: str) -> list[dict[str, Any]]:
     return [r for r in rows if "round" in r]
 
 
-def _metrics_checks(rows: list[dict[str, Any]], action_dim: int, curriculum_length: int | None) -> list[HealthCheck]:
-    checks = [reward_tracks_the_task(rows), policy_entropy(rows, action_dim), learned_reward_share(rows)]
+def _metrics_checks(rows: list[dict[str, Any]], action_dim: int, curriculum_length: int | None,
+                    test: dict[str, Any] | None = None) -> list[HealthCheck]:
+    checks = [reward_tracks_the_task(rows, test), policy_entropy(rows, action_dim), learned_reward_share(rows)]
     subgoals = [int(r["subgoal"]) for r in rows if r.get("subgoal") is not None]
     if curriculum_length is not None:
         checks.append(subgoal_progress(subgoals, curriculum_length))
@@ -118,7 +119,8 @@ def _probe_checks(probe: LearnerProbe, expert_fraction: float) -> list[HealthChe
     ]
 
 
-def health_report(run: Any, method: str, *, episodes: int = 5, metrics_dir: str | None = None) -> HealthReport:
+def health_report(run: Any, method: str, *, episodes: int = 5, metrics_dir: str | None = None,
+                  test: dict[str, Any] | None = None) -> HealthReport:
     """The health report of a built CSIRL run (:class:`~torchrl_csirl.launch.assembly.Run` with
     :class:`~torchrl_csirl.launch.csirl.CSIRLParts`), from its metrics and its networks as they are now.
 
@@ -127,11 +129,12 @@ def health_report(run: Any, method: str, *, episodes: int = 5, metrics_dir: str 
         method: its method's name.
         episodes: the policy's probe episodes (seeded from ``eval.seed``).
         metrics_dir: the directory whose ``metrics.jsonl`` holds the run's rounds (default: the run's).
+        test: the run's final test (its summary: ``success_rate``, ``return``), where it has one.
     """
     cfg, parts = run.cfg, run.parts
     rows = read_metrics(metrics_dir or run.run_dir)
     report = HealthReport(metrics_dir or run.run_dir, run.spec.name, method, rows=rows)
-    report.checks += _metrics_checks(rows, run.spec.action_dim, parts.curriculum.length)
+    report.checks += _metrics_checks(rows, run.spec.action_dim, parts.curriculum.length, test)
     run.mirror.sync()
     report.probe = probe_learner(
         env=run.eval_env, policy=run.mirror.policy, loss=parts.modules.sac, transforms=run.online_buffer.transform,

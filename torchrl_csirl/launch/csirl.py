@@ -329,18 +329,19 @@ def finish(run: Run[CSIRLParts]) -> dict[str, object]:
     summary.update(final_subgoal=run.parts.curriculum.subgoal, curriculum_length=run.parts.curriculum.length)
     summary["plots"] += curriculum_plots(run)
     if run.cfg.eval.health_episodes:
-        summary.update(write_health(run, run.cfg.eval.health_episodes))
+        summary.update(write_health(run, run.cfg.eval.health_episodes, test=summary))
         summary["plots"].append(summary["health_picture"])
     return summary
 
 
 def write_health(run: Run[CSIRLParts], episodes: int, metrics_dir: str | None = None,
-                 out_dir: str | None = None) -> dict[str, object]:
+                 out_dir: str | None = None, test: dict[str, object] | None = None) -> dict[str, object]:
     """The run's health report (:mod:`torchrl_csirl.diagnostics`) in ``health.json`` / ``health.png`` of
-    ``out_dir`` (default: the run's directory), one line naming the flagged checks; the summary's fields."""
+    ``out_dir`` (default: the run's directory), one line naming the flagged checks; the summary's fields.
+    ``test``: the final test's summary, where the run has one (the task's last word in the report)."""
     from torchrl_csirl.diagnostics import health_report, write_health_report
 
-    report = health_report(run, method_name(run.cfg), episodes=episodes, metrics_dir=metrics_dir)
+    report = health_report(run, method_name(run.cfg), episodes=episodes, metrics_dir=metrics_dir, test=test)
     paths = write_health_report(report, out_dir)
     if report.flagged:
         print(f"health: {len(report.flagged)} of {len(report.checks)} checks flagged "

@@ -40,6 +40,19 @@ def _action_dim(cfg) -> int | None:
         return None
 
 
+def _final_test(run_dir: str) -> dict | None:
+    """The run's final test (``summary.json``), or None for a run that has not finished."""
+    path = os.path.join(run_dir, "summary.json")
+    if not os.path.isfile(path):
+        return None
+    try:
+        with open(path, encoding="utf-8") as f:
+            return json.load(f)
+    except json.JSONDecodeError as e:
+        raise ConfigError(f"diagnose {run_dir}: summary.json is not JSON ({e}); move it away to diagnose the run "
+                          "from its metrics") from e
+
+
 def _rebuilt(run_dir: str, workdir: str):
     """The CSIRL run rebuilt from a copy of its configuration and last checkpoint (one in-process collector)."""
     from torchrl_csirl.launch.csirl import CSIRL_RECIPE
@@ -75,7 +88,7 @@ def diagnose(run_dir: str, episodes: int = 5) -> dict[str, object]:
     if not _is_csirl(run_dir):  # a baseline: what its metrics say
         cfg = OmegaConf.load(os.path.join(run_dir, "config.yaml"))
         rows = read_metrics(run_dir)
-        checks = [reward_tracks_the_task(rows)]
+        checks = [reward_tracks_the_task(rows, _final_test(run_dir))]
         action_dim = _action_dim(cfg)
         if action_dim is not None:
             checks.append(policy_entropy(rows, action_dim))
@@ -89,7 +102,7 @@ def diagnose(run_dir: str, episodes: int = 5) -> dict[str, object]:
     with tempfile.TemporaryDirectory() as workdir:
         run = _rebuilt(run_dir, workdir)
         try:
-            write_health(run, episodes, metrics_dir=run_dir, out_dir=run_dir)
+            write_health(run, episodes, metrics_dir=run_dir, out_dir=run_dir, test=_final_test(run_dir))
         finally:
             run.close()
     with open(os.path.join(run_dir, "health.json"), encoding="utf-8") as f:
