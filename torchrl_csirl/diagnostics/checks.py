@@ -135,7 +135,8 @@ def reward_tracks_the_task(rows: Sequence[dict], test: Mapping[str, Any] | None 
             "and last third of the run); the matching features "
             "(env.features, the task's position_feature_indices) reward something the task does not"), figures)
     return HealthCheck(name, True, f"the matching reward went from {m0:.3g} to {m1:.3g}, the evaluations' success "
-                                   f"from {s0:.2f} to {s1:.2f}", figures)
+                                   f"from {s0:.2f} to {s1:.2f} and the environment's return from {e0:.3g} to {e1:.3g}",
+                       figures)
 
 
 def critic_calibration(values: torch.Tensor, returns: torch.Tensor, where: str) -> HealthCheck:
