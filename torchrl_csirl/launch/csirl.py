@@ -247,8 +247,9 @@ def warm_start_actor(cfg: DictConfig, modules: CSIRLLearner, expert: TensorDictR
     """``csirl.actor_pretrain_updates`` behavioural-cloning updates of the actor before training (none by default)."""
     updates = cfg.csirl.actor_pretrain_updates
     if updates:
+        print(f"actor warm start: {updates} behavioural-cloning updates before the first round", file=sys.stderr)
         error = pretrain_actor(modules.actor, expert, updates, lr=cfg.optim.lr,
-                               batch_size=cfg.csirl.actor_pretrain_batch_size)
+                               batch_size=cfg.csirl.actor_pretrain_batch_size, progress_bar=cfg.logger.progress_bar)
         print(f"actor warm-started: {updates} behavioural-cloning updates, last batch's error {error:.4f}",
               file=sys.stderr)
 

@@ -57,7 +57,7 @@ class ActorBehaviourCloning:
 
 
 def pretrain_actor(actor: nn.Module, expert_buffer: Any, updates: int, *, lr: float = 3e-4, batch_size: int = 256,
-                   loss_function: str = "l2") -> float:
+                   loss_function: str = "l2", progress_bar: bool = False) -> float:
     """Behavioural cloning of ``actor`` on the expert's ``(observation, action)`` pairs for ``updates`` Adam steps: a
     warm start, so that reinforcement learning begins from a policy that already imitates (``csirl.actor_pretrain_updates``).
 
@@ -71,6 +71,7 @@ def pretrain_actor(actor: nn.Module, expert_buffer: Any, updates: int, *, lr: fl
         lr: Adam's learning rate.
         batch_size: expert pairs per step.
         loss_function: ``"l2"`` or ``"l1"``.
+        progress_bar: a progress bar over the updates (tqdm).
 
     Returns:
         float: the last batch's cloning loss (NaN when ``updates`` is 0).
@@ -87,6 +88,7 @@ def pretrain_actor(actor: nn.Module, expert_buffer: Any, updates: int, *, lr: fl
         True
     """
     from torchrl.objectives import BCLoss
+    from tqdm.auto import trange
 
     if updates < 0:
         raise ValueError(f"updates must be >= 0, got {updates!r}.")
@@ -94,7 +96,7 @@ def pretrain_actor(actor: nn.Module, expert_buffer: Any, updates: int, *, lr: fl
     optimizer = torch.optim.Adam(actor.parameters(), lr=lr)
     last = torch.tensor(float("nan"))
     with set_exploration_type(ExplorationType.DETERMINISTIC):
-        for _ in range(updates):
+        for _ in trange(updates, desc="actor warm start", unit="update", disable=not progress_bar):
             last = loss(expert_buffer.sample(batch_size))["loss_bc"]
             optimizer.zero_grad(set_to_none=True)
             last.backward()
