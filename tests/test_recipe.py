@@ -740,3 +740,25 @@ def test_method_registry_reads_each_method_with_its_recipe_schema():
     cfg = load_config_for("csirl-b")(["preset=paper"])
     assert cfg.csirl.updates_per_round == 20000 and cfg.csirl.intrinsic is False
     assert load_config_for("csirl")(["env.scenario=hopper"]).env.task == "hopper"
+
+
+def test_main_threads_hold_from_the_runs_first_step(tmp_path):
+    """``collector.main_threads`` reaches the work before the collector starts (an actor's warm start): two runs
+    sharing two cores with one thread each, but a warm start on torch's default threads, spin in OpenMP."""
+    from torchrl_csirl.launch import lifecycle
+
+    cfg = csirl.load_config(["collector.main_threads=1", f"logger.output_dir={tmp_path}", "logger.exp_name=threads"])
+    seen = []
+
+    def build(cfg, run_dir, **_):
+        seen.append(torch.get_num_threads())
+        raise RuntimeError("built")
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        with pytest.raises(RuntimeError, match="built"):
+            lifecycle.open_configured_run(cfg, lambda c: "csirl", build)
+    finally:
+        torch.set_num_threads(before)
+    assert seen == [1] and not os.path.exists(os.path.join(tmp_path, "threads"))

@@ -112,6 +112,27 @@ def make_eval_env(scenario: str) -> EnvBase:
     return make_scenario_env(scenario)
 
 
+def use_main_threads(collector: DictConfig) -> int:
+    """Applies ``collector.main_threads`` to this process (``torch.set_num_threads``) from the run's first step, so
+    that the work before the collector starts (an actor's warm start, the demonstrations' preparation) keeps to it;
+    unset, torch's default stays. Returns the threads in use.
+
+    Two runs sharing two cores with one thread each, but a warm start on torch's default two threads, spin in
+    OpenMP's barriers: 30 000 behavioural-cloning updates took over 30 minutes instead of 3.
+
+    Examples:
+        >>> from omegaconf import OmegaConf
+        >>> before = torch.get_num_threads()
+        >>> use_main_threads(OmegaConf.create({"main_threads": 1}))
+        1
+        >>> torch.set_num_threads(before)
+    """
+    threads = collector.get("main_threads")
+    if threads:
+        torch.set_num_threads(int(threads))
+    return torch.get_num_threads()
+
+
 def make_collector(scenario: str, collector: DictConfig, policy: nn.Module, frames_done: int = 0,
                    worker_errors: WorkerErrorLog | None = None) -> BaseCollector:
     """A synchronous collector of ``collector.num_workers`` worker processes (unbounded; the trainer stops it).

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any, Callable
 from omegaconf import DictConfig, OmegaConf
 
 from torchrl_csirl.launch.assembly import Run
+from torchrl_csirl.launch.collection import use_main_threads
 from torchrl_csirl.launch.config import flatten_config
 from torchrl_csirl.launch.run import (
     default_run_name,
@@ -99,7 +100,10 @@ def record_resumed_settings(cfg: DictConfig, run_dir: str, frames: int) -> dict[
 
 def open_configured_run(cfg: DictConfig, method: Callable[[DictConfig], str], make_trainer: Callable[..., Run]) -> Run:
     """A new run (:func:`start_run`, its directory named by ``method(cfg)``), or the run of
-    ``cfg.checkpoint.resume`` with its checkpoint restored (:func:`resume_run`)."""
+    ``cfg.checkpoint.resume`` with its checkpoint restored (:func:`resume_run`); ``collector.main_threads`` holds
+    from the first step (:func:`~torchrl_csirl.launch.collection.use_main_threads`)."""
+    if "collector" in cfg:
+        use_main_threads(cfg.collector)
     if cfg.checkpoint.resume is None:
         return start_run(cfg, method(cfg), make_trainer)
     return resume_run(cfg, *resolve_resume(cfg.checkpoint.resume), make_trainer)
