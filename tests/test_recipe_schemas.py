@@ -76,3 +76,19 @@ def test_a_scenarios_own_defaults_go_under_the_preset_and_the_command_line(tmp_p
     (tmp_path / "scene" / "merge.yaml").write_text("model:\n  lane_featurs: true\n")
     with pytest.raises(config.ConfigError, match="model.lane_featurs: unknown configuration key"):
         config.load_config(csirl.CSIRLHighwayConfig, ["env.scenario=merge"], str(tmp_path))
+
+
+def test_a_tasks_own_defaults_apply_to_that_task_alone_and_go_under_the_command_line():
+    """``config/csirl_task/scene/<task>.yaml`` for the tasks outside the driving schema: the HalfCheetah trains
+    without expert transitions (docs/studies/outside-driving.md), by either spelling of its name."""
+    from torchrl_csirl.launch import csirl
+    from torchrl_csirl.launch.recipes import recipe_for
+
+    tasks = config.scene_defaults(csirl.TASK_CONFIG_DIR)
+    assert tasks["halfcheetah"] == {"replay_buffer.expert_fraction": 0.0}
+    recipe = recipe_for("csirl")
+    for spelling in ("env.scenario", "env.task"):
+        assert recipe.load_config([f"{spelling}=halfcheetah"]).replay_buffer.expert_fraction == 0.0
+    assert recipe.load_config(["env.task=halfcheetah", "replay_buffer.expert_fraction=0.25"]).replay_buffer.expert_fraction == 0.25
+    assert recipe.load_config(["env.task=hopper"]).replay_buffer.expert_fraction == 0.25
+    assert recipe.load_config(["env.scenario=merge"]).replay_buffer.expert_fraction == 0.25

@@ -10,7 +10,8 @@ dataclasses by ``torchrl_csirl.launch.config.describe_rows`` — the same
 function behind every script's ``--help``, so the page can never drift from the code.
 
 ``<!-- scene-defaults: torchrl_csirl.launch.csirl -->`` is replaced by the table of the scenarios' own defaults
-(``scene/<scenario>.yaml`` under that module's ``CONFIG_DIR``), read by ``torchrl_csirl.launch.config.scene_defaults``.
+(``scene/<scenario>.yaml`` under that module's ``CONFIG_DIR``, or under another folder it names:
+``torchrl_csirl.launch.csirl:TASK_CONFIG_DIR``), read by ``torchrl_csirl.launch.config.scene_defaults``.
 """
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ import importlib
 import re
 
 _MARKER = re.compile(r"^<!-- config-reference: ([\w.]+):(\w+) -->$", flags=re.M)
-_SCENES = re.compile(r"^<!-- scene-defaults: ([\w.]+) -->$", flags=re.M)
+_SCENES = re.compile(r"^<!-- scene-defaults: ([\w.]+)(?::(\w+))? -->$", flags=re.M)
 
 
 def _cell(text: str) -> str:
@@ -40,12 +41,12 @@ def config_table(module: str, name: str) -> str:
     return "\n".join(rows)
 
 
-def scene_table(module: str) -> str:
-    """The Markdown table of the scenario defaults under ``module.CONFIG_DIR``."""
+def scene_table(module: str, folder: str | None = None) -> str:
+    """The Markdown table of the scenario defaults under ``module.CONFIG_DIR`` (or ``module.<folder>``)."""
     from torchrl_csirl.launch.config import scene_defaults
 
     rows = ["| scenario | its defaults |", "|---|---|"]
-    for scenario, values in scene_defaults(_import(module).CONFIG_DIR).items():
+    for scenario, values in scene_defaults(getattr(_import(module), folder or "CONFIG_DIR")).items():
         rows.append(f"| `{scenario}` | " + ", ".join(f"`{k}={_cell(str(v).lower() if isinstance(v, bool) else str(v))}`"
                                                      for k, v in values.items()) + " |")
     return "\n".join(rows)
@@ -54,4 +55,4 @@ def scene_table(module: str) -> str:
 def on_page_markdown(markdown: str, page, config, files) -> str:  # noqa: ARG001 - MkDocs hook signature
     """Replaces every config-reference and scene-defaults marker of a page by its generated table."""
     markdown = _MARKER.sub(lambda m: config_table(m.group(1), m.group(2)), markdown)
-    return _SCENES.sub(lambda m: scene_table(m.group(1)), markdown)
+    return _SCENES.sub(lambda m: scene_table(m.group(1), m.group(2)), markdown)

@@ -235,8 +235,8 @@ def scene_defaults(config_dir: str) -> dict[str, dict[str, object]]:
 def load_config(schema: type, overrides: list[str] | None = None, config_dir: str | None = None) -> DictConfig:
     """Schema defaults, the scenario's defaults, the ``preset``, then ``overrides``.
 
-    The scenario's defaults (``<config_dir>/scene/<env.scenario>.yaml``, where the scene has such a
-    file) are the default preset of that scene; a named preset (``preset=paper``) goes over them.
+    The scenario's defaults (``<config_dir>/scene/<env.scenario>.yaml``, or ``env.task``'s, where the scene has
+    such a file) are the default preset of that scene; a named preset (``preset=paper``) goes over them.
 
     Args:
         schema: the recipe's top-level dataclass.
@@ -251,7 +251,9 @@ def load_config(schema: type, overrides: list[str] | None = None, config_dir: st
     check_known_keys(schema, cli)
     base = OmegaConf.structured(schema)
     layers = []
-    scenario = OmegaConf.select(cli, "env.scenario", default=OmegaConf.select(base, "env.scenario", default=None))
+    scenario = OmegaConf.select(cli, "env.scenario", default=OmegaConf.select(cli, "env.task", default=None))
+    if scenario is None:
+        scenario = OmegaConf.select(base, "env.scenario", default=None)
     scene_file = scene_defaults_path(config_dir, scenario) if config_dir and isinstance(scenario, str) else None
     if scene_file and os.path.isfile(scene_file):
         layers.append(OmegaConf.load(scene_file))

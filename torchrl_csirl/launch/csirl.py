@@ -63,6 +63,8 @@ __all__ = ["CSIRL_RECIPE", "ConfigError", "CSIRLConfig", "CSIRLHighwayConfig", "
 
 #: the preset config group (``preset/<name>.yaml``, ``scene/<scenario>.yaml``), shipped in the package
 CONFIG_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "config", "csirl_highway")
+#: the other tasks' own defaults (``scene/<task>.yaml``), over :class:`CSIRLTaskConfig`'s
+TASK_CONFIG_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "config", "csirl_task")
 
 
 # ---------------------------------------------------------------------------------------- config
@@ -359,6 +361,7 @@ def check_precision(cfg: DictConfig) -> None:
 CSIRL_RECIPE = register_recipe(Recipe(
     name="csirl", script="torchrl_csirl.scripts.csirl_highway", methods=("csirl", "csirl-b"),
     schema=CSIRLHighwayConfig, task_schema=CSIRLTaskConfig, config_dir=CONFIG_DIR,
+    task_config_dir=TASK_CONFIG_DIR,
     checks=(check_collector_config, check_precision),
     method_overrides=lambda method: ["csirl.intrinsic=false"] if method == "csirl-b" else [],
     trainer=make_trainer, finish=finish, method_of=lambda cfg: method_name(cfg)))

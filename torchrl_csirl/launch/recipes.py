@@ -54,6 +54,7 @@ class Recipe:
         schema: the configuration schema of the driving scenes (or of every task when ``task_schema`` is None).
         task_schema: the schema of every other task (None: ``schema`` for every task).
         config_dir: the folder of ``schema``'s presets and per-scene defaults (None: ``preset=default`` only).
+        task_config_dir: the folder of ``task_schema``'s per-task defaults (``scene/<task>.yaml``; None: none).
         checks: ``check(cfg)`` for each configuration loaded (several keys at once, the device, ...);
             each raises :class:`~torchrl_csirl.launch.config.ConfigError`.
         command_check: ``check(overrides, resuming)`` on the command line before loading (e.g. a method named).
@@ -71,6 +72,7 @@ class Recipe:
     schema: type
     task_schema: type | None = None
     config_dir: str | None = None
+    task_config_dir: str | None = None
     checks: Sequence[Callable[[DictConfig], Any]] = ()
     command_check: Callable[[list[str], bool], None] | None = None
     method_overrides: Callable[[str], list[str]] = field(default=lambda method: [])
@@ -86,7 +88,7 @@ class Recipe:
         return self.task_schema
 
     def _config_dir(self, schema: type) -> str | None:
-        return self.config_dir if schema is self.schema else None
+        return self.config_dir if schema is self.schema else self.task_config_dir
 
     def _checked(self, cfg: DictConfig, overrides: list[str]) -> DictConfig:
         check_task_sections(cfg, overrides)
