@@ -19,6 +19,7 @@ from torchrl_csirl.diagnostics import (
     policy_entropy,
     reward_tracks_the_task,
     subgoal_progress,
+    warm_start_kept,
     where_episodes_end,
 )
 from torchrl_csirl.launch import csirl
@@ -117,16 +118,31 @@ def test_each_check_flags_its_own_failure_and_passes_a_healthy_figure():
     assert expert_transitions_reward(torch.zeros(3), torch.ones(3), 0.25).ok is False
     same_goal = torch.tensor([[10.0, 0.0], [10.2, 0.1], [9.9, -0.1]])
     assert demonstrations_share_a_goal(same_goal, path).ok is True
+    warm = [{"frames": f, "eval_success_rate": v, "eval_accomplish_rate": v} for f, v in ((0, 0.2), (10, 0.0), (20, 0.3))]
+    lost = warm_start_kept(warm[:2])
+    assert lost.ok is False and "undid the warm start" in lost.message and lost.figures["warm_start"] == 0.2
+    assert warm_start_kept(warm).ok is True and warm_start_kept(warm[1:]).ok is None
+    progress = warm_start_kept([dict(r, eval_success_rate=0.0) for r in warm])  # no success: the accomplish rate
+    assert progress.ok is True and progress.figures["metric"] == "accomplish rate"
+    assert warm_start_kept([dict(r, eval_success_rate=0.0, eval_accomplish_rate=0.0) for r in warm]).ok is None
     spread = demonstrations_share_a_goal(torch.tensor([[10.0, 0.0], [0.0, 5.0], [3.0, -4.0]]), path)
     assert spread.ok is False and "the goal changes from episode to episode" in spread.message
 
 
-def test_a_run_writes_its_report_and_diagnose_rewrites_it_without_touching_the_run(tmp_path):
+def test_a_run_writes_its_report_and_diagnose_rewrites_it_without_touching_the_run(tmp_path, capsys):
     summary = csirl_highway.main([*TINY, "collector.total_frames=300", "logger.backend=csv",
-                                  f"logger.output_dir={tmp_path}"])
+                                  "csirl.actor_pretrain_updates=5", f"logger.output_dir={tmp_path}"])
     run_dir = summary["run_dir"]
     with open(os.path.join(run_dir, "health.json")) as f:
         written = json.load(f)
+    # the warm-started actor is evaluated before any update: the learning curve's first point, outside the auc
+    with open(os.path.join(run_dir, "metrics.jsonl")) as f:
+        evaluated = [row for row in map(json.loads, f) if "eval_accomplish_rate" in row]
+    assert evaluated[0]["frames"] == 0 and evaluated[0]["updates"] == 0 and len(evaluated) > 1
+    during = [row["eval_accomplish_rate"] for row in evaluated[1:]]
+    assert summary["auc"] == pytest.approx(sum(during) / len(during))
+    assert "actor warm start, before any update: success_rate" in capsys.readouterr().err
+    assert "warm_start_kept" in {c["name"] for c in written["checks"]}
     assert summary["health"] == os.path.join(run_dir, "health.json") and os.path.getsize(summary["health_picture"]) > 0
     assert written["flagged"] == summary["health_flagged"]
     assert {c["name"] for c in written["checks"]} >= {"reward_tracks_the_task", "critic_calibration_expert",

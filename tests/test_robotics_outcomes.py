@@ -59,3 +59,19 @@ def test_main_reports_each_task_and_refuses_a_driving_policy(tmp_path, capsys):
         robotics_outcomes.main([str(driving)])
     with pytest.raises(SystemExit):
         robotics_outcomes.main([str(driving), "--episodes", "0"])
+
+
+def test_warm_start_probe_clones_the_actor_as_a_run_does_and_rolls_its_test_episodes(tmp_path):
+    import warm_start_probe
+
+    from torchrl_csirl.modules import load_policy
+
+    stats = warm_start_probe.main(["--updates", "20", "--episodes", "1", "--out", str(tmp_path), "logger.progress_bar=false"])
+    assert stats["updates"] == 20 and stats["episodes"] == 1
+    assert sum(stats[o] for o in robotics_outcomes.OUTCOMES["antmaze-umaze"]) == 1
+    saved = load_policy(stats["policy"])
+    spec = ROBOTICS_TASKS["antmaze-umaze"]
+    assert sum(p.numel() for p in saved.parameters()) == sum(
+        p.numel() for p in make_actor(spec.obs_dim, spec.action_dim).parameters())
+    with pytest.raises(SystemExit):
+        warm_start_probe.main(["--updates", "0"])

@@ -114,7 +114,8 @@ class CSIRLHyperparameters:
     actor_bc_coef: float = option(0.0, minimum=0.0, help="> 0: behavioural cloning on the actor (TD3+BC-style)")
     actor_pretrain_updates: int = option(
         0, minimum=0, help="behavioural-cloning updates of the actor on the demonstrations before training starts "
-                           "(a warm start, batches of actor_pretrain_batch_size, Adam at optim.lr); 0: none, the paper")
+                           "(a warm start, batches of actor_pretrain_batch_size, Adam at optim.lr), evaluated before the first "
+                           "update (the learning curve at frame 0); 0: none, the paper")
     actor_pretrain_batch_size: int = option(256, above=0, help="expert pairs per warm-start update")
     fixed_alpha: bool = option(False, help="false: SAC's automatic temperature (paper: true)")
 

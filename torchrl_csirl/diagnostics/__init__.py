@@ -26,6 +26,7 @@ from torchrl_csirl.diagnostics.checks import (
     policy_entropy,
     reward_tracks_the_task,
     subgoal_progress,
+    warm_start_kept,
     where_episodes_end,
 )
 from torchrl_csirl.diagnostics.probe import LearnerProbe, discounted_returns, measurable_states, probe_learner
@@ -60,6 +61,7 @@ __all__ = [
     "read_metrics",
     "reward_tracks_the_task",
     "subgoal_progress",
+    "warm_start_kept",
     "where_episodes_end",
     "write_health_report",
 ]

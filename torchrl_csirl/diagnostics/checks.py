@@ -26,6 +26,7 @@ __all__ = [
     "LEARNED_REWARD_SHARE_RANGE",
     "SATURATION_LIMIT",
     "VALUE_RATIO_LIMIT",
+    "WARM_START_KEPT_SHARE",
     "HealthCheck",
     "action_saturation",
     "critic_calibration",
@@ -36,6 +37,7 @@ __all__ = [
     "policy_entropy",
     "reward_tracks_the_task",
     "subgoal_progress",
+    "warm_start_kept",
     "where_episodes_end",
 ]
 
@@ -88,6 +90,10 @@ def _rounds(rows: Sequence[dict]) -> list[dict]:
     return [r for r in rows if "round" in r]
 
 
+#: the share of a warm-started actor's score (before any update) under which the last third's evaluations are called
+#: a lost warm start
+WARM_START_KEPT_SHARE = 0.5
+
 #: a test success (or accomplish rate) from which the task counts as solved: a score flat there is not a failure
 SOLVED = 0.9
 
@@ -137,6 +143,42 @@ def reward_tracks_the_task(rows: Sequence[dict], test: Mapping[str, Any] | None 
     return HealthCheck(name, True, f"the matching reward went from {m0:.3g} to {m1:.3g}, the evaluations' success "
                                    f"from {s0:.2f} to {s1:.2f} and the environment's return from {e0:.3g} to {e1:.3g}",
                        figures)
+
+
+def warm_start_kept(rows: Sequence[dict]) -> HealthCheck:
+    """A warm-started actor (``csirl.actor_pretrain_updates``) against the training that follows: its evaluation
+    before any update (the row at frame 0) and the evaluations after, in success, else accomplish rate.
+
+    Args:
+        rows: ``metrics.jsonl``'s rows (``frames``, ``eval_success_rate``, ``eval_accomplish_rate``).
+
+    Examples:
+        >>> rows = [{"frames": f, "eval_success_rate": s} for f, s in ((0, 0.2), (10, 0.0), (20, 0.0), (30, 0.0))]
+        >>> warm_start_kept(rows).ok, warm_start_kept(rows[1:]).ok
+        (False, None)
+    """
+    name = "warm_start_kept"
+    evaluated = [r for r in rows if r.get("eval_success_rate") is not None or r.get("eval_accomplish_rate") is not None]
+    if not evaluated or evaluated[0].get("frames") != 0:
+        return HealthCheck(name, None, "no evaluation before the first update (the actor was not warm-started)")
+    start, after = evaluated[0], evaluated[1:]
+    if not after:
+        return HealthCheck(name, None, "no evaluation after the warm start's")
+    key = next((k for k in ("eval_success_rate", "eval_accomplish_rate") if (start.get(k) or 0.0) > 0.0), None)
+    if key is None:
+        return HealthCheck(name, None, "the warm-started actor scored 0 before any update: nothing to keep")
+    what = key.removeprefix("eval_").replace("_", " ")
+    first, last = after[0].get(key), _thirds(after, key)[1]
+    figures = {"metric": what, "warm_start": start[key], "first_after": first, "last_third": last,
+               "first_after_frames": after[0].get("frames")}
+    if last < WARM_START_KEPT_SHARE * start[key]:
+        return HealthCheck(name, False, (
+            f"the training undid the warm start: the cloned actor's {what} was {start[key]:.2f} before any update, "
+            f"{first:.2f} at the first evaluation after ({after[0].get('frames')} frames) and {last:.2f} in the "
+            "last third; the actor follows critics that have not learned yet (critic_calibration; "
+            "csirl.actor_bc_coef keeps cloning in the actor's loss)"), figures)
+    return HealthCheck(name, True, f"the warm-started actor's {what}: {start[key]:.2f} before any update, {last:.2f} "
+                                   "in the last third", figures)
 
 
 def critic_calibration(values: torch.Tensor, returns: torch.Tensor, where: str) -> HealthCheck:

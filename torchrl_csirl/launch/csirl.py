@@ -256,6 +256,18 @@ def warm_start_actor(cfg: DictConfig, modules: CSIRLLearner, expert: TensorDictR
               file=sys.stderr)
 
 
+def evaluate_warm_start(run: Run[CSIRLParts]) -> dict[str, float]:
+    """The warm-started actor's validation episodes before any reinforcement update: the learning curve's first
+    point (frame 0, ``eval_*`` in the metrics), so that a run shows whether its updates keep what the cloning gave.
+    Not counted in the summary's ``auc`` (the evaluations during training)."""
+    metrics = run.evaluation.run(run.trainer)
+    run.trainer.log_now()
+    shown = ", ".join(f"{k} {metrics[k]:.3g}" for k in ("success_rate", "accomplish_rate", "env_return") if k in metrics)
+    print(f"actor warm start, before any update: {shown} ({run.cfg.eval.episodes} validation episodes)",
+          file=sys.stderr)
+    return metrics
+
+
 def first_subgoal(cfg: DictConfig, length: int) -> int | None:
     """The curriculum's first subgoal: the last state with ``fixed_subgoal`` (it can never move
     on from there), else None (drawn in ``[1, 5]`` as in the paper)."""
@@ -285,7 +297,7 @@ def make_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume_fra
     selection = SubgoalSelectionHook(curriculum)
     states: dict[str, Any] = {"loss": modules.sac, "reward_network": modules.reward_network, **optimizers,
                               "subgoal_selection": selection}
-    return assemble_trainer(
+    run = assemble_trainer(
         cfg, spec, run_dir, device=device, demos=demos, policy=modules.actor, online_buffer=online,
         update_step=make_update_step(cfg, modules, optimizers, online, expert),
         total_frames=total_frames(cfg, curriculum.length), updates_per_round=cfg.csirl.updates_per_round,
@@ -293,6 +305,9 @@ def make_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume_fra
         resume_frames=resume_frames,
         parts=CSIRLParts(modules, optimizers, curriculum, matching, expert, selection),
     )
+    if cfg.csirl.actor_pretrain_updates and not frames_done:
+        evaluate_warm_start(run)
+    return run
 
 
 @dataclass

@@ -11,6 +11,19 @@ from torchrl_csirl.envs import ScenarioSpec
 from torchrl_csirl.launch.assembly import Run
 
 
+def learning_curve_auc(history: list[dict[str, Any]]) -> float | None:
+    """The mean accomplish rate over the evaluations during training (``history``), without the one before any update
+    (frame 0, a warm-started actor's); None without any.
+
+    Examples:
+        >>> learning_curve_auc([{"frames": 0, "accomplish_rate": 0.9}, {"frames": 10, "accomplish_rate": 0.2},
+        ...                     {"frames": 20, "accomplish_rate": 0.4}])
+        0.30000000000000004
+    """
+    during = [h["accomplish_rate"] for h in history if h["frames"] > 0]
+    return sum(during) / len(during) if during else None
+
+
 def evaluation_summary(cfg: DictConfig, spec: ScenarioSpec, method: str, final: dict[str, float],
                  expert_rate: float | None) -> dict[str, Any]:
     """The summary fields of a run's final test evaluation ``final`` (:func:`evaluate_policy`'s
@@ -56,7 +69,7 @@ def final_summary(run: Run, method: str, title: str) -> dict[str, Any]:
     summary = {
         **evaluation_summary(cfg, run.spec, method, final, expert_rate),
         "device": str(run.device),
-        "auc": sum(h["accomplish_rate"] for h in history) / len(history) if history else None,
+        "auc": learning_curve_auc(history),
         "frames": trainer.frames,
         "updates": trainer.updates,
         "rounds": trainer.rounds,

@@ -195,6 +195,25 @@ class CSIRLTrainer:
         """Adds entries to the metrics row of the current batch (for ``round_end`` ops)."""
         self._recorded.update(metrics)
 
+    def log_now(self) -> dict[str, Any]:
+        """Runs the ``log`` ops now on a row of the counters (``frames``, ``updates``, ``round``) and what was
+        :meth:`record`-ed since the last row: a measurement outside a batch, e.g. an evaluation before training
+        starts. Returns the row.
+
+        Examples:
+            >>> from types import SimpleNamespace
+            >>> rows = []
+            >>> trainer = SimpleNamespace(frames=0, updates=0, rounds=0, _recorded={"eval_accomplish_rate": 0.7},
+            ...                           _ops={"log": [("keep", lambda t, row: rows.append(row))]})
+            >>> CSIRLTrainer.log_now(trainer)["eval_accomplish_rate"], rows[0]["frames"]
+            (0.7, 0)
+        """
+        row = {"frames": self.frames, "updates": self.updates, "round": self.rounds, **self._recorded}
+        self._recorded = {}
+        for _, op in self._ops["log"]:
+            op(self, row)
+        return row
+
     def ops(self, stage: str) -> list[str]:
         """Names of the ops registered at ``stage``, in call order."""
         return [name for name, _ in self._ops[stage]]
