@@ -83,6 +83,18 @@ def test_ops_run_in_stage_order_and_batch_process_transforms_the_batch():
     assert "reward" not in trainer.online_buffer[:]  # removed by the op before the buffer
 
 
+def test_log_now_logs_the_counters_and_what_was_recorded_outside_a_batch():
+    trainer, _ = make_trainer(total_frames=10, updates_per_round=1)
+    rows = []
+    trainer.register_op("log", lambda t, row: rows.append(dict(row)))
+    trainer.record(eval_accomplish_rate=0.7)  # an evaluation before training (a warm-started actor's)
+    assert trainer.log_now()["eval_accomplish_rate"] == 0.7
+    trainer.train()
+    trainer.collector.shutdown()
+    assert rows[0] == {"frames": 0, "updates": 0, "round": 0, "eval_accomplish_rate": 0.7}
+    assert rows[1]["frames"] == 10 and "eval_accomplish_rate" not in rows[1]  # the record went to one row only
+
+
 def test_clear_buffer_each_round_keeps_only_the_current_round():
     trainer, _ = make_trainer(total_frames=40, utd_ratio=1.0, updates_per_round=15, clear_buffer_each_round=True)
     sizes = []

@@ -174,7 +174,7 @@ def warm_start_kept(rows: Sequence[dict]) -> HealthCheck:
     if last < WARM_START_KEPT_SHARE * start[key]:
         return HealthCheck(name, False, (
             f"the training undid the warm start: the cloned actor's {what} was {start[key]:.2f} before any update, "
-            f"{first:.2f} at the first evaluation after ({after[0].get('frames')} frames) and {last:.2f} in the "
+            f"{first:.2f} at the first evaluation after ({figures['first_after_frames']} frames) and {last:.2f} in the "
             "last third; the actor follows critics that have not learned yet (critic_calibration; "
             "csirl.actor_bc_coef keeps cloning in the actor's loss)"), figures)
     return HealthCheck(name, True, f"the warm-started actor's {what}: {start[key]:.2f} before any update, {last:.2f} "

@@ -201,14 +201,15 @@ class CSIRLTrainer:
         starts. Returns the row.
 
         Examples:
-            >>> from types import SimpleNamespace
-            >>> rows = []
-            >>> trainer = SimpleNamespace(frames=0, updates=0, rounds=0, _recorded={"eval_accomplish_rate": 0.7},
-            ...                           _ops={"log": [("keep", lambda t, row: rows.append(row))]})
-            >>> CSIRLTrainer.log_now(trainer)["eval_accomplish_rate"], rows[0]["frames"]
-            (0.7, 0)
+            >>> # trainer.record(eval_accomplish_rate=0.7); trainer.log_now()
+            >>> # -> {"frames": 0, "updates": 0, "round": 0, "eval_accomplish_rate": 0.7} to every log op
+            >>> # (tests/test_trainer.py, on a real trainer)
         """
-        row = {"frames": self.frames, "updates": self.updates, "round": self.rounds, **self._recorded}
+        return self._log_row({"frames": self.frames, "updates": self.updates, "round": self.rounds})
+
+    def _log_row(self, row: dict[str, Any]) -> dict[str, Any]:
+        """``row`` with what was :meth:`record`-ed since the last row, through the ``log`` ops."""
+        row.update(self._recorded)
         self._recorded = {}
         for _, op in self._ops["log"]:
             op(self, row)
@@ -396,10 +397,7 @@ class CSIRLTrainer:
                 round_ended = self.updates_in_round >= self.updates_per_round
                 if round_ended:
                     self._end_round()
-                row.update(self._recorded)
-                self._recorded = {}
-                for _, op in self._ops["log"]:
-                    op(self, row)
+                self._log_row(row)
                 bar.update(frames)
                 if self.postfix:
                     bar.set_postfix(self.postfix, refresh=False)
