@@ -97,8 +97,11 @@ def test_each_check_flags_its_own_failure_and_passes_a_healthy_figure():
     assert held.ok is True and held.figures["test_success"] == 0.96
     assert reward_tracks_the_task(dipped, test={"success_rate": 0.6, "return": 0.6}).ok is False
     returns = torch.full((10,), 30.0)
-    assert "over-value" in critic_calibration(torch.full((5, 10), 300.0), returns, "expert").message
-    assert "under-value" in critic_calibration(torch.full((5, 10), 3.0), returns, "expert").message
+    over = critic_calibration(torch.full((5, 10), 300.0), returns, "expert").message
+    under = critic_calibration(torch.full((5, 10), 3.0), returns, "expert").message
+    assert "over-value" in over and "under-value" in under
+    # the remedies point the right way: a minimum over more critics lowers the targets, over fewer raises them
+    assert "more critics" in over and "expert_fraction" in over and "fewer" in under
     assert critic_calibration(torch.full((5, 10), 33.0), returns, "expert").ok is True
     path = torch.stack([torch.arange(11.0), torch.zeros(11)], -1)
     assert where_episodes_end(torch.tensor([[10.0, 0.0], [9.5, 0.1]]), path).ok is True

@@ -202,12 +202,13 @@ def critic_calibration(values: torch.Tensor, returns: torch.Tensor, where: str) 
     if over:
         return HealthCheck(name, False, (
             f"the critics over-value the {where}'s states: {q:.3g} on average where the learner's own reward "
-            f"returns {g:.3g}; the TD targets feed on this (try fewer critics in the minimum, csirl.num_qvalue_nets, "
-            "or a smaller csirl.gamma)"), figures)
+            f"returns {g:.3g}; the TD targets feed on this (try fewer expert transitions in the batch, "
+            "replay_buffer.expert_fraction; more critics in the minimum, csirl.num_qvalue_nets; or a smaller "
+            "csirl.gamma)"), figures)
     if under:
         return HealthCheck(name, False, (
             f"the critics under-value the {where}'s states: {q:.3g} on average where the learner's own reward "
-            f"returns {g:.3g} (a short run, or the minimum over many critics, csirl.num_qvalue_nets)"), figures)
+            f"returns {g:.3g} (a short run, or the minimum over many critics: fewer, csirl.num_qvalue_nets)"), figures)
     return HealthCheck(name, True, f"the critics value the {where}'s states at {q:.3g}, their return is {g:.3g}",
                        figures)
 
