@@ -18,11 +18,14 @@ from torchrl_csirl.diagnostics import (
     learned_reward_share,
     policy_entropy,
     reward_tracks_the_task,
+    route_opening,
     subgoal_progress,
     warm_start_kept,
     where_episodes_end,
 )
+from torchrl_csirl.envs import resolve_scenario
 from torchrl_csirl.launch import csirl
+from torchrl_csirl.launch.builders import load_experts
 from torchrl_csirl.scripts import csirl_highway, diagnose
 
 TINY = ["collector.frames_per_batch=100", "collector.cut_episodes=true", "collector.init_random_frames=100",
@@ -124,6 +127,9 @@ def test_each_check_flags_its_own_failure_and_passes_a_healthy_figure():
     warm = [{"frames": f, "eval_success_rate": v, "eval_accomplish_rate": v} for f, v in ((0, 0.2), (10, 0.0), (20, 0.3))]
     lost = warm_start_kept(warm[:2])
     assert lost.ok is False and "undid the warm start" in lost.message and lost.figures["warm_start"] == 0.2
+    assert "csirl.actor_bc_coef keeps cloning" in lost.message  # the remedy a run without the term has not tried
+    anchored = warm_start_kept([dict(r, actor_bc_mse=0.01) for r in warm[:2]])  # the term was on: not offered again
+    assert anchored.figures["anchored"] and "even with cloning" in anchored.message
     assert warm_start_kept(warm).ok is True and warm_start_kept(warm[1:]).ok is None
     progress = warm_start_kept([dict(r, eval_success_rate=0.0) for r in warm])  # no success: the accomplish rate
     assert progress.ok is True and progress.figures["metric"] == "accomplish rate"
@@ -164,3 +170,21 @@ def test_diagnose_refuses_a_folder_that_is_not_a_run(tmp_path):
 
     with pytest.raises(ConfigError, match="not a run directory"):
         diagnose.diagnose(str(tmp_path))
+
+
+@pytest.mark.parametrize("target, subgoal, flagged", [("final", -1, True), ("final", 70, False), ("path", -1, False)])
+def test_route_opening_names_a_straight_line_target_across_the_antmazes_wall(target, subgoal, flagged):
+    """AntMaze U-maze's shipped demonstrations: with the subgoal past the U's turn, the straight line to it (``final``)
+    charges the route's first leg (it leads away from the goal); along the expert's path (``path``) it pays."""
+    cfg = csirl.load_config(["env.scenario=antmaze-umaze", f"csirl.matching_target={target}"])
+    spec = resolve_scenario("antmaze-umaze")
+    demos = load_experts(cfg.expert, spec)
+    curriculum = demos.trajectory_observations(0, include_final=True)
+    matching = csirl.make_matching(cfg, spec, curriculum, subgoal % len(curriculum))
+    routes = [matching(demos.trajectory(k))["next", matching.out_key].reshape(-1) for k in range(1, 6)]
+    check = route_opening(routes, target)
+    assert check.ok is (not flagged)
+    if flagged:
+        assert check.figures["opening_share"] > 0.2 and "csirl.matching_target=path" in check.message
+    else:
+        assert check.figures["opening_share"] < 0.02

@@ -14,9 +14,9 @@ SCRIPTS = sorted(name for name in os.listdir(TOOLS) if name.endswith(".py") and 
 
 
 def test_the_analysis_scripts_live_in_tools_and_recipes_holds_what_users_run():
-    assert SCRIPTS == ["compare_runs.py", "locomotion_probe.py", "meta_gradient_balance.py", "point_maze_experts.py",
-                       "policy_outcomes.py", "record_runs.py", "robotics_outcomes.py", "summarize_runs.py", "termination_probe.py",
-                       "warm_start_probe.py"]
+    assert SCRIPTS == ["compare_runs.py", "locomotion_probe.py", "matching_route_probe.py", "meta_gradient_balance.py",
+                       "point_maze_experts.py", "policy_outcomes.py", "record_runs.py", "robotics_outcomes.py",
+                       "summarize_runs.py", "termination_probe.py", "warm_start_probe.py"]
     assert not set(SCRIPTS) & set(os.listdir(os.path.join(ROOT, "recipes")))
 
 
@@ -64,3 +64,18 @@ def test_compare_runs_across_scenarios_sets_a_task_against_its_variant():
     assert row["scenario"] == "merge / roundabout" and row["n"] == [3, 3]
     with pytest.raises(SystemExit):  # without it the two sides share no scenario
         compare_runs.main([*first, "--against", *second, "--metrics", "success_rate"])
+
+
+def test_matching_route_probe_scores_the_demonstrations_route_per_rule(capsys):
+    """AntMaze's shipped demonstrations at the curriculum's last subgoal: the straight line to the goal (``final``)
+    charges the route's first leg and pays it far less in all than the distance along the path."""
+    import json
+
+    import matching_route_probe
+
+    rows = matching_route_probe.main(["--task", "antmaze-umaze", "--subgoals", "1.0", "--rules", "final", "path"])
+    final, path = rows
+    assert (final["rule"], path["rule"]) == ("final", "path") and final["demonstrations"] == 24
+    assert final["quarters"][0] < 0 < path["quarters"][0] and final["opening"] < 10 * path["opening"] < 0
+    assert 0 < final["return"] < path["return"]
+    assert json.loads(capsys.readouterr().out.strip().splitlines()[-1])["rows"] == rows

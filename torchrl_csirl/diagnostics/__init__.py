@@ -3,8 +3,8 @@
 * :mod:`~torchrl_csirl.diagnostics.checks`: each check, a named function of plain figures, flagged in plain
   words when out of range (reward hacking, critics over- or under-valued, a curriculum that never moves,
   a collapsed entropy, saturated actions, a learned reward too small or too large, a matching reward that
-  punishes the demonstrations, a reward that pays the policy more than the expert, episodes that end short
-  of the goal, demonstrations that do not share the curriculum trajectory's goal).
+  punishes the demonstrations or charges their route's first stretch, a reward that pays the policy more than
+  the expert, episodes that end short of the goal, demonstrations that do not share the curriculum trajectory's goal).
 * :mod:`~torchrl_csirl.diagnostics.probe`: the figures measured on a learner's own networks.
 * :mod:`~torchrl_csirl.diagnostics.report`: every check of a run, written at the end of each CSIRL run and by
   ``torchrl-csirl diagnose <run dir>``.
@@ -25,6 +25,7 @@ from torchrl_csirl.diagnostics.checks import (
     matching_along_demonstrations,
     policy_entropy,
     reward_tracks_the_task,
+    route_opening,
     subgoal_progress,
     warm_start_kept,
     where_episodes_end,
@@ -60,6 +61,7 @@ __all__ = [
     "probe_learner",
     "read_metrics",
     "reward_tracks_the_task",
+    "route_opening",
     "subgoal_progress",
     "warm_start_kept",
     "where_episodes_end",

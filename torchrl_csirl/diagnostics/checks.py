@@ -24,6 +24,7 @@ import torch
 __all__ = [
     "ENTROPY_FLOOR_PER_DIM",
     "LEARNED_REWARD_SHARE_RANGE",
+    "ROUTE_OPENING_SHARE",
     "SATURATION_LIMIT",
     "VALUE_RATIO_LIMIT",
     "WARM_START_KEPT_SHARE",
@@ -36,6 +37,7 @@ __all__ = [
     "matching_along_demonstrations",
     "policy_entropy",
     "reward_tracks_the_task",
+    "route_opening",
     "subgoal_progress",
     "warm_start_kept",
     "where_episodes_end",
@@ -48,6 +50,9 @@ VALUE_RATIO_LIMIT = 3.0
 SATURATION_LIMIT = 0.5
 #: entropy per action dimension below which the policy is called collapsed (a Tanh-Normal's entropy goes to -inf)
 ENTROPY_FLOOR_PER_DIM = -3.0
+#: the share of the demonstrations' route total that the route may cost before it pays (its opening) under the
+#: matching reward; beyond it, standing still beats walking the first stretch
+ROUTE_OPENING_SHARE = 0.1
 #: below the first, the learned reward cannot move the policy; above the second, it drowns the matching reward
 LEARNED_REWARD_SHARE_RANGE = (0.01, 0.8)
 
@@ -171,12 +176,16 @@ def warm_start_kept(rows: Sequence[dict]) -> HealthCheck:
     first, last = after[0].get(key), _thirds(after, key)[1]
     figures = {"metric": what, "warm_start": start[key], "first_after": first, "last_third": last,
                "first_after_frames": after[0].get("frames")}
+    figures["anchored"] = any(r.get("actor_bc_mse") is not None for r in rows)  # csirl.actor_bc_coef > 0
     if last < WARM_START_KEPT_SHARE * start[key]:
+        remedy = ("even with cloning in the actor's loss (csirl.actor_bc_coef): the updates follow a reward and "
+                  "critics that lead elsewhere (critic_calibration, expert_transitions_reward)" if figures["anchored"]
+                  else "the updates moved the actor off the cloned behaviour (critic_calibration says whether the "
+                       "critics had learned; csirl.actor_bc_coef keeps cloning in the actor's loss)")
         return HealthCheck(name, False, (
             f"the training undid the warm start: the cloned actor's {what} was {start[key]:.2f} before any update, "
             f"{first:.2f} at the first evaluation after ({figures['first_after_frames']} frames) and {last:.2f} in the "
-            "last third; the actor follows critics that have not learned yet (critic_calibration; "
-            "csirl.actor_bc_coef keeps cloning in the actor's loss)"), figures)
+            f"last third; {remedy}"), figures)
     return HealthCheck(name, True, f"the warm-started actor's {what}: {start[key]:.2f} before any update, {last:.2f} "
                                    "in the last third", figures)
 
@@ -368,6 +377,42 @@ def matching_along_demonstrations(rewards: torch.Tensor) -> HealthCheck:
             "scale or features are wrong"), figures)
     return HealthCheck(name, True, f"the matching reward pays the demonstration {mean:.3g} per step on its way to "
                                    "the subgoal", figures)
+
+
+def route_opening(routes: Sequence[torch.Tensor], target: str = "final") -> HealthCheck:
+    """Whether the matching reward pays the expert's own route from its start: the lowest point of its running sum
+    along each demonstration (the *opening*: what the route costs before it pays) against the route's total.
+
+    A straight line to a target behind a wall (``csirl.matching_target`` ``final`` or ``next`` on a maze that
+    turns away from its goal) charges the first stretch of the route: a learner that cannot yet finish the detour
+    is paid more for standing still.
+
+    Args:
+        routes: per demonstration, the matching reward ``[T]`` on its every step at the run's subgoal.
+        target: the matching target rule (``csirl.matching_target``), for the remedy.
+
+    Examples:
+        >>> route_opening([torch.tensor([-1.0, -1.0, 3.0, 3.0])]).ok, route_opening([torch.ones(4)]).ok
+        (False, True)
+    """
+    name = "route_opening"
+    if not routes:
+        return HealthCheck(name, None, "one demonstration: no other route to score")
+    openings = [min(0.0, float(r.double().cumsum(0).min())) for r in routes]
+    totals = [float(r.double().sum()) for r in routes]
+    opening, total = sum(openings) / len(routes), sum(totals) / len(routes)
+    figures = {"opening_mean": opening, "total_mean": total, "demonstrations": len(routes),
+               "opening_share": -opening / total if total > 0 else None}
+    if total > 0 and -opening <= ROUTE_OPENING_SHARE * total:
+        return HealthCheck(name, True, f"the matching reward pays the demonstrations' route {total:.3g} from its start "
+                                       f"(its opening costs {-opening:.3g})", figures)
+    remedy = ("csirl.matching_target=path measures the distance along the expert's path" if target != "path"
+              else "the features the matching reward measures, csirl.matching_features, or the subgoal")
+    what = (f"costs {-opening:.3g} before it pays ({-opening / total:.0%} of its total {total:.3g})" if total > 0
+            else f"is paid {total:.3g} in all")
+    return HealthCheck(name, False, (
+        f"at the run's subgoal the demonstrations' own route {what}: a learner that cannot yet walk the whole route "
+        f"is paid more for standing still; the target lies across a detour ({remedy})"), figures)
 
 
 def expert_transitions_reward(expert: torch.Tensor, policy: torch.Tensor, expert_fraction: float) -> HealthCheck:

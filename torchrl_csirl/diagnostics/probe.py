@@ -31,6 +31,8 @@ class LearnerProbe:
         policy_rewards: ``[T]`` the learner's reward on every step of the policy's episodes.
         expert_rewards: ``[U]`` the learner's reward on every demonstrated step.
         matching_to_subgoal: the matching reward on the curriculum trajectory's steps up to the subgoal.
+        matching_along_routes: per demonstration after the curriculum's (each walks the route from its own start),
+            the matching reward on its every step at the current subgoal.
         final_features: ``[E, F]`` the matching features of each episode's last state.
         demo_final_features: ``[N, F]`` the matching features of each demonstration's last state.
         path_features: ``[L, F]`` the curriculum trajectory's matching features.
@@ -54,6 +56,8 @@ class LearnerProbe:
     actions: torch.Tensor
     goal_conditioned: bool = False
     episode_paths: tuple[torch.Tensor, ...] = ()
+    matching_along_routes: tuple[torch.Tensor, ...] = ()
+    matching_target: str = "final"
 
 
 def discounted_returns(rewards: torch.Tensor, gamma: float) -> torch.Tensor:
@@ -153,10 +157,14 @@ def probe_learner(*, env: EnvBase, policy, loss, transforms, matching, demos, ga
     if matching.subgoal:
         with torch.no_grad():
             to_subgoal = matching(curriculum.clone())["next", matching.out_key].reshape(-1).float().cpu()
+    with torch.no_grad():
+        routes = tuple(matching(demos.trajectory(k).to(device))["next", matching.out_key].reshape(-1).float().cpu()
+                       for k in range(1, min(demonstrations + 1, demos.num_trajectories)))
     return LearnerProbe(
         policy_values=torch.cat(policy_values, -1), policy_returns=torch.cat(policy_returns),
         expert_values=torch.cat(expert_values, -1), expert_returns=torch.cat(expert_returns),
         policy_rewards=torch.cat(policy_rewards), expert_rewards=torch.cat(expert_rewards),
         matching_to_subgoal=to_subgoal, final_features=torch.stack(finals).float(), demo_final_features=demo_finals.cpu(),
         path_features=matching.expert_observations.index_select(-1, matching.position_feature_indices).float().cpu(),
-        actions=torch.cat(actions).float(), goal_conditioned=hasattr(matching, "demonstration_of"), episode_paths=tuple(paths))
+        actions=torch.cat(actions).float(), goal_conditioned=hasattr(matching, "demonstration_of"), episode_paths=tuple(paths),
+        matching_along_routes=routes, matching_target=getattr(matching, "target", "final"))
