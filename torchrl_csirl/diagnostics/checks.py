@@ -401,14 +401,15 @@ def route_opening(routes: Sequence[torch.Tensor], target: str = "final") -> Heal
     openings = [min(0.0, float(r.double().cumsum(0).min())) for r in routes]
     totals = [float(r.double().sum()) for r in routes]
     opening, total = sum(openings) / len(routes), sum(totals) / len(routes)
+    cost = 0.0 - opening  # what the route costs before it pays (never -0)
     figures = {"opening_mean": opening, "total_mean": total, "demonstrations": len(routes),
-               "opening_share": -opening / total if total > 0 else None}
-    if total > 0 and -opening <= ROUTE_OPENING_SHARE * total:
+               "opening_share": cost / total if total > 0 else None}
+    if total > 0 and cost <= ROUTE_OPENING_SHARE * total:
         return HealthCheck(name, True, f"the matching reward pays the demonstrations' route {total:.3g} from its start "
-                                       f"(its opening costs {-opening:.3g})", figures)
+                                       f"(its opening costs {cost:.3g})", figures)
     remedy = ("csirl.matching_target=path measures the distance along the expert's path" if target != "path"
               else "the features the matching reward measures, csirl.matching_features, or the subgoal")
-    what = (f"costs {-opening:.3g} before it pays ({-opening / total:.0%} of its total {total:.3g})" if total > 0
+    what = (f"costs {cost:.3g} before it pays ({cost / total:.0%} of its total {total:.3g})" if total > 0
             else f"is paid {total:.3g} in all")
     return HealthCheck(name, False, (
         f"at the run's subgoal the demonstrations' own route {what}: a learner that cannot yet walk the whole route "
