@@ -4,6 +4,7 @@ end of a run and by ``torchrl-csirl diagnose`` without touching the run."""
 from __future__ import annotations
 
 import json
+import math
 import os
 
 import pytest
@@ -84,6 +85,29 @@ def test_critics_with_an_inflated_bias_are_named_over_valued(merge_run):
     assert report.check("critic_calibration_policy").ok is False
 
 
+def test_the_critics_are_read_against_the_return_they_estimate_with_the_entropy_bonus(merge_run):
+    """The probe's returns hold SAC's entropy bonus beside the learner's reward: ten times alpha, ten times the
+    bonus's part, the reward's part unchanged (the same seeded episodes and draws)."""
+    loss = merge_run.parts.modules.sac
+    torch.manual_seed(0)  # the same draws of the policy's actions in both probes
+    first = health_report(merge_run, "csirl", episodes=1).probe
+    with torch.no_grad():
+        loss.log_alpha += math.log(10.0)
+    try:
+        torch.manual_seed(0)
+        tenfold = health_report(merge_run, "csirl", episodes=1).probe
+    finally:
+        with torch.no_grad():
+            loss.log_alpha -= math.log(10.0)
+    assert first.policy_entropy_returns.shape == first.policy_returns.shape and first.policy_returns.numel() > 0
+    assert first.policy_entropy_returns.abs().sum() > 0
+    reward_part = first.policy_returns - first.policy_entropy_returns
+    torch.testing.assert_close(tenfold.policy_returns - tenfold.policy_entropy_returns, reward_part)
+    ratio = tenfold.policy_entropy_returns.mean() / first.policy_entropy_returns.mean()
+    assert ratio == pytest.approx(10.0, rel=1e-4)
+    assert first.expert_entropy_returns.shape == first.expert_returns.shape
+
+
 def test_each_check_flags_its_own_failure_and_passes_a_healthy_figure():
     hacked = [{"frames": f, "matching_reward_mean": r, "eval_success_rate": 0.0, "eval_env_return": 1.0}
               for f, r in ((1, 0.1), (2, 0.2), (3, 0.9))]
@@ -101,11 +125,17 @@ def test_each_check_flags_its_own_failure_and_passes_a_healthy_figure():
     assert reward_tracks_the_task(dipped, test={"success_rate": 0.6, "return": 0.6}).ok is False
     returns = torch.full((10,), 30.0)
     over = critic_calibration(torch.full((5, 10), 300.0), returns, "expert").message
-    under = critic_calibration(torch.full((5, 10), 3.0), returns, "expert").message
+    under = critic_calibration(torch.full((5, 10), 3.0), returns, "policy").message
     assert "over-value" in over and "under-value" in under
     # the remedies point the right way: a minimum over more critics lowers the targets, over fewer raises them
     assert "more critics" in over and "expert_fraction" in over and "fewer" in under
     assert critic_calibration(torch.full((5, 10), 33.0), returns, "expert").ok is True
+    # Q(s, a) values the policy's continuation: below the demonstration's return on the expert's states is no fault
+    below = critic_calibration(torch.full((5, 10), 3.0), returns, "expert")
+    assert below.ok is True and "does not follow the expert" in below.message
+    # soft critics: a return whose entropy bonus is negative (SAC's target entropy -dim(A)) is read with it
+    soft = critic_calibration(torch.full((5, 10), -60.0), torch.full((10,), -55.0), "policy", torch.full((10,), -75.0))
+    assert soft.ok is True and soft.figures["entropy_return_mean"] == -75.0 and "entropy bonus" in soft.message
     path = torch.stack([torch.arange(11.0), torch.zeros(11)], -1)
     assert where_episodes_end(torch.tensor([[10.0, 0.0], [9.5, 0.1]]), path).ok is True
     short = where_episodes_end(torch.tensor([[1.0, 0.0]]), path)

@@ -14,9 +14,9 @@ SCRIPTS = sorted(name for name in os.listdir(TOOLS) if name.endswith(".py") and 
 
 
 def test_the_analysis_scripts_live_in_tools_and_recipes_holds_what_users_run():
-    assert SCRIPTS == ["compare_runs.py", "locomotion_probe.py", "matching_route_probe.py", "meta_gradient_balance.py",
-                       "point_maze_experts.py", "policy_outcomes.py", "record_runs.py", "robotics_outcomes.py",
-                       "summarize_runs.py", "termination_probe.py", "warm_start_probe.py"]
+    assert SCRIPTS == ["compare_runs.py", "entropy_bonus_records.py", "locomotion_probe.py", "matching_route_probe.py",
+                       "meta_gradient_balance.py", "point_maze_experts.py", "policy_outcomes.py", "record_runs.py",
+                       "robotics_outcomes.py", "summarize_runs.py", "termination_probe.py", "warm_start_probe.py"]
     assert not set(SCRIPTS) & set(os.listdir(os.path.join(ROOT, "recipes")))
 
 
@@ -79,3 +79,20 @@ def test_matching_route_probe_scores_the_demonstrations_route_per_rule(capsys):
     assert final["quarters"][0] < 0 < path["quarters"][0] and final["opening"] < 10 * path["opening"] < 0
     assert 0 < final["return"] < path["return"]
     assert json.loads(capsys.readouterr().out.strip().splitlines()[-1])["rows"] == rows
+
+
+def test_entropy_bonus_records_rereads_a_recorded_critic_check_with_sacs_entropy_bonus(capsys):
+    """The anchored AntMaze seed 1's report (written before the report counted the entropy bonus) flagged critics
+    under-valuing the policy's states (-37 against a reward return of 1); alpha 0.057 and entropy -8 at its last
+    round make the bonus about -45 over the horizon, and the critics calibrated."""
+    import json
+
+    import entropy_bonus_records
+
+    record = os.path.join(ROOT, "docs", "runs", "antmaze-warmstart-bc", "antmaze-umaze-csirl-s1")
+    (row,) = entropy_bonus_records.main([record])
+    assert row["bonus"] == pytest.approx(row["alpha"] * row["entropy"] * 99.0, rel=1e-3) and row["bonus"] < -40
+    policy = row["policy"]
+    assert policy["recorded_ok"] is False and policy["reread_ok"] is True
+    assert policy["soft_return"] == pytest.approx(policy["return"] + row["bonus"])
+    assert json.loads(capsys.readouterr().out.strip().splitlines()[-1])[0]["record"] == record

@@ -190,35 +190,56 @@ def warm_start_kept(rows: Sequence[dict]) -> HealthCheck:
                                    "in the last third", figures)
 
 
-def critic_calibration(values: torch.Tensor, returns: torch.Tensor, where: str) -> HealthCheck:
-    """The critics' values against Monte Carlo returns of the learner's own reward on the same states.
+def critic_calibration(values: torch.Tensor, returns: torch.Tensor, where: str,
+                       entropy_returns: torch.Tensor | None = None) -> HealthCheck:
+    """The critics' values against Monte Carlo returns of what they estimate on the same states.
+
+    A soft critic estimates the learner's reward plus SAC's entropy bonus (``-alpha log pi`` at every next state);
+    ``returns`` holds both, ``entropy_returns`` the bonus's part, stated in the message: with SAC's target entropy
+    ``-dim(A)`` it is negative, and ignoring it reads calibrated critics as under-valuing. Over-valuation is flagged on
+    either set of states. Under-valuation only on the policy's: ``Q(s, a)`` values the policy's continuation, so on
+    the expert's states it falls below the demonstration's return whenever the policy does not continue the route
+    (the message says so; the policy's own states judge the critics).
 
     Args:
         values: ``[K, N]`` the ensemble's ``Q_k(s, a)`` (or ``[N]``).
-        returns: ``[N]`` the discounted return of the learner's reward from each ``(s, a)`` on.
+        returns: ``[N]`` the discounted return from each ``(s, a)`` on (reward and entropy bonus).
         where: whose states (``"expert"``, ``"policy"``): the check is named ``critic_calibration_<where>``.
+        entropy_returns: ``[N]`` the entropy bonus's part of ``returns`` (default: none).
+
+    Examples:
+        >>> critic_calibration(torch.full((2, 3), -40.0), torch.full((3,), -45.0), "policy",
+        ...                    torch.full((3,), -50.0)).message
+        "the critics value the policy's states at -40, their return is -45 (-50 of it SAC's entropy bonus)"
     """
     name = f"critic_calibration_{where}"
     if returns.numel() == 0:
         return HealthCheck(name, None, f"no {where} states whose return could be measured")
     values = values.reshape(-1, returns.numel()) if values.ndim > 1 else values[None]
     q, g = float(values.mean()), float(returns.mean())
+    bonus = float(entropy_returns.mean()) if entropy_returns is not None and entropy_returns.numel() else 0.0
     figures = {"value_mean": q, "value_min": float(values.min(0).values.mean()), "return_mean": g,
+               "entropy_return_mean": bonus,
                "critic_spread": float(values.std(0).mean()) if values.shape[0] > 1 else 0.0, "states": returns.numel()}
     scale = max(float(returns.abs().mean()), 1e-3)
     figures["bias_over_return"] = (q - g) / scale
-    over, under = q - g > (VALUE_RATIO_LIMIT - 1) * scale, g - q > (1 - 1 / VALUE_RATIO_LIMIT) * scale and g > 0
+    returned = f"{g:.3g}" + (f" ({bonus:.3g} of it SAC's entropy bonus)" if bonus else "")
+    over, under = q - g > (VALUE_RATIO_LIMIT - 1) * scale, g - q > (1 - 1 / VALUE_RATIO_LIMIT) * scale
     if over:
         return HealthCheck(name, False, (
-            f"the critics over-value the {where}'s states: {q:.3g} on average where the learner's own reward "
-            f"returns {g:.3g}; the TD targets feed on this (try fewer expert transitions in the batch, "
-            "replay_buffer.expert_fraction; more critics in the minimum, csirl.num_qvalue_nets; or a smaller "
-            "csirl.gamma)"), figures)
+            f"the critics over-value the {where}'s states: {q:.3g} on average where they return {returned}; the TD "
+            "targets feed on this (try fewer expert transitions in the batch, replay_buffer.expert_fraction; more "
+            "critics in the minimum, csirl.num_qvalue_nets; or a smaller csirl.gamma)"), figures)
+    if under and where == "expert":
+        return HealthCheck(name, True, (
+            f"the critics value the expert's states at {q:.3g}, below the demonstration's return {returned}: the "
+            "value of the policy's continuation, lower where the policy does not follow the expert from there "
+            "(the policy's states judge the critics)"), figures)
     if under:
         return HealthCheck(name, False, (
-            f"the critics under-value the {where}'s states: {q:.3g} on average where the learner's own reward "
-            f"returns {g:.3g} (a short run, or the minimum over many critics: fewer, csirl.num_qvalue_nets)"), figures)
-    return HealthCheck(name, True, f"the critics value the {where}'s states at {q:.3g}, their return is {g:.3g}",
+            f"the critics under-value the {where}'s states: {q:.3g} on average where they return {returned} (a short "
+            "run, or the minimum over many critics: fewer, csirl.num_qvalue_nets)"), figures)
+    return HealthCheck(name, True, f"the critics value the {where}'s states at {q:.3g}, their return is {returned}",
                        figures)
 
 

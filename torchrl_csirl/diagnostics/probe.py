@@ -2,12 +2,13 @@
 
 :func:`probe_learner` rolls the deterministic policy for a few seeded episodes, scores them and the
 demonstrations with the learner's own reward (the online buffer's transforms: matching reward, ``r_w``,
-their sum), and evaluates the critics on both, beside the Monte Carlo return of that reward.
+their sum), and evaluates the critics on both, beside the Monte Carlo return they estimate: that reward's plus SAC's entropy
+bonus (``-alpha log pi`` at every next state, negative where the policy's entropy is).
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import torch
 from tensordict import TensorDictBase
@@ -25,9 +26,12 @@ class LearnerProbe:
 
     Attributes:
         policy_values: ``[K, N]`` the critics on the policy's measurable states and actions.
-        policy_returns: ``[N]`` the discounted return of the learner's reward from those states on.
+        policy_returns: ``[N]`` the discounted return from those states on that the critics estimate: the
+            learner's reward plus SAC's entropy bonus ``-alpha log pi`` at every next state.
         expert_values: ``[K, M]`` the critics on the demonstrations' measurable states and actions.
         expert_returns: ``[M]`` the same return along the demonstrations.
+        policy_entropy_returns: ``[N]`` the entropy bonus's part of ``policy_returns`` (zeros without one).
+        expert_entropy_returns: ``[M]`` the same part of ``expert_returns``.
         policy_rewards: ``[T]`` the learner's reward on every step of the policy's episodes.
         expert_rewards: ``[U]`` the learner's reward on every demonstrated step.
         matching_to_subgoal: the matching reward on the curriculum trajectory's steps up to the subgoal.
@@ -58,6 +62,8 @@ class LearnerProbe:
     episode_paths: tuple[torch.Tensor, ...] = ()
     matching_along_routes: tuple[torch.Tensor, ...] = ()
     matching_target: str = "final"
+    policy_entropy_returns: torch.Tensor = field(default_factory=lambda: torch.zeros(0))
+    expert_entropy_returns: torch.Tensor = field(default_factory=lambda: torch.zeros(0))
 
 
 def discounted_returns(rewards: torch.Tensor, gamma: float) -> torch.Tensor:
@@ -96,17 +102,31 @@ def _learner_reward(transforms, transitions: TensorDictBase) -> TensorDictBase:
         return transforms(transitions.clone())
 
 
+def _next_entropy_bonus(loss, scored: TensorDictBase) -> torch.Tensor:
+    """``[T]`` the entropy term the soft TD target adds after each step: ``-alpha log pi`` at the next state (zero
+    after a terminal one, and for a loss without the term)."""
+    rewards = scored["next", "reward"].reshape(-1)
+    if not hasattr(loss, "entropy_bonus"):
+        return torch.zeros_like(rewards, dtype=torch.float)
+    bonus = loss.entropy_bonus(scored["next", loss.actor_network.in_keys[0]]).reshape(-1).float()
+    if ("next", "terminated") in scored.keys(True):
+        bonus = bonus * (~scored["next", "terminated"].reshape(-1)).float()
+    return bonus
+
+
 def _episode_figures(episode: TensorDictBase, transforms, loss, gamma: float
-                     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """(critic values ``[K, n]``, returns ``[n]``, rewards ``[T]``) of one episode's measurable steps."""
+                     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """(critic values ``[K, n]``, soft returns ``[n]``, their entropy part ``[n]``, rewards ``[T]``) of one
+    episode's measurable steps."""
     scored = _learner_reward(transforms, episode)
     rewards = scored["next", "reward"].reshape(-1).float()
     terminated = bool(scored["next", "terminated"].reshape(-1)[-1]) if ("next", "terminated") in scored.keys(True) else False
     mask = measurable_states(rewards.shape[0], terminated, gamma)
-    returns = discounted_returns(rewards, gamma)[mask]
     with torch.no_grad():
+        entropy_returns = discounted_returns(gamma * _next_entropy_bonus(loss, scored), gamma)[mask]
         values = loss.qvalues(scored[mask]).float()
-    return values.cpu(), returns.cpu(), rewards.cpu()
+    returns = discounted_returns(rewards, gamma)[mask] + entropy_returns
+    return values.cpu(), returns.cpu(), entropy_returns.cpu(), rewards.cpu()
 
 
 def probe_learner(*, env: EnvBase, policy, loss, transforms, matching, demos, gamma: float, max_steps: int,
@@ -129,26 +149,30 @@ def probe_learner(*, env: EnvBase, policy, loss, transforms, matching, demos, ga
         demonstrations: demonstrations scored (the first ones).
         device: the learner's device.
     """
-    policy_values, policy_returns, policy_rewards, finals, actions, paths = [], [], [], [], [], []
+    policy_values, policy_returns, policy_entropy, policy_rewards = [], [], [], []
+    finals, actions, paths = [], [], []
     position = matching.position_feature_indices.cpu()
     with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
         for i in range(episodes):
             env.set_seed(seed + i)
             episode = env.rollout(max_steps, policy, break_when_any_done=True)
-            values, returns, rewards = _episode_figures(episode.to(device), transforms, loss, gamma)
+            values, returns, entropy_returns, rewards = _episode_figures(episode.to(device), transforms, loss, gamma)
             policy_values.append(values)
             policy_returns.append(returns)
+            policy_entropy.append(entropy_returns)
             policy_rewards.append(rewards)
             finals.append(episode["next", "observation"][-1].index_select(-1, position))
             actions.append(episode["action"].reshape(episode.shape[0], -1))
             if hasattr(matching, "demonstration_of"):  # goal-conditioned: the path of the episode's goal
                 chosen = int(matching.demonstration_of(episode["observation"][:1].to(device)).reshape(-1)[0])
                 paths.append(matching.demonstration_positions(chosen).float().cpu())
-    expert_values, expert_returns, expert_rewards = [], [], []
+    expert_values, expert_returns, expert_entropy, expert_rewards = [], [], [], []
     for i in range(min(demonstrations, demos.num_trajectories)):
-        values, returns, rewards = _episode_figures(demos.trajectory(i).to(device), transforms, loss, gamma)
+        values, returns, entropy_returns, rewards = _episode_figures(demos.trajectory(i).to(device), transforms, loss,
+                                                                     gamma)
         expert_values.append(values)
         expert_returns.append(returns)
+        expert_entropy.append(entropy_returns)
         expert_rewards.append(rewards)
     demo_finals = torch.stack([demos.trajectory(i)["next", "observation"][-1].index_select(-1, position)
                                for i in range(demos.num_trajectories)]).float()
@@ -167,4 +191,5 @@ def probe_learner(*, env: EnvBase, policy, loss, transforms, matching, demos, ga
         matching_to_subgoal=to_subgoal, final_features=torch.stack(finals).float(), demo_final_features=demo_finals.cpu(),
         path_features=matching.expert_observations.index_select(-1, matching.position_feature_indices).float().cpu(),
         actions=torch.cat(actions).float(), goal_conditioned=hasattr(matching, "demonstration_of"), episode_paths=tuple(paths),
-        matching_along_routes=routes, matching_target=getattr(matching, "target", "final"))
+        matching_along_routes=routes, matching_target=getattr(matching, "target", "final"),
+        policy_entropy_returns=torch.cat(policy_entropy), expert_entropy_returns=torch.cat(expert_entropy))

@@ -112,8 +112,8 @@ def _metrics_checks(rows: list[dict[str, Any]], action_dim: int, curriculum_leng
 
 def _probe_checks(probe: LearnerProbe, expert_fraction: float) -> list[HealthCheck]:
     return [
-        critic_calibration(probe.expert_values, probe.expert_returns, "expert"),
-        critic_calibration(probe.policy_values, probe.policy_returns, "policy"),
+        critic_calibration(probe.expert_values, probe.expert_returns, "expert", probe.expert_entropy_returns),
+        critic_calibration(probe.policy_values, probe.policy_returns, "policy", probe.policy_entropy_returns),
         matching_along_demonstrations(probe.matching_to_subgoal),
         route_opening(probe.matching_along_routes, probe.matching_target),
         expert_transitions_reward(probe.expert_rewards, probe.policy_rewards, expert_fraction),

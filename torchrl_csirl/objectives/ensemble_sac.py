@@ -535,6 +535,38 @@ class EnsembleSACLoss(SACLoss):
             dist = actor.get_dist(td_in)
             return dist.deterministic_sample if deterministic else dist.rsample()
 
+    def entropy_bonus(self, observation: torch.Tensor, samples: int = 16) -> torch.Tensor:
+        """``-alpha log pi(a|s)`` at each state, averaged over ``samples`` draws ``a ~ pi(s)``.
+
+        The soft TD target adds this term at every next state (``Q'(s', a') - alpha log pi(a'|s')``),
+        so a critic's value holds its discounted sum beside the reward's: ``alpha`` times the
+        policy's entropy per step, negative where the entropy is (SAC's target entropy is ``-dim(A)``).
+        Read under no grad with the stock actor (one draw per sample, scored as drawn).
+
+        Args:
+            observation (Tensor): ``[*B, obs]``, read as the actor's input entry.
+            samples (int): draws per state. Defaults to 16.
+
+        Returns:
+            a ``[*B]`` tensor.
+
+        Examples:
+            >>> import torch
+            >>> from torchrl_csirl.modules import make_actor, make_qvalue
+            >>> loss = EnsembleSACLoss(make_actor(3, 2, hidden=(8,)), make_qvalue(3, 2, hidden=(8,)))
+            >>> loss.entropy_bonus(torch.zeros(4, 3)).shape
+            torch.Size([4])
+        """
+        actor = self.actor_network
+        td_in = TensorDict({actor.in_keys[0]: observation}, batch_size=observation.shape[:-1])
+        with torch.no_grad(), self.actor_network_params.to_module(actor, preserve_module_state=False):
+            dist = actor.get_dist(td_in)
+            if hasattr(dist, "rsample_and_log_prob"):
+                _, log_prob = dist.rsample_and_log_prob((samples,))
+            else:
+                log_prob = dist.log_prob(dist.sample((samples,)))
+            return -sac_alpha(self) * log_prob.reshape(samples, *observation.shape[:-1]).mean(0)
+
     def _critic_values(
         self,
         tensordict: TensorDictBase,

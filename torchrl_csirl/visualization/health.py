@@ -56,7 +56,7 @@ def _reward_panel(ax, rows: list[dict[str, Any]]) -> None:
 
 
 def _critic_panel(ax, probe) -> None:
-    ax.set_title("critics vs returns of the learner's reward", fontsize=10)
+    ax.set_title("critics vs returns (learner's reward + entropy bonus)", fontsize=10)
     if probe is None:
         empty_message(ax, "not probed")
         return
