@@ -201,3 +201,31 @@ def test_env_factory_imports_the_task_modules_in_a_worker(user_dir, monkeypatch)
     monkeypatch.delitem(gym.registry, GYM_ID)  # as in a fresh worker process
     monkeypatch.delitem(sys.modules, MODULE)
     assert factory().rollout(3)["observation"].shape == torch.Size([3, 2])
+
+
+def _exit_killed_after(seconds: float) -> None:
+    time.sleep(seconds)
+    os.kill(os.getpid(), signal.SIGKILL)
+
+
+def test_a_broken_pipe_from_a_worker_still_exiting_is_named_as_its_death():
+    """A worker's pipe breaks while its process is still exiting (a race the killed-worker test can lose): on a
+    broken pipe the log watches the workers before concluding that none failed; on any other error it does not wait."""
+    import multiprocessing
+    from types import SimpleNamespace
+
+    from torchrl_csirl.trainers import WorkerErrorLog
+
+    log = WorkerErrorLog()
+    proc = multiprocessing.get_context("fork").Process(target=_exit_killed_after, args=(0.5,))
+    proc.start()
+    try:
+        collector = SimpleNamespace(procs=[proc])
+        started = time.monotonic()
+        assert log.describe(collector, ValueError("not a worker's")) is None  # alive, not a pipe error: at once
+        assert time.monotonic() - started < 0.4
+        line = log.describe(collector, ConnectionResetError(104, "Connection reset by peer"))
+        assert line == f"collector worker 0 (pid {proc.pid}) was killed by SIGKILL; no error of its own", line
+    finally:
+        proc.join(5)
+        log.close()

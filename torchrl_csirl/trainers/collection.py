@@ -13,6 +13,7 @@ import os
 import shutil
 import signal
 import tempfile
+import time
 import traceback
 import warnings
 from collections.abc import Callable
@@ -124,6 +125,9 @@ class WorkerErrorLog:
         >>> log.close()
     """
 
+    exit_wait_s: float = 5.0
+    """How long :meth:`describe` watches the workers after a broken pipe (a worker still exiting)."""
+
     def __init__(self) -> None:
         self.folder = tempfile.mkdtemp(prefix="csirl-worker-errors-")
 
@@ -143,19 +147,21 @@ class WorkerErrorLog:
     def describe(self, collector: BaseCollector | None, error: BaseException | None = None) -> str | None:
         """One line on the failed worker of ``collector``, or None when no worker failed.
 
+        A worker's pipe can break (``ConnectionResetError``, ``EOFError``) while the process is still
+        exiting; on such an error the workers are watched for up to :attr:`exit_wait_s` seconds
+        before concluding that none failed.
+
         Args:
             collector: the collector (None: it failed while starting, ``error`` says how).
             error: the exception the collector raised.
         """
+        dead = _dead_workers(collector)
+        if not dead and isinstance(error, _BROKEN_PIPE_ERRORS):
+            deadline = time.monotonic() + self.exit_wait_s
+            while not dead and time.monotonic() < deadline:
+                time.sleep(0.05)
+                dead = _dead_workers(collector)
         written = self.errors()
-        dead = []
-        for index, proc in enumerate(collector_worker_processes(collector)):
-            try:
-                alive, code, pid = proc.is_alive(), proc.exitcode, proc.pid
-            except ValueError:  # closed: TorchRL terminated it after another worker failed
-                continue
-            if not alive and code not in (None, 0):
-                dead.append((index, pid, code))
         for index, pid, code in dead:
             if pid in written:
                 return f"collector worker {index} (pid {pid}) failed: {written[pid]}"
@@ -173,6 +179,22 @@ class WorkerErrorLog:
     def close(self) -> None:
         """Removes the folder."""
         shutil.rmtree(self.folder, ignore_errors=True)
+
+
+_BROKEN_PIPE_ERRORS = (EOFError, ConnectionError)  # ConnectionResetError, BrokenPipeError among them
+
+
+def _dead_workers(collector: BaseCollector | None) -> list[tuple[int, int, int]]:
+    """(worker index, pid, exit code) of each worker of ``collector`` that exited with a failure."""
+    dead = []
+    for index, proc in enumerate(collector_worker_processes(collector)):
+        try:
+            alive, code, pid = proc.is_alive(), proc.exitcode, proc.pid
+        except ValueError:  # closed: TorchRL terminated it after another worker failed
+            continue
+        if not alive and code not in (None, 0):
+            dead.append((index, pid, code))
+    return dead
 
 
 def _failed_to_start(error: BaseException, written: dict[int, str]) -> str:
