@@ -3,6 +3,7 @@ matching reward, critics with an inflated bias), each check on its own figures, 
 end of a run and by ``torchrl-csirl diagnose`` without touching the run."""
 from __future__ import annotations
 
+import csv
 import json
 import math
 import os
@@ -166,6 +167,34 @@ def test_each_check_flags_its_own_failure_and_passes_a_healthy_figure():
     assert warm_start_kept([dict(r, eval_success_rate=0.0, eval_accomplish_rate=0.0) for r in warm]).ok is None
     spread = demonstrations_share_a_goal(torch.tensor([[10.0, 0.0], [0.0, 5.0], [3.0, -4.0]]), path)
     assert spread.ok is False and "the goal changes from episode to episode" in spread.message
+
+
+def test_a_near_zero_matching_reward_that_rises_a_little_is_not_called_hacking():
+    """A recorded AntMaze run whose ant stands still: its matching reward per step went from -0.005 to 0.009 (a large
+    rise against its own near-zero start) where the demonstration is paid about 3 per step."""
+    record = os.path.join(os.path.dirname(__file__), "..", "docs", "runs", "antmaze-noexp", "antmaze-umaze-csirl-s2")
+    by_frames: dict[int, dict] = {}  # a record keeps its evaluations in metrics.jsonl, its rounds in rounds.csv
+    with open(os.path.join(record, "rounds.csv"), newline="", encoding="utf-8") as f:
+        for r in csv.DictReader(f):
+            by_frames[int(r["frames"])] = {"frames": int(r["frames"]),
+                                           "matching_reward_mean": float(r["matching_reward_mean"])}
+    with open(os.path.join(record, "metrics.jsonl"), encoding="utf-8") as f:
+        for r in map(json.loads, f):
+            if r["frames"] in by_frames:
+                by_frames[r["frames"]].update(r)
+    rows = [by_frames[k] for k in sorted(by_frames)]
+    with open(os.path.join(record, "health.json"), encoding="utf-8") as f:
+        recorded = {c["name"]: c for c in json.load(f)["checks"]}
+    paid = recorded["matching_along_demonstrations"]["figures"]["mean"]
+    assert paid > 1.0
+    assert reward_tracks_the_task(rows).ok is False  # without the demonstration's scale: the relative rise alone
+    check = reward_tracks_the_task(rows, demonstration_reward=paid)
+    assert check.ok is True and "too small to be hacking" in check.message
+    assert check.figures["demonstration_reward"] == paid
+    # the same rise scaled up to a twentieth of the demonstration's pay (the PointMaze runs that chased the wrong
+    # goal rose by 3 % to 17 % of it) is hacking again
+    scaled = [dict(r, matching_reward_mean=r["matching_reward_mean"] * 0.05 * paid / 0.014) for r in rows]
+    assert reward_tracks_the_task(scaled, demonstration_reward=paid).ok is False
 
 
 def test_a_run_writes_its_report_and_diagnose_rewrites_it_without_touching_the_run(tmp_path, capsys):

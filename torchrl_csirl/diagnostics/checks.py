@@ -23,6 +23,7 @@ import torch
 
 __all__ = [
     "ENTROPY_FLOOR_PER_DIM",
+    "HACKING_RISE_FLOOR",
     "LEARNED_REWARD_SHARE_RANGE",
     "ROUTE_OPENING_SHARE",
     "SATURATION_LIMIT",
@@ -101,9 +102,13 @@ WARM_START_KEPT_SHARE = 0.5
 
 #: a test success (or accomplish rate) from which the task counts as solved: a score flat there is not a failure
 SOLVED = 0.9
+#: the rise of the matching reward per step, as a share of what the demonstration is paid per step, below which it
+#: is too small to call hacking (a relative rise on a near-zero base: a learner that stands still)
+HACKING_RISE_FLOOR = 0.01
 
 
-def reward_tracks_the_task(rows: Sequence[dict], test: Mapping[str, Any] | None = None) -> HealthCheck:
+def reward_tracks_the_task(rows: Sequence[dict], test: Mapping[str, Any] | None = None,
+                           demonstration_reward: float | None = None) -> HealthCheck:
     """Reward hacking: the matching reward the learner collects rises while the task's success and return stay flat
     (below :data:`SOLVED`, in the last third's evaluations and in the final test).
 
@@ -112,11 +117,16 @@ def reward_tracks_the_task(rows: Sequence[dict], test: Mapping[str, Any] | None 
             ``eval_accomplish_rate``, ``eval_env_return``).
         test: the run's final test (``summary.json``: ``success_rate``, ``accomplish_rate``), where it has one: a
             test at or above :data:`SOLVED` clears the run, whatever its last few 10-episode evaluations said.
+        demonstration_reward: the matching reward per step the demonstration is paid on its way to the subgoal
+            (the probe's), where known: a rise below :data:`HACKING_RISE_FLOOR` of it is too small to be hacking,
+            however large against a near-zero start.
 
     Examples:
         >>> rows = [{"matching_reward_mean": r, "eval_success_rate": s} for r, s in ((0.1, 1.0), (0.2, 0.9), (0.9, 0.6))]
         >>> reward_tracks_the_task(rows).ok, reward_tracks_the_task(rows, test={"success_rate": 0.96}).ok
         (False, True)
+        >>> reward_tracks_the_task(rows, demonstration_reward=100.0).ok  # a rise of 0.8 against 100 per step
+        True
     """
     logged = [r for r in rows if r.get("matching_reward_mean") is not None]
     name = "reward_tracks_the_task"
@@ -130,12 +140,14 @@ def reward_tracks_the_task(rows: Sequence[dict], test: Mapping[str, Any] | None 
     a0, a1 = _thirds(rows, "eval_accomplish_rate")
     e0, e1 = _thirds(rows, "eval_env_return")
     spread = max(abs(m0), abs(m1), 1e-8)
-    reward_rose = (m1 - m0) / spread > 0.25
+    floor = HACKING_RISE_FLOOR * abs(demonstration_reward) if demonstration_reward is not None else 0.0
+    reward_rose = (m1 - m0) / spread > 0.25 and m1 - m0 > floor
     task_flat = (math.isnan(s1) or s1 - s0 <= 0.05) and (math.isnan(a1) or a1 - a0 <= 0.05) and (
         math.isnan(e1) or e1 - e0 <= 0.05 * max(abs(e0), abs(e1), 1e-8))
     figures = {"matching_reward_first": m0, "matching_reward_last": m1, "success_first": s0, "success_last": s1,
                "accomplish_first": a0, "accomplish_last": a1, "env_return_first": e0, "env_return_last": e1,
-               "reward_first": _thirds(rows, "reward_mean")[0], "reward_last": _thirds(rows, "reward_mean")[1]}
+               "reward_first": _thirds(rows, "reward_mean")[0], "reward_last": _thirds(rows, "reward_mean")[1],
+               "demonstration_reward": demonstration_reward}
     tested = [float(test[k]) for k in ("success_rate", "accomplish_rate") if (test or {}).get(k) is not None]
     figures["test_success"] = max(tested) if tested else None
     solved = any(not math.isnan(v) and v >= SOLVED for v in (s1, a1, *tested))  # flat at the top is not hacking
@@ -145,6 +157,11 @@ def reward_tracks_the_task(rows: Sequence[dict], test: Mapping[str, Any] | None 
             f"success went from {s0:.2f} to {s1:.2f} and the environment's return from {e0:.3g} to {e1:.3g} (first "
             "and last third of the run); the matching features "
             "(env.features, the task's position_feature_indices) reward something the task does not"), figures)
+    if (m1 - m0) / spread > 0.25 and not reward_rose:
+        return HealthCheck(name, True, (
+            f"the matching reward per step went from {m0:.3g} to {m1:.3g}, a rise below {HACKING_RISE_FLOOR:.0%} of "
+            f"the {demonstration_reward:.3g} the demonstration is paid per step: too small to be hacking (the "
+            "learner collects almost none of it)"), figures)
     return HealthCheck(name, True, f"the matching reward went from {m0:.3g} to {m1:.3g}, the evaluations' success "
                                    f"from {s0:.2f} to {s1:.2f} and the environment's return from {e0:.3g} to {e1:.3g}",
                        figures)

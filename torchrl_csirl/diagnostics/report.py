@@ -101,8 +101,9 @@ def read_metrics(run_dir: str) -> list[dict[str, Any]]:
 
 
 def _metrics_checks(rows: list[dict[str, Any]], action_dim: int, curriculum_length: int | None,
-                    test: dict[str, Any] | None = None) -> list[HealthCheck]:
-    checks = [reward_tracks_the_task(rows, test), policy_entropy(rows, action_dim), learned_reward_share(rows),
+                    test: dict[str, Any] | None = None, demonstration_reward: float | None = None
+                    ) -> list[HealthCheck]:
+    checks = [reward_tracks_the_task(rows, test, demonstration_reward), policy_entropy(rows, action_dim), learned_reward_share(rows),
               warm_start_kept(rows)]
     subgoals = [int(r["subgoal"]) for r in rows if r.get("subgoal") is not None]
     if curriculum_length is not None:
@@ -138,12 +139,14 @@ def health_report(run: Any, method: str, *, episodes: int = 5, metrics_dir: str 
     cfg, parts = run.cfg, run.parts
     rows = read_metrics(metrics_dir or run.run_dir)
     report = HealthReport(metrics_dir or run.run_dir, run.spec.name, method, rows=rows)
-    report.checks += _metrics_checks(rows, run.spec.action_dim, parts.curriculum.length, test)
     run.mirror.sync()
     report.probe = probe_learner(
         env=run.eval_env, policy=run.mirror.policy, loss=parts.modules.sac, transforms=run.online_buffer.transform,
         matching=parts.matching, demos=run.demos, gamma=cfg.csirl.gamma, max_steps=run.spec.max_steps,
         episodes=episodes, seed=cfg.eval.seed, device=run.device)
+    to_subgoal = report.probe.matching_to_subgoal
+    demonstration_reward = float(to_subgoal.mean()) if to_subgoal.numel() else None
+    report.checks += _metrics_checks(rows, run.spec.action_dim, parts.curriculum.length, test, demonstration_reward)
     report.checks += _probe_checks(report.probe, cfg.replay_buffer.expert_fraction)
     return report
 
