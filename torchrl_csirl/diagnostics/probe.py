@@ -102,16 +102,20 @@ def _learner_reward(transforms, transitions: TensorDictBase) -> TensorDictBase:
         return transforms(transitions.clone())
 
 
-def _next_entropy_bonus(loss, scored: TensorDictBase) -> torch.Tensor:
+def _next_terminated(scored: TensorDictBase) -> torch.Tensor:
+    """``[T]`` whether each step ended in a terminal state (all False without a ``terminated`` entry)."""
+    if ("next", "terminated") in scored.keys(True):
+        return scored["next", "terminated"].reshape(-1).bool()
+    return torch.zeros(scored["next", "reward"].numel(), dtype=torch.bool, device=scored.device)
+
+
+def _next_entropy_bonus(loss, scored: TensorDictBase, terminated: torch.Tensor) -> torch.Tensor:
     """``[T]`` the entropy term the soft TD target adds after each step: ``-alpha log pi`` at the next state (zero
     after a terminal one, and for a loss without the term)."""
-    rewards = scored["next", "reward"].reshape(-1)
     if not hasattr(loss, "entropy_bonus"):
-        return torch.zeros_like(rewards, dtype=torch.float)
+        return torch.zeros(terminated.shape, dtype=torch.float, device=terminated.device)
     bonus = loss.entropy_bonus(scored["next", loss.actor_network.in_keys[0]]).reshape(-1).float()
-    if ("next", "terminated") in scored.keys(True):
-        bonus = bonus * (~scored["next", "terminated"].reshape(-1)).float()
-    return bonus
+    return bonus * (~terminated).float()
 
 
 def _episode_figures(episode: TensorDictBase, transforms, loss, gamma: float
@@ -120,10 +124,10 @@ def _episode_figures(episode: TensorDictBase, transforms, loss, gamma: float
     episode's measurable steps."""
     scored = _learner_reward(transforms, episode)
     rewards = scored["next", "reward"].reshape(-1).float()
-    terminated = bool(scored["next", "terminated"].reshape(-1)[-1]) if ("next", "terminated") in scored.keys(True) else False
-    mask = measurable_states(rewards.shape[0], terminated, gamma)
+    terminated = _next_terminated(scored)
+    mask = measurable_states(rewards.shape[0], bool(terminated[-1]), gamma)
     with torch.no_grad():
-        entropy_returns = discounted_returns(gamma * _next_entropy_bonus(loss, scored), gamma)[mask]
+        entropy_returns = discounted_returns(gamma * _next_entropy_bonus(loss, scored, terminated), gamma)[mask]
         values = loss.qvalues(scored[mask]).float()
     returns = discounted_returns(rewards, gamma)[mask] + entropy_returns
     return values.cpu(), returns.cpu(), entropy_returns.cpu(), rewards.cpu()

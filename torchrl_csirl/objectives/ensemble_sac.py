@@ -528,12 +528,18 @@ class EnsembleSACLoss(SACLoss):
         if fused_actor is not None:
             loc, scale = fused_actor.dist_params(observation, params)
             return fused_actor.deterministic_sample(loc) if deterministic else fused_actor.rsample(loc, scale)
+        exploration = ExplorationType.DETERMINISTIC if deterministic else ExplorationType.RANDOM
+        with set_exploration_type(exploration):
+            dist = self._stock_actor_dist(observation, params)
+        return dist.deterministic_sample if deterministic else dist.rsample()
+
+    def _stock_actor_dist(self, observation: torch.Tensor, params: TensorDictBase) -> torch.distributions.Distribution:
+        """The stock actor's action distribution at ``observation`` under ``params`` (its location and scale
+        computed, so it can be drawn from once the parameters are put back)."""
         actor = self.actor_network
         td_in = TensorDict({actor.in_keys[0]: observation}, batch_size=observation.shape[:-1])
-        exploration = ExplorationType.DETERMINISTIC if deterministic else ExplorationType.RANDOM
-        with set_exploration_type(exploration), params.to_module(actor, preserve_module_state=False):
-            dist = actor.get_dist(td_in)
-            return dist.deterministic_sample if deterministic else dist.rsample()
+        with params.to_module(actor, preserve_module_state=False):
+            return actor.get_dist(td_in)
 
     def entropy_bonus(self, observation: torch.Tensor, samples: int = 16) -> torch.Tensor:
         """``-alpha log pi(a|s)`` at each state, averaged over ``samples`` draws ``a ~ pi(s)``.
@@ -557,10 +563,8 @@ class EnsembleSACLoss(SACLoss):
             >>> loss.entropy_bonus(torch.zeros(4, 3)).shape
             torch.Size([4])
         """
-        actor = self.actor_network
-        td_in = TensorDict({actor.in_keys[0]: observation}, batch_size=observation.shape[:-1])
-        with torch.no_grad(), self.actor_network_params.to_module(actor, preserve_module_state=False):
-            dist = actor.get_dist(td_in)
+        with torch.no_grad():
+            dist = self._stock_actor_dist(observation, self.actor_network_params)
             if hasattr(dist, "rsample_and_log_prob"):
                 _, log_prob = dist.rsample_and_log_prob((samples,))
             else:
