@@ -141,13 +141,14 @@ def reward_tracks_the_task(rows: Sequence[dict], test: Mapping[str, Any] | None 
     e0, e1 = _thirds(rows, "eval_env_return")
     spread = max(abs(m0), abs(m1), 1e-8)
     floor = HACKING_RISE_FLOOR * abs(demonstration_reward) if demonstration_reward is not None else 0.0
-    reward_rose = (m1 - m0) / spread > 0.25 and m1 - m0 > floor
+    rose_relative = (m1 - m0) / spread > 0.25
+    reward_rose = rose_relative and m1 - m0 > floor
     task_flat = (math.isnan(s1) or s1 - s0 <= 0.05) and (math.isnan(a1) or a1 - a0 <= 0.05) and (
         math.isnan(e1) or e1 - e0 <= 0.05 * max(abs(e0), abs(e1), 1e-8))
     figures = {"matching_reward_first": m0, "matching_reward_last": m1, "success_first": s0, "success_last": s1,
                "accomplish_first": a0, "accomplish_last": a1, "env_return_first": e0, "env_return_last": e1,
-               "reward_first": _thirds(rows, "reward_mean")[0], "reward_last": _thirds(rows, "reward_mean")[1],
                "demonstration_reward": demonstration_reward}
+    figures["reward_first"], figures["reward_last"] = _thirds(rows, "reward_mean")
     tested = [float(test[k]) for k in ("success_rate", "accomplish_rate") if (test or {}).get(k) is not None]
     figures["test_success"] = max(tested) if tested else None
     solved = any(not math.isnan(v) and v >= SOLVED for v in (s1, a1, *tested))  # flat at the top is not hacking
@@ -157,7 +158,7 @@ def reward_tracks_the_task(rows: Sequence[dict], test: Mapping[str, Any] | None 
             f"success went from {s0:.2f} to {s1:.2f} and the environment's return from {e0:.3g} to {e1:.3g} (first "
             "and last third of the run); the matching features "
             "(env.features, the task's position_feature_indices) reward something the task does not"), figures)
-    if (m1 - m0) / spread > 0.25 and not reward_rose:
+    if rose_relative and not reward_rose:
         return HealthCheck(name, True, (
             f"the matching reward per step went from {m0:.3g} to {m1:.3g}, a rise below {HACKING_RISE_FLOOR:.0%} of "
             f"the {demonstration_reward:.3g} the demonstration is paid per step: too small to be hacking (the "

@@ -103,8 +103,8 @@ def read_metrics(run_dir: str) -> list[dict[str, Any]]:
 def _metrics_checks(rows: list[dict[str, Any]], action_dim: int, curriculum_length: int | None,
                     test: dict[str, Any] | None = None, demonstration_reward: float | None = None
                     ) -> list[HealthCheck]:
-    checks = [reward_tracks_the_task(rows, test, demonstration_reward), policy_entropy(rows, action_dim), learned_reward_share(rows),
-              warm_start_kept(rows)]
+    checks = [reward_tracks_the_task(rows, test, demonstration_reward), policy_entropy(rows, action_dim),
+              learned_reward_share(rows), warm_start_kept(rows)]
     subgoals = [int(r["subgoal"]) for r in rows if r.get("subgoal") is not None]
     if curriculum_length is not None:
         checks.append(subgoal_progress(subgoals, curriculum_length))
