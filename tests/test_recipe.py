@@ -282,6 +282,33 @@ def test_demonstrations_in_the_batch_and_actor_cloning_are_wired_and_logged(tmp_
         run.close()
 
 
+@pytest.mark.parametrize("warmup", [100, 1000])
+def test_the_critics_warm_up_holds_the_actor_its_cloning_and_alpha_then_lets_them_learn(tmp_path, warmup):
+    """``csirl.critic_warmup_updates``: the first updates (joint meta steps included) step the critics' loss only;
+    the actor's losses are still logged. 150 updates in all: held throughout at 1000, moving after 100."""
+    cfg = _tiny_cfg(tmp_path, f"csirl.critic_warmup_updates={warmup}", "csirl.actor_bc_coef=0.4",
+                    "collector.total_frames=300")
+    run = csirl.make_trainer(cfg, str(tmp_path))
+    try:
+        modules = run.parts.modules
+        actor = [p.detach().clone() for p in modules.actor.parameters()]
+        critics = {k: v.detach().clone() for k, v in modules.sac.named_parameters() if k.startswith("qvalue_network")}
+        log_alpha = modules.sac.log_alpha.detach().clone()
+        run.trainer.train()
+        assert run.trainer.updates == 150 and any("loss_meta" in r for r in run.logger.rows)
+        params = dict(modules.sac.named_parameters())
+        assert all(not torch.equal(v, params[k]) for k, v in critics.items())
+        held = warmup >= run.trainer.updates
+        assert all(torch.equal(a, b) for a, b in zip(actor, modules.actor.parameters())) == held
+        assert torch.equal(log_alpha, modules.sac.log_alpha.detach()) == held
+        assert any("loss_actor_bc" in r for r in run.logger.rows) != held  # the cloning term is not computed while held
+        assert all("loss_actor" in r for r in run.logger.rows if "loss_qvalue" in r)
+    finally:
+        run.close()
+    with pytest.raises(config.ConfigError, match="critic_warmup_updates"):
+        _tiny_cfg(tmp_path, "csirl.critic_warmup_updates=-1")
+
+
 def test_nan_stops_training_and_keeps_the_last_checkpoint(tmp_path):
     cfg = _tiny_cfg(tmp_path, "collector.total_frames=400")
     run = csirl.make_trainer(cfg, str(tmp_path))

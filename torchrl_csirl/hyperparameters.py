@@ -117,6 +117,9 @@ class CSIRLHyperparameters:
                            "(a warm start, batches of actor_pretrain_batch_size, Adam at optim.lr), evaluated before the first "
                            "update (the learning curve at frame 0); 0: none, the paper")
     actor_pretrain_batch_size: int = option(256, above=0, help="expert pairs per warm-start update")
+    critic_warmup_updates: int = option(
+        0, minimum=0, help="the run's first updates step the critics only (the actor, its cloning term and alpha "
+                           "held), so that a warm-started actor meets calibrated critics; 0: none, the paper")
     fixed_alpha: bool = option(False, help="false: SAC's automatic temperature (paper: true)")
 
     @property

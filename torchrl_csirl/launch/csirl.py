@@ -238,7 +238,7 @@ def make_update_step(cfg: DictConfig, modules: CSIRLLearner, optimizers: dict, o
     """CSIRL's update: a joint SAC + meta-gradient step every ``csirl.meta_every`` updates; CSIRL-B's: SAC."""
     sac_update = SACUpdate(modules.sac, optimizers["optim_sac"], modules.target_updater, cfg.optim.max_grad_norm,
                            sample=make_sampler(cfg, online, expert), actor_bc=make_actor_bc(cfg, modules, expert),
-                           precision=learner_precision(cfg))
+                           precision=learner_precision(cfg), critic_warmup_updates=cfg.csirl.critic_warmup_updates)
     if modules.meta is None:
         return sac_update
     return MetaRewardUpdate(modules.meta, sac_update, optimizers["optim_reward"], expert,

@@ -91,15 +91,22 @@ class SACUpdate:
         actor_bc: an :class:`ActorBehaviourCloning` term added to the actor loss (None: plain SAC).
         precision: the matmul precision of the losses' forward pass (``optim.precision``;
             :class:`~torchrl_csirl.modules.LearnerPrecision`). Defaults to float32.
+        critic_warmup_updates: the first updates of a run step the critics' loss only: the actor, its
+            cloning term and the temperature are held (``csirl.critic_warmup_updates``; their losses are
+            still logged). Defaults to ``0``: every update steps everything, as the paper.
     """
 
     LOSS_KEYS = ("loss_qvalue", "loss_actor", "loss_alpha")
+    CRITIC_KEYS = ("loss_qvalue",)
     LOG_KEYS = ("alpha", "entropy")
 
     def __init__(self, loss: nn.Module, optimizer: torch.optim.Optimizer, target_updater: Any,
                  max_grad_norm: float | None = None,
                  sample: Callable[[], TensorDictBase] | None = None,
-                 actor_bc: ActorBehaviourCloning | None = None, precision: LearnerPrecision | None = None) -> None:
+                 actor_bc: ActorBehaviourCloning | None = None, precision: LearnerPrecision | None = None,
+                 critic_warmup_updates: int = 0) -> None:
+        if critic_warmup_updates < 0:
+            raise ValueError(f"critic_warmup_updates must be >= 0, got {critic_warmup_updates}.")
         self.loss = loss
         self.optimizer = optimizer
         self.target_updater = target_updater
@@ -107,13 +114,23 @@ class SACUpdate:
         self._sample = sample
         self.actor_bc = actor_bc
         self.precision = precision if precision is not None else LearnerPrecision()
+        self.critic_warmup_updates = int(critic_warmup_updates)
 
     def sample(self, trainer: CSIRLTrainer) -> TensorDictBase:
         """A training batch: ``sample()`` if given, else one of the trainer's online buffer."""
         return self._sample() if self._sample is not None else trainer.online_buffer.sample()
 
-    def with_actor_bc(self, losses: dict[str, torch.Tensor]) -> tuple[dict[str, torch.Tensor], dict[str, torch.Tensor]]:
-        """``losses`` with the behavioural-cloning term (if any), and its diagnostics."""
+    def actor_held(self, trainer: CSIRLTrainer) -> bool:
+        """Whether this update leaves the actor and the temperature as they are (the critics' warm-up)."""
+        return trainer.updates < self.critic_warmup_updates
+
+    def losses_to_step(self, losses: dict[str, torch.Tensor],
+                       trainer: CSIRLTrainer) -> tuple[dict[str, torch.Tensor], dict[str, torch.Tensor]]:
+        """The losses this update steps and what it logs besides: the critics' alone during the warm-up
+        (the others logged), else ``losses`` with the behavioural-cloning term (if any) and its diagnostics."""
+        if self.actor_held(trainer):
+            held = {key: value.detach() for key, value in losses.items() if key not in self.CRITIC_KEYS}
+            return {key: losses[key] for key in self.CRITIC_KEYS}, held
         if self.actor_bc is None:
             return losses, {}
         bc_losses, logs = self.actor_bc(losses["loss_actor"])
@@ -129,7 +146,7 @@ class SACUpdate:
         batch = self.sample(trainer)
         with self.precision.autocast():
             out = self.loss(batch)
-        losses, logs = self.with_actor_bc({key: out.get(key) for key in self.LOSS_KEYS if key in out.keys()})
+        losses, logs = self.losses_to_step({key: out.get(key) for key in self.LOSS_KEYS if key in out.keys()}, trainer)
         self.step(losses, trainer)
         return {**{key: value.detach() for key, value in losses.items()}, **_detached(out, self.LOG_KEYS), **logs,
                 **batch_reward_means(batch)}
@@ -175,8 +192,8 @@ class MetaRewardUpdate:
         expert, regularizer = self.expert_buffer.sample(), trainer.online_buffer.sample()
         with self.sac_update.precision.autocast():  # the SAC update's precision
             out = self.meta_loss(online, expert, regularizer=regularizer)
-        sac_losses, logs = self.sac_update.with_actor_bc(
-            {key: out.get(key) for key in SACUpdate.LOSS_KEYS if key in out.keys()})
+        sac_losses, logs = self.sac_update.losses_to_step(
+            {key: out.get(key) for key in SACUpdate.LOSS_KEYS if key in out.keys()}, trainer)
         meta = out.get("loss_meta")
         check_finite_losses({**sac_losses, "loss_meta": meta}, update_location(trainer))
         self.reward_optimizer.zero_grad(set_to_none=True)
