@@ -15,7 +15,8 @@ SCRIPTS = sorted(name for name in os.listdir(TOOLS) if name.endswith(".py") and 
 
 def test_the_analysis_scripts_live_in_tools_and_recipes_holds_what_users_run():
     assert SCRIPTS == ["compare_runs.py", "entropy_bonus_records.py", "locomotion_probe.py", "matching_route_probe.py",
-                       "meta_gradient_balance.py", "point_maze_experts.py", "policy_outcomes.py", "record_runs.py",
+                       "meta_gradient_balance.py", "plot_curves.py", "point_maze_experts.py", "policy_outcomes.py",
+                       "record_runs.py",
                        "robotics_outcomes.py", "summarize_runs.py", "termination_probe.py", "warm_start_probe.py"]
     assert not set(SCRIPTS) & set(os.listdir(os.path.join(ROOT, "recipes")))
 
@@ -64,6 +65,35 @@ def test_compare_runs_across_scenarios_sets_a_task_against_its_variant():
     assert row["scenario"] == "merge / roundabout" and row["n"] == [3, 3]
     with pytest.raises(SystemExit):  # without it the two sides share no scenario
         compare_runs.main([*first, "--against", *second, "--metrics", "success_rate"])
+
+
+def test_plot_curves_draws_each_group_at_the_frames_all_its_seeds_evaluated(tmp_path, capsys):
+    """The AntMaze study's records: the warm-start seeds differ in carrying a frame-0 evaluation, so their curve
+    starts at the first round; each group's last point is its seeds' mean there."""
+    import json
+
+    import plot_curves
+
+    from torchrl_csirl.benchmark.results import eval_curve
+
+    runs = os.path.join(ROOT, "docs", "runs")
+    groups = {name: [os.path.join(runs, name, f"antmaze-umaze-csirl-s{s}") for s in range(3)]
+              for name in ("antmaze-warmstart", "antmaze-bc-path")}
+    out = tmp_path / "curves.png"
+    args = [arg for name, dirs in groups.items() for arg in ("--group", name, *dirs)]
+    result = plot_curves.main([*args, "--reference", "bc, test=0.64", "--output", str(out)])
+    assert out.stat().st_size > 10_000 and json.loads(capsys.readouterr().out.splitlines()[-1]) == result
+    for name, dirs in groups.items():
+        curves = [eval_curve(d) for d in dirs]
+        frames, _ = plot_curves.common_frames(curves)
+        assert frames == sorted(set(curves[0][0]) & set(curves[1][0]) & set(curves[2][0]))
+        last = [dict(zip(*c))[frames[-1]] for c in curves]
+        assert result["last"][name] == {"runs": 3, "frames": frames[-1], "mean": pytest.approx(sum(last) / 3)}
+    assert 0.0 not in plot_curves.common_frames([eval_curve(d) for d in groups["antmaze-warmstart"]])[0]
+    with pytest.raises(SystemExit, match="no 'no_such_key'"):
+        plot_curves.main([*args, "--metric", "no_such_key", "--output", str(out)])
+    with pytest.raises(SystemExit):  # a reference without its level
+        plot_curves.main([*args, "--reference", "bc", "--output", str(out)])
 
 
 def test_matching_route_probe_scores_the_demonstrations_route_per_rule(capsys):

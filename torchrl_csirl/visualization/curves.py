@@ -143,7 +143,8 @@ def plot_method_curves(
         ylabel (str): the y axis label.
         rate (bool): the values are rates, drawn on [0, 1]; ``False`` (e.g. returns): the axis follows the data.
         method_order (sequence of str, optional): every method that may be drawn, in one fixed order: a method keeps
-            its colour (its place in this order) from figure to figure; others follow. Default: the drawn methods sorted.
+            its colour (its place in this order) and its place in the legend from figure to figure; others follow.
+            Default: the drawn methods sorted.
 
     Returns:
         Path: ``path`` (an 860 x 450 px PNG, the legend right of the curves).
@@ -161,8 +162,8 @@ def plot_method_curves(
     palette = [*colormaps["tab10"].colors, *colormaps["Dark2"].colors]  # 18 colours before one repeats
     order = list(method_order or []) + sorted(m for m in curves if m not in (method_order or []))
     curves_drawn = False
-    for method, runs in sorted(curves.items()):
-        k = order.index(method)
+    for method in sorted(curves, key=order.index):  # the legend in ``method_order``
+        k, runs = order.index(method), curves[method]
         runs = [(finite_array(f, "frames"), finite_array(r, "rates")) for f, r in runs]
         runs = [(f, r) for f, r in runs if f.size and f.size == r.size]
         if not runs:
