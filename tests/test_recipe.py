@@ -278,19 +278,23 @@ def test_demonstrations_in_the_batch_and_actor_cloning_are_wired_and_logged(tmp_
         assert ("next", "matching_reward") in batch.keys(True) and ("next", "intrinsic_reward") in batch.keys(True)
         rows = [r for r in run.logger.rows if "loss_actor_bc" in r]
         assert rows and all(r["actor_bc_mse"] > 0 and r["loss_actor_bc"] > 0 for r in rows)
+        assert all(r["actor_bc_weight"] > 0 for r in rows)
     finally:
         run.close()
 
 
-@pytest.mark.parametrize("warmup", [100, 1000])
-def test_the_critics_warm_up_holds_the_actor_its_cloning_and_alpha_then_lets_them_learn(tmp_path, warmup):
+@pytest.mark.parametrize("warmup, scale", [(100, "qvalue"), (1000, "actor_loss")])
+def test_the_critics_warm_up_holds_the_actor_its_cloning_and_alpha_then_lets_them_learn(tmp_path, warmup, scale):
     """``csirl.critic_warmup_updates``: the first updates (joint meta steps included) step the critics' loss only;
-    the actor's losses are still logged. 150 updates in all: held throughout at 1000, moving after 100."""
+    the actor's losses are still logged. 150 updates in all: held throughout at 1000, moving after 100 (with the
+    cloning term weighted by the critics' values, ``csirl.actor_bc_scale=qvalue``)."""
     cfg = _tiny_cfg(tmp_path, f"csirl.critic_warmup_updates={warmup}", "csirl.actor_bc_coef=0.4",
-                    "collector.total_frames=300")
+                    f"csirl.actor_bc_scale={scale}", "collector.total_frames=300")
     run = csirl.make_trainer(cfg, str(tmp_path))
     try:
         modules = run.parts.modules
+        critic = run.trainer.update_step.sac_update.actor_bc.critic
+        assert critic is (modules.sac if scale == "qvalue" else None)
         actor = [p.detach().clone() for p in modules.actor.parameters()]
         critics = {k: v.detach().clone() for k, v in modules.sac.named_parameters() if k.startswith("qvalue_network")}
         log_alpha = modules.sac.log_alpha.detach().clone()
@@ -302,6 +306,7 @@ def test_the_critics_warm_up_holds_the_actor_its_cloning_and_alpha_then_lets_the
         assert all(torch.equal(a, b) for a, b in zip(actor, modules.actor.parameters())) == held
         assert torch.equal(log_alpha, modules.sac.log_alpha.detach()) == held
         assert any("loss_actor_bc" in r for r in run.logger.rows) != held  # the cloning term is not computed while held
+        assert all(r["actor_bc_weight"] > 0 for r in run.logger.rows if "actor_bc_weight" in r)
         assert all("loss_actor" in r for r in run.logger.rows if "loss_qvalue" in r)
     finally:
         run.close()

@@ -14,7 +14,7 @@ SCRIPTS = sorted(name for name in os.listdir(TOOLS) if name.endswith(".py") and 
 
 
 def test_the_analysis_scripts_live_in_tools_and_recipes_holds_what_users_run():
-    assert SCRIPTS == ["compare_runs.py", "entropy_bonus_records.py", "locomotion_probe.py", "matching_route_probe.py",
+    assert SCRIPTS == ["anchor_records.py", "compare_runs.py", "entropy_bonus_records.py", "locomotion_probe.py", "matching_route_probe.py",
                        "meta_gradient_balance.py", "plot_curves.py", "point_maze_experts.py", "policy_outcomes.py",
                        "record_runs.py",
                        "robotics_outcomes.py", "summarize_runs.py", "termination_probe.py", "warm_start_probe.py"]
@@ -65,6 +65,25 @@ def test_compare_runs_across_scenarios_sets_a_task_against_its_variant():
     assert row["scenario"] == "merge / roundabout" and row["n"] == [3, 3]
     with pytest.raises(SystemExit):  # without it the two sides share no scenario
         compare_runs.main([*first, "--against", *second, "--metrics", "success_rate"])
+
+
+def test_anchor_records_reads_how_firmly_the_cloning_term_held_per_round(capsys):
+    """The anchored AntMaze records: the actor's distance to the demonstrations' actions against ``|L_actor|``."""
+    import csv
+
+    import anchor_records
+
+    runs = [os.path.join(ROOT, "docs", "runs", "antmaze-bc-path", f"antmaze-umaze-csirl-s{s}") for s in range(3)]
+    result = anchor_records.main([*runs, "--threshold", "20"])
+    assert "| Spearman" in capsys.readouterr().err
+    for run, row in zip(runs, result["rows"]):
+        with open(os.path.join(run, "rounds.csv")) as f:
+            rounds = list(csv.DictReader(f))
+        weak = [float(r["actor_bc_mse"]) for r in rounds if abs(float(r["loss_actor"])) < 20]
+        assert row["rounds"] == len(rounds) and row["rounds_weak"] == len(weak)
+        assert row["mse_weak"] == pytest.approx(sum(weak) / len(weak)) and -1 <= row["spearman"] <= 1
+    with pytest.raises(SystemExit, match="no rounds.csv"):
+        anchor_records.main([os.path.join(ROOT, "docs", "runs", "robotics", "relocate-csirl-bc-s0")])
 
 
 def test_plot_curves_draws_each_group_at_the_frames_all_its_seeds_evaluated(tmp_path, capsys):

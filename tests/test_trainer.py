@@ -249,6 +249,43 @@ def test_actor_behaviour_cloning_pulls_the_deterministic_action_to_the_expert_an
         ActorBehaviourCloning(term.bc_loss, expert.as_replay_buffer(batch_size=4), coef=0.0)
 
 
+def test_actor_cloning_scaled_by_the_critics_is_td3_bcs_mean_absolute_q_where_the_actor_loss_cancels():
+    """``csirl.actor_bc_scale=qvalue``: the weight is ``coef * mean |min_k Q_k(s, mu(s))|`` over the training batch,
+    whatever the actor loss; ``|L_actor|`` (the default) vanishes where values of either sign cancel."""
+    from tensordict import TensorDict
+    from torchrl.envs.utils import ExplorationType, set_exploration_type
+    from torchrl.objectives import BCLoss
+
+    from torchrl_csirl.data import ExpertDemonstrations
+    from torchrl_csirl.modules import make_actor, make_qvalue
+    from torchrl_csirl.objectives import ActorBehaviourCloning, EnsembleSACLoss
+
+    torch.manual_seed(0)
+    obs = torch.randn(20, 4)
+    episode = {"observation": obs, "action": torch.tanh(obs[:, :2]), "next_observation": obs.roll(1, 0),
+               "terminated": torch.zeros(20, dtype=torch.bool)}
+    expert = ExpertDemonstrations.from_episodes([episode]).as_replay_buffer(batch_size=20)
+    actor = make_actor(4, 2, hidden=(32,))
+    sac = EnsembleSACLoss(actor, make_qvalue(4, 2, hidden=(32,)), num_qvalue_nets=3)
+    term = ActorBehaviourCloning(BCLoss(actor, loss_function="l2"), expert, coef=0.5, critic=sac)
+    batch = TensorDict({"observation": torch.randn(64, 4)}, [64])
+    losses, logs = term(torch.tensor(0.0), batch)  # an actor loss that cancels to 0: the anchor holds
+    with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
+        acted = actor(batch.clone())
+        expected = 0.5 * sac.qvalues(acted).min(0).values.abs().mean()
+    assert expected > 0
+    torch.testing.assert_close(logs["actor_bc_weight"], expected)
+    torch.testing.assert_close(losses["loss_actor_bc"], expected * logs["actor_bc_mse"])
+    assert set(batch.keys()) == {"observation"}  # the batch is not written to
+    losses["loss_actor_bc"].backward()  # the gradient reaches the actor only, through the cloning error
+    assert all(p.grad is not None for p in actor.parameters())
+    assert all(p.grad is None for p in sac.qvalue_network_params.values(True, True))
+    default = ActorBehaviourCloning(term.bc_loss, expert, coef=0.5)
+    assert default(torch.tensor(0.0))[1]["actor_bc_weight"] == 0.0
+    with pytest.raises(ValueError, match="pass batch="):
+        term(torch.tensor(-1.0))
+
+
 
 def test_a_stop_request_ends_at_the_batch_boundary_and_its_checkpoint_resumes_exactly(tmp_path):
     from torchrl_csirl.trainers import TrainingInterrupted

@@ -112,6 +112,10 @@ class CSIRLHyperparameters:
     gamma: float = option(0.99, above=0.0, below=1.0, help="discount")
     alpha: float = option(0.01, above=0.0, help="entropy coefficient (its initial value unless fixed_alpha)")
     actor_bc_coef: float = option(0.0, minimum=0.0, help="> 0: behavioural cloning on the actor (TD3+BC-style)")
+    actor_bc_scale: str = option(
+        "actor_loss", choices=("actor_loss", "qvalue"),
+        help="the cloning term's weight, actor_bc_coef times: actor_loss, |mean actor loss| (vanishes where the batch's "
+             "values of either sign cancel); qvalue, TD3+BC's mean |min_k Q(s, mu(s))| over the batch")
     actor_pretrain_updates: int = option(
         0, minimum=0, help="behavioural-cloning updates of the actor on the demonstrations before training starts "
                            "(a warm start, batches of actor_pretrain_batch_size, Adam at optim.lr), evaluated before the first "

@@ -227,10 +227,13 @@ def make_sampler(cfg: DictConfig, online: TensorDictReplayBuffer, expert: Tensor
 
 
 def make_actor_bc(cfg: DictConfig, modules: CSIRLLearner, expert: TensorDictReplayBuffer) -> ActorBehaviourCloning | None:
-    """The actor's behavioural-cloning term on ``expert.batch_size`` pairs (``csirl.actor_bc_coef`` > 0), else None."""
+    """The actor's behavioural-cloning term on ``expert.batch_size`` pairs (``csirl.actor_bc_coef`` > 0, weighted as
+    ``csirl.actor_bc_scale``), else None."""
     if cfg.csirl.actor_bc_coef == 0:
         return None
-    return ActorBehaviourCloning(BCLoss(modules.actor, loss_function="l2"), expert, cfg.csirl.actor_bc_coef)
+    critic = modules.sac if cfg.csirl.actor_bc_scale == "qvalue" else None
+    return ActorBehaviourCloning(BCLoss(modules.actor, loss_function="l2"), expert, cfg.csirl.actor_bc_coef,
+                                 critic=critic)
 
 
 def make_update_step(cfg: DictConfig, modules: CSIRLLearner, optimizers: dict, online: TensorDictReplayBuffer,

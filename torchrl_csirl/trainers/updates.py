@@ -124,16 +124,17 @@ class SACUpdate:
         """Whether this update leaves the actor and the temperature as they are (the critics' warm-up)."""
         return trainer.updates < self.critic_warmup_updates
 
-    def losses_to_step(self, losses: dict[str, torch.Tensor],
-                       trainer: CSIRLTrainer) -> tuple[dict[str, torch.Tensor], dict[str, torch.Tensor]]:
-        """The losses this update steps and what it logs besides: the critics' alone during the warm-up
-        (the others logged), else ``losses`` with the behavioural-cloning term (if any) and its diagnostics."""
+    def losses_to_step(self, losses: dict[str, torch.Tensor], trainer: CSIRLTrainer,
+                       batch: TensorDictBase) -> tuple[dict[str, torch.Tensor], dict[str, torch.Tensor]]:
+        """The losses this update steps on ``batch`` and what it logs besides: the critics' alone during the
+        warm-up (the others logged), else ``losses`` with the behavioural-cloning term (if any) and its
+        diagnostics."""
         if self.actor_held(trainer):
             held = {key: value.detach() for key, value in losses.items() if key not in self.CRITIC_KEYS}
             return {key: losses[key] for key in self.CRITIC_KEYS}, held
         if self.actor_bc is None:
             return losses, {}
-        bc_losses, logs = self.actor_bc(losses["loss_actor"])
+        bc_losses, logs = self.actor_bc(losses["loss_actor"], batch)
         return {**losses, **bc_losses}, logs
 
     def step(self, losses: dict[str, torch.Tensor], trainer: CSIRLTrainer) -> None:
@@ -146,7 +147,8 @@ class SACUpdate:
         batch = self.sample(trainer)
         with self.precision.autocast():
             out = self.loss(batch)
-        losses, logs = self.losses_to_step({key: out.get(key) for key in self.LOSS_KEYS if key in out.keys()}, trainer)
+        losses, logs = self.losses_to_step({key: out.get(key) for key in self.LOSS_KEYS if key in out.keys()}, trainer,
+                                           batch)
         self.step(losses, trainer)
         return {**{key: value.detach() for key, value in losses.items()}, **_detached(out, self.LOG_KEYS), **logs,
                 **batch_reward_means(batch)}
@@ -193,7 +195,7 @@ class MetaRewardUpdate:
         with self.sac_update.precision.autocast():  # the SAC update's precision
             out = self.meta_loss(online, expert, regularizer=regularizer)
         sac_losses, logs = self.sac_update.losses_to_step(
-            {key: out.get(key) for key in SACUpdate.LOSS_KEYS if key in out.keys()}, trainer)
+            {key: out.get(key) for key in SACUpdate.LOSS_KEYS if key in out.keys()}, trainer, online)
         meta = out.get("loss_meta")
         check_finite_losses({**sac_losses, "loss_meta": meta}, update_location(trainer))
         self.reward_optimizer.zero_grad(set_to_none=True)
