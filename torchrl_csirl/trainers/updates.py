@@ -93,7 +93,8 @@ class SACUpdate:
             :class:`~torchrl_csirl.modules.LearnerPrecision`). Defaults to float32.
         critic_warmup_updates: the first updates of a run step the critics' loss only: the actor, its
             cloning term and the temperature are held (``csirl.critic_warmup_updates``; their losses are
-            still logged). Defaults to ``0``: every update steps everything, as the paper.
+            still logged). Defaults to ``0`` (:data:`~torchrl_csirl.hyperparameters.CSIRL_DEFAULTS`): every update
+            steps everything, as the paper.
     """
 
     LOSS_KEYS = ("loss_qvalue", "loss_actor", "loss_alpha")
@@ -104,7 +105,7 @@ class SACUpdate:
                  max_grad_norm: float | None = None,
                  sample: Callable[[], TensorDictBase] | None = None,
                  actor_bc: ActorBehaviourCloning | None = None, precision: LearnerPrecision | None = None,
-                 critic_warmup_updates: int = 0) -> None:
+                 critic_warmup_updates: int = CSIRL_DEFAULTS.critic_warmup_updates) -> None:
         if critic_warmup_updates < 0:
             raise ValueError(f"critic_warmup_updates must be >= 0, got {critic_warmup_updates}.")
         self.loss = loss
