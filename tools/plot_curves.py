@@ -30,7 +30,8 @@ from torchrl_csirl.visualization import plot_method_curves
 def common_frames(runs: list[tuple[list[float], list[float]]]) -> tuple[list[float], list[list[float]]]:
     """The frames every run evaluated, and each run's values there."""
     shared = sorted(set.intersection(*(set(frames) for frames, _ in runs))) if runs else []
-    return shared, [[dict(zip(frames, values))[f] for f in shared] for frames, values in runs]
+    by_frame = [dict(zip(frames, values)) for frames, values in runs]
+    return shared, [[run[f] for f in shared] for run in by_frame]
 
 
 def group_curves(run_dirs: list[str], metric: str) -> tuple[list[float], list[list[float]]]:
