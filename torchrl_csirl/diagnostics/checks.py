@@ -198,9 +198,8 @@ def warm_start_kept(rows: Sequence[dict]) -> HealthCheck:
     if last < WARM_START_KEPT_SHARE * start[key]:
         remedy = ("even with cloning in the actor's loss (csirl.actor_bc_coef): SAC's fine-tuning moved the actor off "
                   "the cloned behaviour; where critic_calibration and expert_transitions_reward are in range the reward "
-                  "is not the cause (on AntMaze neither the critics' warm-up, csirl.critic_warmup_updates, nor "
-                  "TD3+BC's scale, csirl.actor_bc_scale=qvalue, kept it); a larger csirl.actor_bc_coef keeps the actor "
-                  "nearer the clone" if figures["anchored"]
+                  "is not the cause (what was tried on AntMaze: docs/studies/outside-driving.md); a larger "
+                  "csirl.actor_bc_coef keeps the actor nearer the clone" if figures["anchored"]
                   else "the updates moved the actor off the cloned behaviour (critic_calibration says whether the "
                        "critics had learned; csirl.actor_bc_coef keeps cloning in the actor's loss)")
         return HealthCheck(name, False, (
