@@ -2,7 +2,6 @@
 rows of its rounds, the tools' outputs)."""
 from __future__ import annotations
 
-import csv
 import json
 import os
 import shutil
@@ -72,8 +71,16 @@ def test_unfinished_runs_and_broken_logs_are_refused_by_name(tmp_path, capsys):
 
 
 def _rounds(target: str) -> list[dict]:
-    with open(os.path.join(target, "rounds.csv")) as f:
-        return list(csv.DictReader(f))
+    return record_runs.read_rounds(target)
+
+
+def test_read_rounds_names_a_record_without_its_per_round_table(tmp_path):
+    rows = [{"frames": 10, "loss_actor": -1.5}, {"frames": 20, "actor_bc_mse": 0.25}]
+    record_runs.write_rounds(str(tmp_path / "rounds.csv"), rows)
+    assert record_runs.read_rounds(str(tmp_path)) == [
+        {"frames": "10", "loss_actor": "-1.5", "actor_bc_mse": ""}, {"frames": "20", "loss_actor": "", "actor_bc_mse": "0.25"}]
+    with pytest.raises(SystemExit, match=r"old-record: no rounds.csv \(records before the per-round table"):
+        record_runs.read_rounds(str(tmp_path / "old-record"))
 
 
 def test_a_real_run_keeps_one_row_per_round_with_what_the_pages_read(tmp_path):

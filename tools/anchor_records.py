@@ -17,11 +17,12 @@ Examples:
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import os
 import sys
 from statistics import mean
+
+from record_runs import read_rounds
 
 
 def _ranks(values: list[float]) -> list[float]:
@@ -42,11 +43,7 @@ def spearman(x: list[float], y: list[float]) -> float:
 
 def anchor_rounds(run_dir: str) -> list[tuple[float, float]]:
     """``(|loss_actor|, actor_bc_mse)`` of each round of a record that logged the cloning term."""
-    path = os.path.join(run_dir, "rounds.csv")
-    if not os.path.isfile(path):
-        raise SystemExit(f"{run_dir}: no rounds.csv (records before the per-round table have none)")
-    with open(path) as f:
-        rows = [r for r in csv.DictReader(f) if r.get("actor_bc_mse")]
+    rows = [r for r in read_rounds(run_dir) if r.get("actor_bc_mse")]
     if not rows:
         raise SystemExit(f"{run_dir}: no round logged actor_bc_mse (a run without csirl.actor_bc_coef?)")
     return [(abs(float(r["loss_actor"])), float(r["actor_bc_mse"])) for r in rows]

@@ -15,13 +15,13 @@ The last line is JSON; a Markdown table goes to stderr.
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import os
 import sys
 
 import torch
 import yaml
+from record_runs import read_rounds
 
 from torchrl_csirl.diagnostics import critic_calibration
 
@@ -38,8 +38,7 @@ def horizon_bonus(alpha: float, entropy: float, gamma: float) -> float:
 
 def reread_record(record: str) -> dict[str, object]:
     """One record's end-of-run alpha, entropy, bonus, and each critic check as recorded and re-read."""
-    with open(os.path.join(record, "rounds.csv"), newline="", encoding="utf-8") as f:
-        last = list(csv.DictReader(f))[-1]
+    last = read_rounds(record)[-1]
     with open(os.path.join(record, "config.yaml"), encoding="utf-8") as f:
         gamma = float(yaml.safe_load(f)["csirl"]["gamma"])
     with open(os.path.join(record, "health.json"), encoding="utf-8") as f:

@@ -174,6 +174,19 @@ def write_rounds(path: str, rows: list[dict]) -> None:
         writer.writerows(rows)
 
 
+def read_rounds(record: str) -> list[dict[str, str]]:
+    """The rows of a record's ``rounds.csv`` (strings, empty where a round did not log a column).
+
+    Raises:
+        SystemExit: naming the record when it has no ``rounds.csv`` (records before the per-round table).
+    """
+    path = os.path.join(record, ROUNDS_FILE)
+    if not os.path.isfile(path):
+        raise SystemExit(f"{record}: no {ROUNDS_FILE} (records before the per-round table have none)")
+    with open(path, newline="", encoding="utf-8") as handle:
+        return list(csv.DictReader(handle))
+
+
 def read_metrics(path: str) -> list[dict]:
     """The JSON rows of ``metrics.jsonl``; a line that is not JSON is an error naming it."""
     rows = []
