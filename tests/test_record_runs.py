@@ -70,10 +70,6 @@ def test_unfinished_runs_and_broken_logs_are_refused_by_name(tmp_path, capsys):
         record_runs.record_run(unfinished, str(tmp_path / "docs"))
 
 
-def _rounds(target: str) -> list[dict]:
-    return record_runs.read_rounds(target)
-
-
 def test_read_rounds_names_a_record_without_its_per_round_table(tmp_path):
     rows = [{"frames": 10, "loss_actor": -1.5}, {"frames": 20, "actor_bc_mse": 0.25}]
     record_runs.write_rounds(str(tmp_path / "rounds.csv"), rows)
@@ -97,7 +93,7 @@ def test_a_real_run_keeps_one_row_per_round_with_what_the_pages_read(tmp_path):
     batches = [r for r in logged if "round" in r]
     assert [r["round"] for r in batches] == [0, 0, 1, 1]  # 10 updates a batch, 20 a round
     target = record_runs.record_run(run_dir, str(tmp_path / "docs"))
-    rounds = _rounds(target)
+    rounds = record_runs.read_rounds(target)
     assert [(int(r["frames"]), int(r["round"]), int(r["batches"])) for r in rounds] == [(200, 0, 2), (400, 1, 2)]
     columns = set(rounds[0])
     assert {"updates", "subgoal", "subgoal_changed", "alpha", "entropy", "loss_qvalue", "loss_actor", "loss_meta",
@@ -131,7 +127,7 @@ def test_round_rows_bound_the_discriminator_pool_long_runs_and_copy_the_tools_ou
         with open(os.path.join(run, name), "w") as f:
             f.write('{"method": "gail"}\n')
     target = record_runs.record_run(run, str(tmp_path / "docs"), max_rounds=2)
-    rounds = _rounds(target)
+    rounds = record_runs.read_rounds(target)
     assert [(r["frames"], r["round"], r["batches"]) for r in rounds] == [("4000", "1", "4"), ("8000", "3", "4")]
     assert (rounds[0]["loss_discriminator_min"], rounds[0]["loss_discriminator_max"]) == ("0.001", "0.004")
     assert float(rounds[0]["loss_discriminator"]) == pytest.approx(0.0025)
