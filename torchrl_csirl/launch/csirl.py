@@ -98,6 +98,7 @@ class CSIRLTaskConfig(RoboticsSections, CSIRLHighwayConfig):
     """``recipes/csirl_highway.py`` on any task but the driving scenes (robotics, locomotion, ``env.gym_id``, yours):
     the driving defaults with the task sections (``env``, ``expert``, ``model``, ``collector``)."""
 
+    preset: str = option("default", help="default | paper (config group torchrl_csirl/launch/config/csirl_task/preset)")
     expert: RoboticsExpertConfig = field(default_factory=RoboticsExpertConfig)
 
 
