@@ -12,6 +12,7 @@ import pytest
 import torch
 
 from torchrl_csirl.diagnostics import (
+    OFF_DEMONSTRATION_RATIO,
     action_saturation,
     critic_calibration,
     demonstrations_share_a_goal,
@@ -21,6 +22,7 @@ from torchrl_csirl.diagnostics import (
     policy_entropy,
     reward_tracks_the_task,
     route_opening,
+    states_off_the_demonstrations,
     subgoal_progress,
     warm_start_kept,
     where_episodes_end,
@@ -247,3 +249,40 @@ def test_route_opening_names_a_straight_line_target_across_the_antmazes_wall(tar
         assert check.figures["opening_share"] > 0.2 and "csirl.matching_target=path" in check.message
     else:
         assert check.figures["opening_share"] < 0.02
+
+
+def _halfcheetah_demonstration() -> tuple[torch.Tensor, object]:
+    """The HalfCheetah's shipped demonstration's observations ``[L, D]`` and the task's spec."""
+    spec = resolve_scenario("halfcheetah")
+    cfg = csirl.CSIRL_RECIPE.load_config(["env.scenario=halfcheetah"])
+    demos = load_experts(cfg.expert, spec)
+    return demos.trajectory(0)["observation"].reshape(-1, spec.obs_dim).float(), spec
+
+
+def test_a_cheetah_on_its_back_is_named_off_the_demonstrations():
+    """The HalfCheetah's demonstration, its second half as the policy's states against its first half: in range; the
+    same states with the torso turned half a turn (a cheetah on its back, moving its x as an upright one does):
+    flagged, the torso's angle named first."""
+    demonstration, spec = _halfcheetah_demonstration()
+    half = demonstration.shape[0] // 2
+    names = [spec.feature_name(i) for i in range(spec.obs_dim)]
+    upright = states_off_the_demonstrations(demonstration[half:], [demonstration[:half]], spec.position_feature_indices,
+                                            names)
+    assert upright.ok is True and upright.figures["ratio"] < 2
+    angle = names.index("angle")
+    flipped_states = demonstration[half:].clone()
+    flipped_states[:, angle] += math.pi
+    flipped = states_off_the_demonstrations(flipped_states, [demonstration[:half]], spec.position_feature_indices, names)
+    assert flipped.ok is False and flipped.figures["farthest_features"][0] == "angle"
+    assert flipped.figures["ratio"] > OFF_DEMONSTRATION_RATIO and "never goes" in flipped.message
+    # the matching feature (the torso's x) is not read: moving it anywhere changes nothing
+    moved = demonstration[half:].clone()
+    moved[:, spec.position_feature_indices[0]] += 1e3
+    assert states_off_the_demonstrations(moved, [demonstration[:half]], spec.position_feature_indices).figures[
+        "ratio"] == pytest.approx(upright.figures["ratio"])
+
+
+def test_the_report_sets_the_policys_states_against_the_demonstrations(merge_run):
+    check = health_report(merge_run, "csirl", episodes=1).check("states_off_the_demonstrations")
+    assert check.ok is not None and check.figures["entries"] > 0
+    assert check.figures["reference"] == "from each other" and check.figures["demonstrations_median"] > 0

@@ -62,13 +62,14 @@ def test_every_task_has_the_published_procedure_as_a_preset():
     load = recipe_for("csirl").load_config
     default, paper = load(["env.task=antmaze-umaze"]), load(["env.task=antmaze-umaze", "preset=paper"])
     driving = csirl.load_config(["preset=paper"])
-    for key in ("collector.frames_per_batch", "replay_buffer.clear_each_round", "replay_buffer.expert_fraction",
+    for key in ("collector.init_random_frames", "replay_buffer.clear_each_round", "replay_buffer.expert_fraction",
                 "optim.utd_ratio", "csirl.updates_per_round", "csirl.meta_every", "csirl.matching_target",
                 "csirl.matching_features", "csirl.fixed_alpha"):
         assert config.flatten_config(paper)[key] == config.flatten_config(driving)[key], key
     assert paper.csirl.actor_bc_coef == 0 and paper.csirl.goal_conditioned is False
-    assert default.collector.frames_per_batch != paper.collector.frames_per_batch
-    assert csirl.total_frames(paper, curriculum_length=700) == 700 * (20000 + 1280)
+    assert default.csirl.matching_target != paper.csirl.matching_target
+    assert paper.collector.frames_per_batch == default.collector.frames_per_batch  # whole episodes per worker
+    assert csirl.total_frames(paper, curriculum_length=280) == 280 * (20000 + 1280)
     # the preset goes over a task's own defaults, the command line over both
     assert load(["env.scenario=halfcheetah", "preset=paper", "csirl.meta_every=3"]).csirl.meta_every == 3
     with pytest.raises(config.ConfigError, match="preset=fast: must be one of default, paper"):

@@ -4,7 +4,8 @@
   words when out of range (reward hacking, critics over- or under-valued, a curriculum that never moves,
   a collapsed entropy, saturated actions, a learned reward too small or too large, a matching reward that
   punishes the demonstrations or charges their route's first stretch, a reward that pays the policy more than
-  the expert, episodes that end short of the goal, demonstrations that do not share the curriculum trajectory's goal).
+  the expert, episodes that end short of the goal, demonstrations that do not share the curriculum trajectory's goal,
+  a policy whose states the demonstrations never visit).
 * :mod:`~torchrl_csirl.diagnostics.probe`: the figures measured on a learner's own networks.
 * :mod:`~torchrl_csirl.diagnostics.report`: every check of a run, written at the end of each CSIRL run and by
   ``torchrl-csirl diagnose <run dir>``.
@@ -16,6 +17,7 @@ Examples:
     (False, 0.0002)
 """
 from torchrl_csirl.diagnostics.checks import (
+    OFF_DEMONSTRATION_RATIO,
     HealthCheck,
     action_saturation,
     critic_calibration,
@@ -23,9 +25,11 @@ from torchrl_csirl.diagnostics.checks import (
     expert_transitions_reward,
     learned_reward_share,
     matching_along_demonstrations,
+    nearest_state_distances,
     policy_entropy,
     reward_tracks_the_task,
     route_opening,
+    states_off_the_demonstrations,
     subgoal_progress,
     warm_start_kept,
     where_episodes_end,
@@ -44,6 +48,7 @@ from torchrl_csirl.diagnostics.report import (
 __all__ = [
     "HEALTH_FILE",
     "HEALTH_PICTURE",
+    "OFF_DEMONSTRATION_RATIO",
     "HealthCheck",
     "HealthReport",
     "LearnerProbe",
@@ -61,7 +66,9 @@ __all__ = [
     "probe_learner",
     "read_metrics",
     "reward_tracks_the_task",
+    "nearest_state_distances",
     "route_opening",
+    "states_off_the_demonstrations",
     "subgoal_progress",
     "warm_start_kept",
     "where_episodes_end",

@@ -45,6 +45,9 @@ class LearnerProbe:
         actions: ``[T, A]`` the policy's actions.
         goal_conditioned: the matching reward follows the demonstration of each episode's goal
             (:class:`~torchrl_csirl.transforms.GoalConditionedMatchingReward`), not the first one only.
+        observations: ``[T, D]`` the policy's observations (each step's next one).
+        demo_observations: ``[L_i, D]`` per demonstration, its observations.
+        matched_features: the observation entries the matching reward's potential reads.
     """
 
     policy_values: torch.Tensor
@@ -64,6 +67,9 @@ class LearnerProbe:
     matching_target: str = "final"
     policy_entropy_returns: torch.Tensor = field(default_factory=lambda: torch.zeros(0))
     expert_entropy_returns: torch.Tensor = field(default_factory=lambda: torch.zeros(0))
+    observations: torch.Tensor = field(default_factory=lambda: torch.zeros(0))
+    demo_observations: tuple[torch.Tensor, ...] = ()
+    matched_features: tuple[int, ...] = ()
 
 
 def discounted_returns(rewards: torch.Tensor, gamma: float) -> torch.Tensor:
@@ -154,7 +160,7 @@ def probe_learner(*, env: EnvBase, policy, loss, transforms, matching, demos, ga
         device: the learner's device.
     """
     policy_values, policy_returns, policy_entropy, policy_rewards = [], [], [], []
-    finals, actions, paths = [], [], []
+    finals, actions, paths, observations = [], [], [], []
     position = matching.position_feature_indices.cpu()
     with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
         for i in range(episodes):
@@ -167,6 +173,7 @@ def probe_learner(*, env: EnvBase, policy, loss, transforms, matching, demos, ga
             policy_rewards.append(rewards)
             finals.append(episode["next", "observation"][-1].index_select(-1, position))
             actions.append(episode["action"].reshape(episode.shape[0], -1))
+            observations.append(episode["next", "observation"].reshape(episode.shape[0], -1).float())
             if hasattr(matching, "demonstration_of"):  # goal-conditioned: the path of the episode's goal
                 chosen = int(matching.demonstration_of(episode["observation"][:1].to(device)).reshape(-1)[0])
                 paths.append(matching.demonstration_positions(chosen).float().cpu())
@@ -196,4 +203,7 @@ def probe_learner(*, env: EnvBase, policy, loss, transforms, matching, demos, ga
         path_features=matching.expert_observations.index_select(-1, matching.position_feature_indices).float().cpu(),
         actions=torch.cat(actions).float(), goal_conditioned=hasattr(matching, "demonstration_of"), episode_paths=tuple(paths),
         matching_along_routes=routes, matching_target=getattr(matching, "target", "final"),
-        policy_entropy_returns=torch.cat(policy_entropy), expert_entropy_returns=torch.cat(expert_entropy))
+        policy_entropy_returns=torch.cat(policy_entropy), expert_entropy_returns=torch.cat(expert_entropy),
+        observations=torch.cat(observations).cpu(), matched_features=tuple(position.tolist()),
+        demo_observations=tuple(demos.trajectory(i)["observation"].reshape(-1, observations[0].shape[-1]).float().cpu()
+                                for i in range(demos.num_trajectories)))

@@ -24,6 +24,7 @@ from torchrl_csirl.diagnostics.checks import (
     policy_entropy,
     reward_tracks_the_task,
     route_opening,
+    states_off_the_demonstrations,
     subgoal_progress,
     warm_start_kept,
     where_episodes_end,
@@ -111,7 +112,7 @@ def _metrics_checks(rows: list[dict[str, Any]], action_dim: int, curriculum_leng
     return checks
 
 
-def _probe_checks(probe: LearnerProbe, expert_fraction: float) -> list[HealthCheck]:
+def _probe_checks(probe: LearnerProbe, expert_fraction: float, names: list[str] | None = None) -> list[HealthCheck]:
     return [
         critic_calibration(probe.expert_values, probe.expert_returns, "expert", probe.expert_entropy_returns),
         critic_calibration(probe.policy_values, probe.policy_returns, "policy", probe.policy_entropy_returns),
@@ -120,6 +121,7 @@ def _probe_checks(probe: LearnerProbe, expert_fraction: float) -> list[HealthChe
         expert_transitions_reward(probe.expert_rewards, probe.policy_rewards, expert_fraction),
         where_episodes_end(probe.final_features, probe.path_features, probe.episode_paths),
         demonstrations_share_a_goal(probe.demo_final_features, probe.path_features, probe.goal_conditioned),
+        states_off_the_demonstrations(probe.observations, probe.demo_observations, probe.matched_features, names),
         action_saturation(probe.actions),
     ]
 
@@ -147,7 +149,8 @@ def health_report(run: Any, method: str, *, episodes: int = 5, metrics_dir: str 
     to_subgoal = report.probe.matching_to_subgoal
     demonstration_reward = float(to_subgoal.mean()) if to_subgoal.numel() else None
     report.checks += _metrics_checks(rows, run.spec.action_dim, parts.curriculum.length, test, demonstration_reward)
-    report.checks += _probe_checks(report.probe, cfg.replay_buffer.expert_fraction)
+    names = [run.spec.feature_name(i) for i in range(run.spec.obs_dim)]
+    report.checks += _probe_checks(report.probe, cfg.replay_buffer.expert_fraction, names)
     return report
 
 

@@ -1,0 +1,77 @@
+"""Are a run's states the demonstrations'? The health check ``states_off_the_demonstrations`` on any run.
+
+``python tools/off_demonstrations.py <run dir> [<run dir> ...] [--episodes 5] [--holdout]``
+
+For each run (any method: its ``policy.pt``, else the actor of its last checkpoint) it rolls the deterministic policy
+for ``--episodes`` episodes seeded from the run's ``eval.seed`` (the test's first episodes) and sets its states against
+the run's demonstrations (:func:`torchrl_csirl.diagnostics.states_off_the_demonstrations`: the median nearest-state
+distance on the standardised entries the matching reward does not read, over the demonstrations' own). With
+``--holdout`` it sets the run's last five demonstrations against the others instead of a policy: the figure an expert
+gets. One line per run, then the figures as a JSON line per run. CSIRL's health report makes the same check at the
+end of every run; this tool makes it for the baselines too, and calibrates its threshold
+(docs/own-task.md#its-health-report).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+
+import torch
+from omegaconf import OmegaConf
+from torchrl.envs.utils import ExplorationType, set_exploration_type
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from locomotion_probe import load_actor  # noqa: E402
+
+from torchrl_csirl.diagnostics import check_line, states_off_the_demonstrations  # noqa: E402
+from torchrl_csirl.envs import make_env, resolve_scenario  # noqa: E402
+from torchrl_csirl.launch.builders import load_experts  # noqa: E402
+
+
+def policy_states(run_dir: str, cfg, episodes: int) -> torch.Tensor:
+    """``[T, D]`` the deterministic policy's next observations over ``episodes`` episodes (seeds ``eval.seed + i``)."""
+    spec = resolve_scenario(cfg.env.scenario)
+    actor = load_actor(run_dir, cfg.env.scenario)
+    states = []
+    for i in range(episodes):
+        env = make_env(cfg.env.scenario, seed=int(cfg.eval.seed) + i)
+        with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
+            rollout = env.rollout(spec.max_steps, actor, break_when_any_done=True)
+        states.append(rollout["next", "observation"].reshape(rollout.shape[0], -1).float())
+        env.close()
+    return torch.cat(states)
+
+
+def check_run(run_dir: str, episodes: int = 5, holdout: bool = False) -> dict:
+    """The check on one run, as a dict (``name``, ``ok``, ``message``, ``figures``, ``run``)."""
+    cfg = OmegaConf.load(os.path.join(run_dir, "config.yaml"))
+    spec = resolve_scenario(cfg.env.scenario)
+    demos = load_experts(cfg.expert, spec)
+    trajectories = [demos.trajectory(i)["observation"].reshape(-1, spec.obs_dim).float()
+                    for i in range(demos.num_trajectories)]
+    if holdout:
+        states, trajectories = torch.cat(trajectories[-5:]), trajectories[:-5]
+    else:
+        states = policy_states(run_dir, cfg, episodes)
+    names = [spec.feature_name(i) for i in range(spec.obs_dim)]
+    check = states_off_the_demonstrations(states, trajectories, spec.position_feature_indices, names)
+    return {"run": run_dir, "holdout": holdout, **check.as_dict()}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("runs", nargs="+")
+    parser.add_argument("--episodes", type=int, default=5)
+    parser.add_argument("--holdout", action="store_true", help="the last five demonstrations against the others")
+    args = parser.parse_args()
+    results = [check_run(run, args.episodes, args.holdout) for run in args.runs]
+    for result in results:
+        print(f"{result['run']}: {check_line(result)}")
+    for result in results:
+        print(json.dumps(result, default=float))
+
+
+if __name__ == "__main__":
+    main()
