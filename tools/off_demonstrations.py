@@ -6,7 +6,7 @@ For each run (any method: its ``policy.pt``, else the actor of its last checkpoi
 for ``--episodes`` episodes seeded from the run's ``eval.seed`` (the test's first episodes) and sets its states against
 the run's demonstrations (:func:`torchrl_csirl.diagnostics.states_off_the_demonstrations`: the median nearest-state
 distance on the standardised entries the matching reward does not read, over the demonstrations' own). With
-``--holdout`` it sets the run's last five demonstrations against the others instead of a policy: the figure an expert
+``--holdout`` it sets the run's last five demonstrations (at most all but one) against the others instead of a policy: the figure an expert
 gets. One line per run, then the figures as a JSON line per run. CSIRL's health report makes the same check at the
 end of every run; this tool makes it for the baselines too, and calibrates its threshold
 (docs/own-task.md#its-health-report).
@@ -28,6 +28,7 @@ from locomotion_probe import load_actor  # noqa: E402
 from torchrl_csirl.diagnostics import check_line, states_off_the_demonstrations  # noqa: E402
 from torchrl_csirl.envs import make_env, resolve_scenario  # noqa: E402
 from torchrl_csirl.launch.builders import load_experts  # noqa: E402
+from torchrl_csirl.launch.robotics import prepare_task  # noqa: E402
 
 
 def policy_states(run_dir: str, cfg, episodes: int) -> torch.Tensor:
@@ -47,12 +48,14 @@ def policy_states(run_dir: str, cfg, episodes: int) -> torch.Tensor:
 def check_run(run_dir: str, episodes: int = 5, holdout: bool = False) -> dict:
     """The check on one run, as a dict (``name``, ``ok``, ``message``, ``figures``, ``run``)."""
     cfg = OmegaConf.load(os.path.join(run_dir, "config.yaml"))
+    prepare_task([], run_dir=run_dir)  # a task by gymnasium id or from a module: registered as the run had it
     spec = resolve_scenario(cfg.env.scenario)
     demos = load_experts(cfg.expert, spec)
     trajectories = [demos.trajectory(i)["observation"].reshape(-1, spec.obs_dim).float()
                     for i in range(demos.num_trajectories)]
-    if holdout:
-        states, trajectories = torch.cat(trajectories[-5:]), trajectories[:-5]
+    if holdout:  # the last five (at most all but one) against the others
+        kept = max(1, len(trajectories) - 5)
+        states, trajectories = torch.cat(trajectories[kept:]), trajectories[:kept]
     else:
         states = policy_states(run_dir, cfg, episodes)
     names = [spec.feature_name(i) for i in range(spec.obs_dim)]
