@@ -4,12 +4,12 @@
 
 For each run (any method: its ``policy.pt``, else the actor of its last checkpoint) it rolls the deterministic policy
 for ``--episodes`` episodes seeded from the run's ``eval.seed`` (the test's first episodes) and sets its states against
-the run's demonstrations (:func:`torchrl_csirl.diagnostics.states_off_the_demonstrations`: the median nearest-state
-distance on the standardised entries the matching reward does not read, over the demonstrations' own). With
-``--holdout`` it sets the run's last five demonstrations (at most all but one) against the others instead of a policy: the figure an expert
-gets. One line per run, then the figures as a JSON line per run. CSIRL's health report makes the same check at the
-end of every run; this tool makes it for the baselines too, and calibrates its threshold
-(docs/own-task.md#its-health-report).
+the run's demonstrations (:func:`torchrl_csirl.diagnostics.states_off_the_demonstrations`: per observation entry the
+matching reward does not read, the mean gap to the nearest demonstration state in the demonstrations' standard
+deviations). With ``--holdout`` it sets the run's last five demonstrations (at most all but one) against the others
+instead of a policy: the figure an expert gets. One line per run, then the figures as a JSON line per run. CSIRL's
+health report makes the same check at the end of every run; this tool makes it for the baselines too, and calibrates
+its threshold (docs/own-task.md#a-cheetah-on-its-back).
 """
 from __future__ import annotations
 
@@ -53,6 +53,8 @@ def check_run(run_dir: str, episodes: int = 5, holdout: bool = False) -> dict:
     demos = load_experts(cfg.expert, spec)
     trajectories = [demos.trajectory(i)["observation"].reshape(-1, spec.obs_dim).float()
                     for i in range(demos.num_trajectories)]
+    if holdout and len(trajectories) < 2:
+        raise SystemExit(f"error: {run_dir}: one demonstration, none to hold out")
     if holdout:  # the last five (at most all but one) against the others
         kept = max(1, len(trajectories) - 5)
         states, trajectories = torch.cat(trajectories[kept:]), trajectories[:kept]

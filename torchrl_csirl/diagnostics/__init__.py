@@ -17,7 +17,7 @@ Examples:
     (False, 0.0002)
 """
 from torchrl_csirl.diagnostics.checks import (
-    OFF_DEMONSTRATION_RATIO,
+    OFF_DEMONSTRATION_SD,
     HealthCheck,
     action_saturation,
     critic_calibration,
@@ -48,7 +48,7 @@ from torchrl_csirl.diagnostics.report import (
 __all__ = [
     "HEALTH_FILE",
     "HEALTH_PICTURE",
-    "OFF_DEMONSTRATION_RATIO",
+    "OFF_DEMONSTRATION_SD",
     "HealthCheck",
     "HealthReport",
     "LearnerProbe",
