@@ -281,6 +281,20 @@ def test_a_cheetah_on_its_back_is_named_off_the_demonstrations():
         "largest_gap_sd"] == pytest.approx(upright.figures["largest_gap_sd"])
 
 
+def test_off_the_demonstrations_names_a_blown_up_simulation_and_reads_tensor_indices():
+    demonstration, spec = _halfcheetah_demonstration()
+    half = demonstration.shape[0] // 2
+    blown = demonstration[half:].clone()
+    blown[3, 2] = float("nan")
+    check = states_off_the_demonstrations(blown, [demonstration[:half]], spec.position_feature_indices)
+    assert check.ok is False and check.figures["non_finite_entries"] == [2] and "NaN" in check.message
+    as_tensor = states_off_the_demonstrations(demonstration[half:], [demonstration[:half]],
+                                              torch.tensor(spec.position_feature_indices))
+    assert as_tensor.figures["entries"] == spec.obs_dim - len(spec.position_feature_indices)
+    narrow = states_off_the_demonstrations(demonstration[half:, :5], [demonstration[:half]])
+    assert narrow.ok is None and "nothing to compare" in narrow.message
+
+
 def test_the_report_sets_the_policys_states_against_the_demonstrations(merge_run):
     check = health_report(merge_run, "csirl", episodes=1).check("states_off_the_demonstrations")
     assert check.ok is not None and check.figures["entries"] > 0 and len(check.figures["farthest_features"]) == 3

@@ -68,9 +68,9 @@ def test_every_task_has_the_published_procedure_as_a_preset():
         assert config.flatten_config(paper)[key] == config.flatten_config(driving)[key], key
     assert paper.csirl.actor_bc_coef == 0 and paper.csirl.goal_conditioned is False
     assert default.csirl.matching_target != paper.csirl.matching_target
-    assert paper.collector.frames_per_batch == default.collector.frames_per_batch  # whole episodes per worker
+    assert paper.collector.frames_per_batch == default.collector.frames_per_batch  # the task's batch
     assert csirl.total_frames(paper, curriculum_length=280) == 280 * (20000 + 1280)
-    # the preset goes over a task's own defaults, the command line over both
+    # the command line goes over the preset
     assert load(["env.scenario=halfcheetah", "preset=paper", "csirl.meta_every=3"]).csirl.meta_every == 3
     with pytest.raises(config.ConfigError, match="preset=fast: must be one of default, paper"):
         load(["env.task=antmaze-umaze", "preset=fast"])

@@ -43,7 +43,7 @@ def load_actor(run_dir: str, task: str) -> torch.nn.Module:
     path = os.path.join(run_dir, "checkpoints", "last", "state.pt")
     if not os.path.isfile(path):
         raise SystemExit(f"error: {run_dir}: neither policy.pt nor checkpoints/last/state.pt")
-    state = torch.load(path, weights_only=False)["states"].get("loss", {})
+    state = torch.load(path, weights_only=False, map_location="cpu")["states"].get("loss", {})
     for prefix in ACTOR_PREFIXES:
         weights = {k[len(prefix):]: v for k, v in state.items() if k.startswith(prefix)}
         if weights:

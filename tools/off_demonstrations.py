@@ -36,7 +36,7 @@ def policy_states(run_dir: str, cfg, episodes: int) -> torch.Tensor:
     spec = resolve_scenario(cfg.env.scenario)
     actor = load_actor(run_dir, cfg.env.scenario)
     states = []
-    for i in range(episodes):
+    for i in range(episodes):  # each episode on its own seed, as the test's
         env = make_env(cfg.env.scenario, seed=int(cfg.eval.seed) + i)
         with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
             rollout = env.rollout(spec.max_steps, actor, break_when_any_done=True)
@@ -71,11 +71,21 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=5)
     parser.add_argument("--holdout", action="store_true", help="the last five demonstrations against the others")
     args = parser.parse_args()
-    results = [check_run(run, args.episodes, args.holdout) for run in args.runs]
+    if args.episodes < 1:
+        parser.error("--episodes must be at least 1")
+    results, failed = [], []
+    for run in args.runs:
+        try:
+            results.append(check_run(run, args.episodes, args.holdout))
+        except SystemExit as err:  # one run that cannot be read does not stop the others
+            failed.append(run)
+            print(err, file=sys.stderr)
     for result in results:
         print(f"{result['run']}: {check_line(result)}")
     for result in results:
         print(json.dumps(result, default=float))
+    if failed:
+        raise SystemExit(f"error: {len(failed)} run(s) not read: {', '.join(failed)}")
 
 
 if __name__ == "__main__":

@@ -37,9 +37,9 @@ __all__ = [
     "expert_transitions_reward",
     "learned_reward_share",
     "matching_along_demonstrations",
+    "nearest_state_distances",
     "policy_entropy",
     "reward_tracks_the_task",
-    "nearest_state_distances",
     "route_opening",
     "states_off_the_demonstrations",
     "subgoal_progress",
@@ -481,11 +481,11 @@ def expert_transitions_reward(expert: torch.Tensor, policy: torch.Tensor, expert
 #: on average over the policy's states, from the nearest demonstration state before the states are called off the
 #: demonstrations
 OFF_DEMONSTRATION_SD = 5.0
-#: at most this many states of each side enter a distance (evenly strided): the check stays cheap on long runs
+#: at most this many of the policy's states are paired (evenly strided): the check stays cheap on long runs
 _MAX_STATES = 4000
 
 
-def nearest_state_distances(states: torch.Tensor, reference: torch.Tensor, chunk: int = 512
+def nearest_state_distances(states: torch.Tensor, reference: torch.Tensor, chunk: int = 128
                             ) -> tuple[torch.Tensor, torch.Tensor]:
     """Each of ``states``' (``[N, D]``) Euclidean distance to its nearest row of ``reference`` (``[M, D]``) and that
     row's index, ``chunk`` rows at a time.
@@ -496,7 +496,7 @@ def nearest_state_distances(states: torch.Tensor, reference: torch.Tensor, chunk
     """
     reference = reference.double()
     found = [torch.cdist(part.double(), reference).min(-1) for part in states.split(chunk)]
-    return torch.cat([f.values for f in found]).to(states.dtype), torch.cat([f.indices for f in found])
+    return torch.cat([f.values for f in found]).float(), torch.cat([f.indices for f in found])
 
 
 def _strided(states: torch.Tensor, most: int = _MAX_STATES) -> torch.Tensor:
@@ -531,20 +531,38 @@ def states_off_the_demonstrations(policy_states: torch.Tensor, demonstrations: S
         (False, 'angle')
     """
     name = "states_off_the_demonstrations"
-    demonstrations = [d.float() for d in demonstrations if d.shape[0] > 0]
+    demonstrations = [d.detach().float().cpu() for d in demonstrations if d.shape[0] > 0]
     if policy_states.numel() == 0 or not demonstrations:
         return HealthCheck(name, None, "no policy state or no demonstration to compare")
+    policy_states = policy_states.detach().float().cpu()
+    width = policy_states.shape[-1]
+    if any(d.shape[-1] != width for d in demonstrations) or (names is not None and len(names) != width):
+        return HealthCheck(name, None, (
+            f"the policy's observations have {width} entries, the demonstrations' "
+            f"{sorted({d.shape[-1] for d in demonstrations})}" + (f", the names {len(names)}" if names is not None
+                                                                  else "") + ": nothing to compare"))
+    if not torch.isfinite(policy_states).all():
+        bad = sorted({int(i) for i in (~torch.isfinite(policy_states)).nonzero()[:, -1]})
+        return HealthCheck(name, False, (
+            "the policy's observations hold NaN or inf (entries "
+            + ", ".join(names[i] if names is not None else f"obs[{i}]" for i in bad[:5])
+            + "): the simulation blew up or the policy's actions did"), {"non_finite_entries": bad})
     every = torch.cat(demonstrations)
-    mean, std = every.mean(0), every.std(0) if every.shape[0] > 1 else torch.zeros(every.shape[-1])
-    keep = [i for i in range(every.shape[-1]) if i not in set(matched) and float(std[i]) > 1e-6]
+    if every.shape[0] < 2:
+        return HealthCheck(name, None, "one demonstration state: no spread to standardise by")
+    mean, std = every.mean(0), every.std(0)
+    matched = {int(i) for i in matched}
+    unread = [i for i in range(width) if i not in matched]
+    keep = [i for i in unread if float(std[i]) > 1e-6]
     if not keep:
-        return HealthCheck(name, None, "every entry the matching reward does not read is constant in the demonstrations")
+        return HealthCheck(name, None, "the matching reward reads every entry" if not unread
+                           else "every entry the matching reward does not read is constant in the demonstrations")
     keep_t = torch.tensor(keep)
 
     def standardised(x: torch.Tensor) -> torch.Tensor:
-        return ((x.float() - mean) / std).index_select(-1, keep_t)
+        return ((x - mean) / std).index_select(-1, keep_t)
 
-    policy, pool = _strided(standardised(policy_states)), _strided(standardised(every))
+    policy, pool = _strided(standardised(policy_states)), standardised(every)
     distance, nearest = nearest_state_distances(policy, pool)
     gaps = (policy - pool[nearest]).abs().mean(0)  # per entry, in the demonstrations' standard deviations
     order = gaps.argsort(descending=True)[:3].tolist()

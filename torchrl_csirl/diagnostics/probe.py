@@ -173,7 +173,7 @@ def probe_learner(*, env: EnvBase, policy, loss, transforms, matching, demos, ga
             policy_rewards.append(rewards)
             finals.append(episode["next", "observation"][-1].index_select(-1, position))
             actions.append(episode["action"].reshape(episode.shape[0], -1))
-            observations.append(episode["next", "observation"].reshape(episode.shape[0], -1).float())
+            observations.append(_flat_observations(episode["next"]))
             if hasattr(matching, "demonstration_of"):  # goal-conditioned: the path of the episode's goal
                 chosen = int(matching.demonstration_of(episode["observation"][:1].to(device)).reshape(-1)[0])
                 paths.append(matching.demonstration_positions(chosen).float().cpu())
@@ -204,6 +204,11 @@ def probe_learner(*, env: EnvBase, policy, loss, transforms, matching, demos, ga
         actions=torch.cat(actions).float(), goal_conditioned=hasattr(matching, "demonstration_of"), episode_paths=tuple(paths),
         matching_along_routes=routes, matching_target=getattr(matching, "target", "final"),
         policy_entropy_returns=torch.cat(policy_entropy), expert_entropy_returns=torch.cat(expert_entropy),
-        observations=torch.cat(observations).cpu(), matched_features=tuple(position.tolist()),
-        demo_observations=tuple(demos.trajectory(i)["observation"].reshape(-1, observations[0].shape[-1]).float().cpu()
-                                for i in range(demos.num_trajectories)))
+        observations=torch.cat(observations), matched_features=tuple(position.tolist()),
+        demo_observations=tuple(_flat_observations(demos.trajectory(i)) for i in range(demos.num_trajectories)))
+
+
+def _flat_observations(trajectory: TensorDictBase) -> torch.Tensor:
+    """``[L, D]`` a trajectory's observations, one row per step (its batch dimensions flattened)."""
+    observation = trajectory["observation"]
+    return observation.reshape(trajectory.numel(), -1).float().cpu()
