@@ -25,9 +25,9 @@ import os
 import torch
 from omegaconf import OmegaConf
 from torchrl.envs.utils import ExplorationType, set_exploration_type
-from torchrl.objectives.value.functional import reward2go
 
 from torchrl_csirl.data.shipped import load_expert_demonstrations
+from torchrl_csirl.diagnostics import discounted_returns
 from torchrl_csirl.envs import make_env, resolve_scenario
 from torchrl_csirl.launch.builders import load_experts
 from torchrl_csirl.launch.csirl import make_matching
@@ -114,13 +114,6 @@ def trained_reward(cfg, expert) -> tuple[str, torch.Tensor] | None:
     return None
 
 
-def discounted_to_go(reward: torch.Tensor, gamma: float) -> torch.Tensor:
-    """``sum_k gamma^k r_{t+k}`` for every ``t`` of one episode (TorchRL's ``reward2go``)."""
-    done = torch.zeros(len(reward), 1, dtype=torch.bool)
-    done[-1] = True
-    return reward2go(reward.reshape(-1, 1), done, gamma).reshape(-1)
-
-
 def plot_critic(path: str, title: str, q_expert: torch.Tensor, q_policy: torch.Tensor,
                 known: tuple[str, torch.Tensor] | None) -> str:
     """Two panels: ``Q`` along the expert's demonstration (mean and range over the critics, the return to go
@@ -162,12 +155,26 @@ def critic_probe(run_dir: str, cfg, rollout, plot: str | None = None) -> dict:
               "q_random_actions_at_last_state": [round(float(q_random.min()), 2), round(float(q_random.max()), 2)]}
     known = trained_reward(cfg, expert)
     if known is not None:
-        known = (known[0], discounted_to_go(known[1], gamma))
+        known = (known[0], discounted_returns(known[1], gamma))
         report[f"{known[0]}_return_to_go_expert"] = {str(t): round(float(known[1][t]), 2) for t in steps}
     if plot is not None:
         title = f"{os.path.basename(run_dir)}: the last checkpoint's {len(critics)} critics (gamma {gamma})"
         report["plot"] = plot_critic(plot, title, q_experts, q_policies, known)
     return report
+
+
+def policy_episodes(run_dir: str, task: str, episodes: int, seed: int, stochastic: bool = False):
+    """The run's policy (:func:`load_actor`) over ``episodes`` episodes, each on its own seed (``seed + i``, as
+    the test's), yielded one rollout at a time; its mean action unless ``stochastic``."""
+    spec = resolve_scenario(task)
+    actor = load_actor(run_dir, task)
+    mode = ExplorationType.RANDOM if stochastic else ExplorationType.DETERMINISTIC
+    for i in range(episodes):
+        env = make_env(task, seed=seed + i)
+        with torch.no_grad(), set_exploration_type(mode):
+            rollout = env.rollout(spec.max_steps, actor, break_when_any_done=True)
+        env.close()
+        yield rollout
 
 
 def probe(run_dir: str, episodes: int = 1, seed: int | None = None, stochastic: bool = False,
@@ -177,16 +184,10 @@ def probe(run_dir: str, episodes: int = 1, seed: int | None = None, stochastic: 
     spec = resolve_scenario(task)
     if "x" not in spec.observation_layout:
         raise SystemExit(f"error: {task} has no torso x (a locomotion task: hopper, halfcheetah)")
-    actor = load_actor(run_dir, task)
     seed = int(cfg.eval.seed if seed is None else seed)
     x_at, angle_at = spec.observation_layout["x"][0], spec.observation_layout["angle"][0]
     out = []
-    for i in range(episodes):
-        env = make_env(task, seed=seed + i)
-        mode = ExplorationType.RANDOM if stochastic else ExplorationType.DETERMINISTIC
-        with torch.no_grad(), set_exploration_type(mode):
-            rollout = env.rollout(spec.max_steps, actor, break_when_any_done=True)
-        env.close()
+    for i, rollout in enumerate(policy_episodes(run_dir, task, episodes, seed, stochastic)):
         obs = rollout["next", "observation"]
         x = [round(float(v), 1) for v in obs[::100, x_at]] + [round(float(obs[-1, x_at]), 1)]
         angle = obs[:, angle_at]

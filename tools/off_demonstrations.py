@@ -20,29 +20,20 @@ import sys
 
 import torch
 from omegaconf import OmegaConf
-from torchrl.envs.utils import ExplorationType, set_exploration_type
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from locomotion_probe import load_actor  # noqa: E402
+from locomotion_probe import policy_episodes  # noqa: E402
 
-from torchrl_csirl.diagnostics import check_line, states_off_the_demonstrations  # noqa: E402
-from torchrl_csirl.envs import make_env, resolve_scenario  # noqa: E402
+from torchrl_csirl.diagnostics import check_line, flat_observations, states_off_the_demonstrations  # noqa: E402
+from torchrl_csirl.envs import resolve_scenario  # noqa: E402
 from torchrl_csirl.launch.builders import load_experts  # noqa: E402
 from torchrl_csirl.launch.robotics import prepare_task  # noqa: E402
 
 
 def policy_states(run_dir: str, cfg, episodes: int) -> torch.Tensor:
     """``[T, D]`` the deterministic policy's next observations over ``episodes`` episodes (seeds ``eval.seed + i``)."""
-    spec = resolve_scenario(cfg.env.scenario)
-    actor = load_actor(run_dir, cfg.env.scenario)
-    states = []
-    for i in range(episodes):  # each episode on its own seed, as the test's
-        env = make_env(cfg.env.scenario, seed=int(cfg.eval.seed) + i)
-        with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
-            rollout = env.rollout(spec.max_steps, actor, break_when_any_done=True)
-        states.append(rollout["next", "observation"].reshape(rollout.shape[0], -1).float())
-        env.close()
-    return torch.cat(states)
+    rollouts = policy_episodes(run_dir, cfg.env.scenario, episodes, int(cfg.eval.seed))
+    return torch.cat([flat_observations(rollout["next"]) for rollout in rollouts])
 
 
 def check_run(run_dir: str, episodes: int = 5, holdout: bool = False) -> dict:
@@ -51,8 +42,7 @@ def check_run(run_dir: str, episodes: int = 5, holdout: bool = False) -> dict:
     prepare_task([], run_dir=run_dir)  # a task by gymnasium id or from a module: registered as the run had it
     spec = resolve_scenario(cfg.env.scenario)
     demos = load_experts(cfg.expert, spec)
-    trajectories = [demos.trajectory(i)["observation"].reshape(-1, spec.obs_dim).float()
-                    for i in range(demos.num_trajectories)]
+    trajectories = [flat_observations(demos.trajectory(i)) for i in range(demos.num_trajectories)]
     if holdout and len(trajectories) < 2:
         raise SystemExit(f"error: {run_dir}: one demonstration, none to hold out")
     if holdout:  # the last five (at most all but one) against the others

@@ -34,7 +34,7 @@ from torchrl_csirl.diagnostics.checks import (
     warm_start_kept,
     where_episodes_end,
 )
-from torchrl_csirl.diagnostics.probe import LearnerProbe, discounted_returns, measurable_states, probe_learner
+from torchrl_csirl.diagnostics.probe import LearnerProbe, discounted_returns, flat_observations, measurable_states, probe_learner
 from torchrl_csirl.diagnostics.report import (
     HEALTH_FILE,
     HEALTH_PICTURE,
@@ -57,6 +57,7 @@ __all__ = [
     "critic_calibration",
     "demonstrations_share_a_goal",
     "discounted_returns",
+    "flat_observations",
     "expert_transitions_reward",
     "health_report",
     "learned_reward_share",

@@ -173,7 +173,7 @@ def probe_learner(*, env: EnvBase, policy, loss, transforms, matching, demos, ga
             policy_rewards.append(rewards)
             finals.append(episode["next", "observation"][-1].index_select(-1, position))
             actions.append(episode["action"].reshape(episode.shape[0], -1))
-            observations.append(_flat_observations(episode["next"]))
+            observations.append(flat_observations(episode["next"]))
             if hasattr(matching, "demonstration_of"):  # goal-conditioned: the path of the episode's goal
                 chosen = int(matching.demonstration_of(episode["observation"][:1].to(device)).reshape(-1)[0])
                 paths.append(matching.demonstration_positions(chosen).float().cpu())
@@ -205,10 +205,16 @@ def probe_learner(*, env: EnvBase, policy, loss, transforms, matching, demos, ga
         matching_along_routes=routes, matching_target=getattr(matching, "target", "final"),
         policy_entropy_returns=torch.cat(policy_entropy), expert_entropy_returns=torch.cat(expert_entropy),
         observations=torch.cat(observations), matched_features=tuple(position.tolist()),
-        demo_observations=tuple(_flat_observations(demos.trajectory(i)) for i in range(demos.num_trajectories)))
+        demo_observations=tuple(flat_observations(demos.trajectory(i)) for i in range(demos.num_trajectories)))
 
 
-def _flat_observations(trajectory: TensorDictBase) -> torch.Tensor:
-    """``[L, D]`` a trajectory's observations, one row per step (its batch dimensions flattened)."""
+def flat_observations(trajectory: TensorDictBase) -> torch.Tensor:
+    """``[L, D]`` a trajectory's observations, one row per step (its batch dimensions flattened), on the CPU.
+
+    Examples:
+        >>> from tensordict import TensorDict
+        >>> flat_observations(TensorDict({"observation": torch.zeros(2, 3, 4)}, [2, 3])).shape
+        torch.Size([6, 4])
+    """
     observation = trajectory["observation"]
     return observation.reshape(trajectory.numel(), -1).float().cpu()
