@@ -274,11 +274,35 @@ def test_a_cheetah_on_its_back_is_named_off_the_demonstrations():
     flipped = states_off_the_demonstrations(flipped_states, [demonstration[:half]], spec.position_feature_indices, names)
     assert flipped.ok is False and flipped.figures["farthest_features"][0] == "angle"
     assert flipped.figures["largest_gap_sd"] > OFF_DEMONSTRATION_SD and "never does" in flipped.message
+    # one episode on its back among four upright ones is read on its own, not averaged away
+    upright_episodes = list(demonstration[half:].chunk(4))
+    one_in_five = states_off_the_demonstrations(upright_episodes[:2] + [flipped_states] + upright_episodes[2:],
+                                                [demonstration[:half]], spec.position_feature_indices, names)
+    assert one_in_five.ok is False and one_in_five.figures["episodes_off"] == 1
+    assert one_in_five.figures["worst_episode"] == 2 and "in 1 of 5 episode(s)" in one_in_five.message
+    assert one_in_five.figures["largest_gap_sd"] == pytest.approx(flipped.figures["largest_gap_sd"])
     # the matching feature (the torso's x) is not read: moving it anywhere changes nothing
     moved = demonstration[half:].clone()
     moved[:, spec.position_feature_indices[0]] += 1e3
     assert states_off_the_demonstrations(moved, [demonstration[:half]], spec.position_feature_indices).figures[
         "largest_gap_sd"] == pytest.approx(upright.figures["largest_gap_sd"])
+
+
+def test_off_the_demonstrations_reads_a_long_episode_without_aliasing():
+    """An episode longer than the states the check pairs, whose states alternate every step (a policy that flips its
+    actions each step): the subset it pairs gives the episode's own mean gap, where every other state would give the
+    far half's alone."""
+    generator = torch.Generator().manual_seed(0)
+    demos = [torch.randn(2000, 3, generator=generator)]
+    episode = torch.randn(6000, 3, generator=generator)
+    episode[::2, 2] += 3.0  # every other state off in its last entry
+    whole = states_off_the_demonstrations(episode, demos)  # more states than it pairs
+    halves = states_off_the_demonstrations(list(episode.chunk(2)), demos)  # each paired in full
+    exact = sum(halves.figures["episode_largest_gaps_sd"]) / 2
+    assert whole.figures["farthest_features"][0] == "obs[2]"
+    assert whole.figures["largest_gap_sd"] == pytest.approx(exact, rel=0.05)
+    even = states_off_the_demonstrations(episode[::2], demos).figures["largest_gap_sd"]
+    assert even > 1.3 * exact  # what a stride of two would have read
 
 
 def test_off_the_demonstrations_names_a_blown_up_simulation_and_reads_tensor_indices():

@@ -177,6 +177,7 @@ def test_an_expert_its_demonstrations_then_csirl_and_a_baseline_on_the_hopper(tm
     assert bc["updates"] > 0 and bc["success_rate"] == 0.0
     off = off_demonstrations.check_run(bc["run_dir"], episodes=1)  # tools/: the baseline's states against the demos
     assert off["name"] == "states_off_the_demonstrations" and off["figures"]["entries"] == 11  # all but the torso's x
+    assert off["first_crash_per_episode"] == [None]  # the Hopper reports no `crashed`
     assert off["figures"]["largest_gap_sd"] >= 0 and len(off["figures"]["farthest_features"]) == 3
     assert off_demonstrations.check_run(bc["run_dir"], holdout=True)["ok"] is True  # a demonstration against the other
     dac = imitation_robotics.main(["method=dac", "env.task=hopper", f"expert.path={demos}", "expert.num_trajectories=2",

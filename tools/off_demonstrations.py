@@ -6,10 +6,11 @@ For each run (any method: its ``policy.pt``, else the actor of its last checkpoi
 for ``--episodes`` episodes seeded from the run's ``eval.seed`` (the test's first episodes) and sets its states against
 the run's demonstrations (:func:`torchrl_csirl.diagnostics.states_off_the_demonstrations`: per observation entry the
 matching reward does not read, the mean gap to the nearest demonstration state in the demonstrations' standard
-deviations). With ``--holdout`` it sets the run's last five demonstrations (at most all but one) against the others
-instead of a policy: the figure an expert gets. One line per run, then the figures as a JSON line per run. CSIRL's
-health report makes the same check at the end of every run; this tool makes it for the baselines too, and calibrates
-its threshold (docs/own-task.md#a-cheetah-on-its-back).
+deviations, read per episode, the worst one reported). With ``--holdout`` it sets the run's last five demonstrations
+(at most all but one) against the others instead of a policy: the figure an expert gets. One line per run, then the
+figures as a JSON line per run (with ``first_crash_per_episode``: where the environment reports ``crashed``, each
+episode's first such step; AntMaze's is a flipped ant). CSIRL's health report makes the same check at the end of every
+run; this tool makes it for the baselines too, and calibrates its threshold (docs/own-task.md#a-cheetah-on-its-back).
 """
 from __future__ import annotations
 
@@ -30,10 +31,19 @@ from torchrl_csirl.launch.builders import load_experts  # noqa: E402
 from torchrl_csirl.launch.robotics import prepare_task  # noqa: E402
 
 
-def policy_states(run_dir: str, cfg, episodes: int) -> torch.Tensor:
-    """``[T, D]`` the deterministic policy's next observations over ``episodes`` episodes (seeds ``eval.seed + i``)."""
-    rollouts = policy_episodes(run_dir, cfg.env.scenario, episodes, int(cfg.eval.seed))
-    return torch.cat([flat_observations(rollout["next"]) for rollout in rollouts])
+def first_crash(rollout) -> int | None:
+    """The first step at which the environment reports ``crashed`` (AntMaze: the ant flipped), None if never."""
+    if ("next", "crashed") not in rollout.keys(True):
+        return None
+    crashed = rollout["next", "crashed"].reshape(-1)
+    return int(crashed.nonzero()[0]) if crashed.any() else None
+
+
+def policy_states(run_dir: str, cfg, episodes: int) -> tuple[list[torch.Tensor], list[int | None]]:
+    """``[T_j, D]`` per episode, the deterministic policy's next observations over ``episodes`` episodes (seeds
+    ``eval.seed + i``), and each episode's :func:`first_crash`."""
+    rollouts = list(policy_episodes(run_dir, cfg.env.scenario, episodes, int(cfg.eval.seed)))
+    return [flat_observations(rollout["next"]) for rollout in rollouts], [first_crash(r) for r in rollouts]
 
 
 def check_run(run_dir: str, episodes: int = 5, holdout: bool = False) -> dict:
@@ -47,12 +57,13 @@ def check_run(run_dir: str, episodes: int = 5, holdout: bool = False) -> dict:
         raise SystemExit(f"error: {run_dir}: one demonstration, none to hold out")
     if holdout:  # the last five (at most all but one) against the others
         kept = max(1, len(trajectories) - 5)
-        states, trajectories = torch.cat(trajectories[kept:]), trajectories[:kept]
+        states, trajectories = trajectories[kept:], trajectories[:kept]  # each held out one as an episode
+        crashes = None
     else:
-        states = policy_states(run_dir, cfg, episodes)
+        states, crashes = policy_states(run_dir, cfg, episodes)
     names = [spec.feature_name(i) for i in range(spec.obs_dim)]
     check = states_off_the_demonstrations(states, trajectories, spec.position_feature_indices, names)
-    return {"run": run_dir, "holdout": holdout, **check.as_dict()}
+    return {"run": run_dir, "holdout": holdout, **check.as_dict(), "first_crash_per_episode": crashes}
 
 
 def main() -> None:

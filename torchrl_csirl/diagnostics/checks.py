@@ -481,7 +481,8 @@ def expert_transitions_reward(expert: torch.Tensor, policy: torch.Tensor, expert
 #: on average over the policy's states, from the nearest demonstration state before the states are called off the
 #: demonstrations
 OFF_DEMONSTRATION_SD = 5.0
-#: at most this many of the policy's states are paired (evenly strided): the check stays cheap on long runs
+#: at most this many of an episode's states are paired (a fixed random subset, not a stride: a policy that alternates
+#: its actions every step would alias with one): the check stays cheap on long episodes
 _MAX_STATES = 4000
 
 
@@ -499,23 +500,42 @@ def nearest_state_distances(states: torch.Tensor, reference: torch.Tensor, chunk
     return torch.cat([f.values for f in found]).float(), torch.cat([f.indices for f in found])
 
 
-def _strided(states: torch.Tensor, most: int = _MAX_STATES) -> torch.Tensor:
-    step = max(1, math.ceil(states.shape[0] / most))
-    return states[::step]
+def _subsampled(states: torch.Tensor, most: int = _MAX_STATES) -> torch.Tensor:
+    """At most ``most`` of ``states``' rows, a fixed random subset in their order (all of them when there are fewer).
+
+    Examples:
+        >>> _subsampled(torch.arange(10.0).unsqueeze(-1), most=4).shape
+        torch.Size([4, 1])
+    """
+    if states.shape[0] <= most:
+        return states
+    chosen = torch.randperm(states.shape[0], generator=torch.Generator().manual_seed(0))[:most]
+    return states[chosen.sort().values]
 
 
-def states_off_the_demonstrations(policy_states: torch.Tensor, demonstrations: Sequence[torch.Tensor],
-                                  matched: Sequence[int] = (), names: Sequence[str] | None = None) -> HealthCheck:
+def _gaps_to_demonstrations(states: torch.Tensor, pool: torch.Tensor) -> tuple[torch.Tensor, float]:
+    """Per entry, the mean absolute gap of ``states`` to their nearest ``pool`` states, and the median distance."""
+    states = _subsampled(states)
+    distance, nearest = nearest_state_distances(states, pool)
+    return (states - pool[nearest]).abs().mean(0), float(distance.median())
+
+
+def states_off_the_demonstrations(policy_states: torch.Tensor | Sequence[torch.Tensor],
+                                  demonstrations: Sequence[torch.Tensor], matched: Sequence[int] = (),
+                                  names: Sequence[str] | None = None) -> HealthCheck:
     """Whether the policy's states look like the demonstrations' in what the matching reward does not read.
 
     The matching reward pays progress in a few features (``h(s)``); a policy can make that progress in a way the
     expert never does (a HalfCheetah that runs on its back moves its torso's x as an upright one does). Each policy
     state is paired with its nearest demonstration state on every other observation entry, each standardised by the
     demonstrations (entries they hold constant are left out); an entry whose gap averages more than
-    :data:`OFF_DEMONSTRATION_SD` of the demonstrations' standard deviations is somewhere the expert never goes.
+    :data:`OFF_DEMONSTRATION_SD` of the demonstrations' standard deviations over an episode is somewhere the expert
+    never goes. Each episode is read on its own and the worst one reported, so that one episode in five on its back
+    is not averaged away by four upright ones.
 
     Args:
-        policy_states: ``[T, D]`` the policy's observations over its probe episodes.
+        policy_states: the policy's observations, ``[T_j, D]`` per probe episode (one ``[T, D]`` tensor is read as
+            one episode).
         demonstrations: ``[L_i, D]`` each demonstration's observations.
         matched: the observation entries the matching reward reads (left out).
         names: a name per observation entry (the task's :meth:`~torchrl_csirl.envs.ScenarioSpec.feature_name`).
@@ -526,23 +546,27 @@ def states_off_the_demonstrations(policy_states: torch.Tensor, demonstrations: S
         >>> states_off_the_demonstrations(torch.randn(100, 3), demos).ok
         True
         >>> flipped = torch.randn(100, 3) + torch.tensor([0.0, 0.0, 12.0])
-        >>> check = states_off_the_demonstrations(flipped, demos, names=["x", "y", "angle"])
-        >>> check.ok, check.figures["farthest_features"][0]
-        (False, 'angle')
+        >>> check = states_off_the_demonstrations([torch.randn(100, 3), flipped], demos, names=["x", "y", "angle"])
+        >>> check.ok, check.figures["farthest_features"][0], check.figures["episodes_off"]
+        (False, 'angle', 1)
     """
     name = "states_off_the_demonstrations"
+    episodes = [policy_states] if isinstance(policy_states, torch.Tensor) else list(policy_states)
+    episodes = [e.detach().float().cpu().reshape(-1, e.shape[-1]) for e in episodes if e.numel() > 0]
     demonstrations = [d.detach().float().cpu() for d in demonstrations if d.shape[0] > 0]
-    if policy_states.numel() == 0 or not demonstrations:
+    if not episodes or not demonstrations:
         return HealthCheck(name, None, "no policy state or no demonstration to compare")
-    policy_states = policy_states.detach().float().cpu()
-    width = policy_states.shape[-1]
-    if any(d.shape[-1] != width for d in demonstrations) or (names is not None and len(names) != width):
+    widths = sorted({e.shape[-1] for e in episodes})
+    if (len(widths) > 1 or any(d.shape[-1] != widths[0] for d in demonstrations)
+            or (names is not None and len(names) != widths[0])):
         return HealthCheck(name, None, (
-            f"the policy's observations have {width} entries, the demonstrations' "
+            f"the policy's observations have {widths} entries, the demonstrations' "
             f"{sorted({d.shape[-1] for d in demonstrations})}" + (f", the names {len(names)}" if names is not None
                                                                   else "") + ": nothing to compare"))
-    if not torch.isfinite(policy_states).all():
-        bad = sorted({int(i) for i in (~torch.isfinite(policy_states)).nonzero()[:, -1]})
+    width = widths[0]
+    every_policy_state = torch.cat(episodes)
+    if not torch.isfinite(every_policy_state).all():
+        bad = sorted({int(i) for i in (~torch.isfinite(every_policy_state)).nonzero()[:, -1]})
         return HealthCheck(name, False, (
             "the policy's observations hold NaN or inf (entries "
             + ", ".join(names[i] if names is not None else f"obs[{i}]" for i in bad[:5])
@@ -562,21 +586,29 @@ def states_off_the_demonstrations(policy_states: torch.Tensor, demonstrations: S
     def standardised(x: torch.Tensor) -> torch.Tensor:
         return ((x - mean) / std).index_select(-1, keep_t)
 
-    policy, pool = _strided(standardised(policy_states)), standardised(every)
-    distance, nearest = nearest_state_distances(policy, pool)
-    gaps = (policy - pool[nearest]).abs().mean(0)  # per entry, in the demonstrations' standard deviations
+    pool = standardised(every)
+    read = [_gaps_to_demonstrations(standardised(e), pool) for e in episodes]
+    largest = [float(gaps.max()) for gaps, _ in read]
+    worst = max(range(len(read)), key=largest.__getitem__)
+    gaps = read[worst][0]  # the worst episode's, per entry, in the demonstrations' standard deviations
     order = gaps.argsort(descending=True)[:3].tolist()
     farthest = [names[keep[i]] if names is not None else f"obs[{keep[i]}]" for i in order]
+    off = sum(g > OFF_DEMONSTRATION_SD for g in largest)
     figures = {"largest_gap_sd": float(gaps[order[0]]), "farthest_features": farthest,
-               "farthest_gaps_sd": [float(gaps[i]) for i in order], "distance_median": float(distance.median()),
+               "farthest_gaps_sd": [float(gaps[i]) for i in order], "distance_median": read[worst][1],
+               "episode_largest_gaps_sd": largest, "worst_episode": worst, "episodes_off": off,
                "entries": len(keep)}
     listed = ", ".join(f"{f} {g:.2g}" for f, g in zip(farthest, figures["farthest_gaps_sd"]))
-    if figures["largest_gap_sd"] > OFF_DEMONSTRATION_SD:
+    if off:
         return HealthCheck(name, False, (
-            f"the policy goes where the expert never does: from the nearest demonstration state, its states differ by "
-            f"{listed} of the demonstrations' standard deviations on average (the entries that differ most, of the "
-            f"{len(keep)} the matching reward does not read); the matching features (env.features, the task's "
-            "position_feature_indices) pay its progress as they pay the expert's"), figures)
+            f"the policy goes where the expert never does in {off} of {len(episodes)} episode(s): in the worst, its "
+            f"states differ from the nearest demonstration state by {listed} of the demonstrations' standard "
+            f"deviations on average (the entries that differ most, of the {len(keep)} the matching reward does not "
+            "read): a body the expert never shows (a cheetah or an ant on its back); where such an episode still "
+            "progresses, the matching features (env.features, the task's position_feature_indices) pay it as they "
+            "pay the expert"), figures)
     return HealthCheck(name, True, (
         f"the policy's states are near the demonstrations' in the {len(keep)} entries the matching reward does not "
-        f"read (largest gap to the nearest demonstration state: {listed} standard deviations)"), figures)
+        f"read (largest gap to the nearest demonstration state, worst of {len(episodes)} episode(s): {listed} "
+        "standard deviations)"), figures)
+

@@ -45,7 +45,7 @@ class LearnerProbe:
         actions: ``[T, A]`` the policy's actions.
         goal_conditioned: the matching reward follows the demonstration of each episode's goal
             (:class:`~torchrl_csirl.transforms.GoalConditionedMatchingReward`), not the first one only.
-        observations: ``[T, D]`` the policy's observations (each step's next one).
+        observations: ``[T_j, D]`` per policy episode, its observations (each step's next one).
         demo_observations: ``[L_i, D]`` per demonstration, its observations.
         matched_features: the observation entries the matching reward's potential reads.
     """
@@ -67,7 +67,7 @@ class LearnerProbe:
     matching_target: str = "final"
     policy_entropy_returns: torch.Tensor = field(default_factory=lambda: torch.zeros(0))
     expert_entropy_returns: torch.Tensor = field(default_factory=lambda: torch.zeros(0))
-    observations: torch.Tensor = field(default_factory=lambda: torch.zeros(0))
+    observations: tuple[torch.Tensor, ...] = ()
     demo_observations: tuple[torch.Tensor, ...] = ()
     matched_features: tuple[int, ...] = ()
 
@@ -204,7 +204,7 @@ def probe_learner(*, env: EnvBase, policy, loss, transforms, matching, demos, ga
         actions=torch.cat(actions).float(), goal_conditioned=hasattr(matching, "demonstration_of"), episode_paths=tuple(paths),
         matching_along_routes=routes, matching_target=getattr(matching, "target", "final"),
         policy_entropy_returns=torch.cat(policy_entropy), expert_entropy_returns=torch.cat(expert_entropy),
-        observations=torch.cat(observations), matched_features=tuple(position.tolist()),
+        observations=tuple(observations), matched_features=tuple(position.tolist()),
         demo_observations=tuple(flat_observations(demos.trajectory(i)) for i in range(demos.num_trajectories)))
 
 
