@@ -281,6 +281,14 @@ def test_a_cheetah_on_its_back_is_named_off_the_demonstrations():
     assert one_in_five.ok is False and one_in_five.figures["episodes_off"] == 1
     assert one_in_five.figures["worst_episode"] == 2 and "in 1 of 5 episode(s)" in one_in_five.message
     assert one_in_five.figures["largest_gap_sd"] == pytest.approx(flipped.figures["largest_gap_sd"])
+    # an empty episode keeps its place; a stacked [E, T, D] tensor is E episodes
+    with_empty = states_off_the_demonstrations([torch.zeros(0, spec.obs_dim), flipped_states], [demonstration[:half]],
+                                               spec.position_feature_indices, names)
+    assert with_empty.figures["worst_episode"] == 1 and with_empty.figures["episode_largest_gaps_sd"][0] is None
+    assert "in 1 of 1 episode(s)" in with_empty.message
+    stacked = torch.stack([demonstration[half:half + 200], flipped_states[:200]])
+    assert states_off_the_demonstrations(stacked, [demonstration[:half]], spec.position_feature_indices,
+                                         names).figures["worst_episode"] == 1
     # the matching feature (the torso's x) is not read: moving it anywhere changes nothing
     moved = demonstration[half:].clone()
     moved[:, spec.position_feature_indices[0]] += 1e3

@@ -478,11 +478,11 @@ def expert_transitions_reward(expert: torch.Tensor, policy: torch.Tensor, expert
 
 
 #: how many of the demonstrations' standard deviations an observation entry the matching reward does not read may lie,
-#: on average over the policy's states, from the nearest demonstration state before the states are called off the
+#: on average over one episode's states, from the nearest demonstration state before the episode is called off the
 #: demonstrations
 OFF_DEMONSTRATION_SD = 5.0
 #: at most this many of an episode's states are paired (a fixed random subset, not a stride: a policy that alternates
-#: its actions every step would alias with one): the check stays cheap on long episodes
+#: its actions every step would alias with one): the check's cost grows with the episodes, not their length
 _MAX_STATES = 4000
 
 
@@ -534,8 +534,9 @@ def states_off_the_demonstrations(policy_states: torch.Tensor | Sequence[torch.T
     is not averaged away by four upright ones.
 
     Args:
-        policy_states: the policy's observations, ``[T_j, D]`` per probe episode (one ``[T, D]`` tensor is read as
-            one episode).
+        policy_states: the policy's observations, ``[T_j, D]`` per probe episode; one ``[T, D]`` tensor is one
+            episode, one ``[E, T, D]`` tensor ``E`` episodes. An empty episode is skipped (its entry in
+            ``episode_largest_gaps_sd`` is None).
         demonstrations: ``[L_i, D]`` each demonstration's observations.
         matched: the observation entries the matching reward reads (left out).
         names: a name per observation entry (the task's :meth:`~torchrl_csirl.envs.ScenarioSpec.feature_name`).
@@ -551,20 +552,22 @@ def states_off_the_demonstrations(policy_states: torch.Tensor | Sequence[torch.T
         (False, 'angle', 1)
     """
     name = "states_off_the_demonstrations"
-    episodes = [policy_states] if isinstance(policy_states, torch.Tensor) else list(policy_states)
-    episodes = [e.detach().float().cpu().reshape(-1, e.shape[-1]) for e in episodes if e.numel() > 0]
+    if isinstance(policy_states, torch.Tensor):
+        policy_states = policy_states.unbind(0) if policy_states.ndim == 3 else [policy_states]
+    episodes = [e.detach().float().cpu().reshape(-1, e.shape[-1]) if e.numel() else torch.zeros(0, 0)
+                for e in policy_states]
     demonstrations = [d.detach().float().cpu() for d in demonstrations if d.shape[0] > 0]
-    if not episodes or not demonstrations:
+    if not any(e.shape[0] for e in episodes) or not demonstrations:
         return HealthCheck(name, None, "no policy state or no demonstration to compare")
-    widths = sorted({e.shape[-1] for e in episodes})
+    widths = sorted({e.shape[-1] for e in episodes if e.shape[0]})
     if (len(widths) > 1 or any(d.shape[-1] != widths[0] for d in demonstrations)
             or (names is not None and len(names) != widths[0])):
         return HealthCheck(name, None, (
-            f"the policy's observations have {widths} entries, the demonstrations' "
+            f"the policy's observations have {widths[0] if len(widths) == 1 else widths} entries, the demonstrations' "
             f"{sorted({d.shape[-1] for d in demonstrations})}" + (f", the names {len(names)}" if names is not None
                                                                   else "") + ": nothing to compare"))
     width = widths[0]
-    every_policy_state = torch.cat(episodes)
+    every_policy_state = torch.cat([e for e in episodes if e.shape[0]])
     if not torch.isfinite(every_policy_state).all():
         bad = sorted({int(i) for i in (~torch.isfinite(every_policy_state)).nonzero()[:, -1]})
         return HealthCheck(name, False, (
@@ -587,13 +590,14 @@ def states_off_the_demonstrations(policy_states: torch.Tensor | Sequence[torch.T
         return ((x - mean) / std).index_select(-1, keep_t)
 
     pool = standardised(every)
-    read = [_gaps_to_demonstrations(standardised(e), pool) for e in episodes]
-    largest = [float(gaps.max()) for gaps, _ in read]
-    worst = max(range(len(read)), key=largest.__getitem__)
+    read = [_gaps_to_demonstrations(standardised(e), pool) if e.shape[0] else None for e in episodes]
+    largest = [None if r is None else float(r[0].max()) for r in read]
+    worst = max((i for i, g in enumerate(largest) if g is not None), key=largest.__getitem__)
     gaps = read[worst][0]  # the worst episode's, per entry, in the demonstrations' standard deviations
     order = gaps.argsort(descending=True)[:3].tolist()
     farthest = [names[keep[i]] if names is not None else f"obs[{keep[i]}]" for i in order]
-    off = sum(g > OFF_DEMONSTRATION_SD for g in largest)
+    off = sum(g is not None and g > OFF_DEMONSTRATION_SD for g in largest)
+    probed = sum(g is not None for g in largest)
     figures = {"largest_gap_sd": float(gaps[order[0]]), "farthest_features": farthest,
                "farthest_gaps_sd": [float(gaps[i]) for i in order], "distance_median": read[worst][1],
                "episode_largest_gaps_sd": largest, "worst_episode": worst, "episodes_off": off,
@@ -601,14 +605,14 @@ def states_off_the_demonstrations(policy_states: torch.Tensor | Sequence[torch.T
     listed = ", ".join(f"{f} {g:.2g}" for f, g in zip(farthest, figures["farthest_gaps_sd"]))
     if off:
         return HealthCheck(name, False, (
-            f"the policy goes where the expert never does in {off} of {len(episodes)} episode(s): in the worst, its "
+            f"the policy goes where the expert never does in {off} of {probed} episode(s): in the worst, its "
             f"states differ from the nearest demonstration state by {listed} of the demonstrations' standard "
             f"deviations on average (the entries that differ most, of the {len(keep)} the matching reward does not "
-            "read): a body the expert never shows (a cheetah or an ant on its back); where such an episode still "
+            "read): a state the expert never shows (e.g. a cheetah or an ant on its back); where such an episode still "
             "progresses, the matching features (env.features, the task's position_feature_indices) pay it as they "
             "pay the expert"), figures)
     return HealthCheck(name, True, (
         f"the policy's states are near the demonstrations' in the {len(keep)} entries the matching reward does not "
-        f"read (largest gap to the nearest demonstration state, worst of {len(episodes)} episode(s): {listed} "
+        f"read (largest gap to the nearest demonstration state, worst of {probed} episode(s): {listed} "
         "standard deviations)"), figures)
 

@@ -14,7 +14,7 @@ import torch
 from tensordict import TensorDictBase
 from torchrl.envs import EnvBase, ExplorationType, set_exploration_type
 
-__all__ = ["LearnerProbe", "discounted_returns", "measurable_states", "probe_learner"]
+__all__ = ["LearnerProbe", "discounted_returns", "flat_observations", "measurable_states", "probe_learner"]
 
 #: a return is measured where the rest of the episode weighs at least this share of the infinite horizon
 _HORIZON_WEIGHT = 0.95
