@@ -24,11 +24,12 @@ import os
 
 import torch
 from omegaconf import OmegaConf
-from torchrl.envs.utils import ExplorationType, set_exploration_type
+from policy_cli import roll_test_episodes
+from torchrl.envs.utils import ExplorationType
 
 from torchrl_csirl.data.shipped import load_expert_demonstrations
 from torchrl_csirl.diagnostics import discounted_returns
-from torchrl_csirl.envs import make_env, resolve_scenario
+from torchrl_csirl.envs import resolve_scenario
 from torchrl_csirl.launch.builders import load_experts
 from torchrl_csirl.launch.csirl import make_matching
 from torchrl_csirl.modules import load_policy, make_actor, make_input_features, make_qvalue
@@ -166,14 +167,10 @@ def critic_probe(run_dir: str, cfg, rollout, plot: str | None = None) -> dict:
 def policy_episodes(run_dir: str, task: str, episodes: int, seed: int, stochastic: bool = False):
     """The run's policy (:func:`load_actor`) over ``episodes`` episodes, each on its own seed (``seed + i``, as
     the test's), yielded one rollout at a time; its mean action unless ``stochastic``."""
-    spec = resolve_scenario(task)
-    actor = load_actor(run_dir, task)
     mode = ExplorationType.RANDOM if stochastic else ExplorationType.DETERMINISTIC
-    for i in range(episodes):
-        env = make_env(task, seed=seed + i)
-        with torch.no_grad(), set_exploration_type(mode):
-            rollout = env.rollout(spec.max_steps, actor, break_when_any_done=True)
-        env.close()
+    episodes_rolled = roll_test_episodes(load_actor(run_dir, task), task, episodes, seed,
+                                         resolve_scenario(task).max_steps, exploration=mode)
+    for _, rollout, _ in episodes_rolled:
         yield rollout
 
 

@@ -9,7 +9,7 @@ matching reward does not read, the mean gap to the nearest demonstration state i
 deviations, read per episode, the worst one reported). With ``--holdout`` it sets the run's last five demonstrations
 (at most all but one) against the others instead of a policy: the figure an expert gets. One line per run, then the
 figures as a JSON line per run (with ``first_crash_per_episode``: where the environment reports ``crashed``, each
-episode's first such step; AntMaze's is a flipped ant). CSIRL's health report makes the same check at the end of every
+episode's first such step, counted from 1; AntMaze's is a flipped ant). CSIRL's health report makes the same check at the end of every
 run; this tool makes it for the baselines too, and calibrates its threshold (docs/own-task.md#a-cheetah-on-its-back).
 """
 from __future__ import annotations
@@ -24,6 +24,7 @@ from omegaconf import OmegaConf
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from locomotion_probe import policy_episodes  # noqa: E402
+from policy_cli import first_crash_step  # noqa: E402
 
 from torchrl_csirl.diagnostics import check_line, flat_observations, states_off_the_demonstrations  # noqa: E402
 from torchrl_csirl.envs import resolve_scenario  # noqa: E402
@@ -31,19 +32,11 @@ from torchrl_csirl.launch.builders import load_experts  # noqa: E402
 from torchrl_csirl.launch.robotics import prepare_task  # noqa: E402
 
 
-def first_crash(rollout) -> int | None:
-    """The first step at which the environment reports ``crashed`` (AntMaze: the ant flipped), None if never."""
-    if ("next", "crashed") not in rollout.keys(True):
-        return None
-    crashed = rollout["next", "crashed"].reshape(-1)
-    return int(crashed.nonzero()[0]) if crashed.any() else None
-
-
 def policy_states(run_dir: str, cfg, episodes: int) -> tuple[list[torch.Tensor], list[int | None]]:
     """``[T_j, D]`` per episode, the deterministic policy's next observations over ``episodes`` episodes (seeds
-    ``eval.seed + i``), and each episode's :func:`first_crash`."""
+    ``eval.seed + i``), and each episode's first ``crashed`` step (counted from 1)."""
     rollouts = list(policy_episodes(run_dir, cfg.env.scenario, episodes, int(cfg.eval.seed)))
-    return [flat_observations(rollout["next"]) for rollout in rollouts], [first_crash(r) for r in rollouts]
+    return [flat_observations(rollout["next"]) for rollout in rollouts], [first_crash_step(r) for r in rollouts]
 
 
 def check_run(run_dir: str, episodes: int = 5, holdout: bool = False) -> dict:

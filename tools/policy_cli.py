@@ -15,7 +15,7 @@ from torchrl.envs import EnvBase, ExplorationType, set_exploration_type
 from torchrl_csirl.envs import make_env, sample_lane_centres
 from torchrl_csirl.modules import load_policy
 
-__all__ = ["format_cell", "load_test_policy", "mean_or_none", "roll_test_episodes"]
+__all__ = ["first_crash_step", "format_cell", "load_test_policy", "mean_or_none", "roll_test_episodes"]
 
 
 def load_test_policy(description: str, argv: list[str] | None, tasks: Collection[str],
@@ -57,14 +57,16 @@ def load_test_policy(description: str, argv: list[str] | None, tasks: Collection
 
 
 def roll_test_episodes(policy, task: str, episodes: int, seed: int, max_steps: int,
-                       at_reset: Callable[[EnvBase], Any] | None = None
+                       at_reset: Callable[[EnvBase], Any] | None = None,
+                       exploration: ExplorationType = ExplorationType.DETERMINISTIC,
                        ) -> Iterator[tuple[EnvBase, TensorDictBase, Any]]:
-    """Rolls the deterministic ``policy`` over the recipe's test episodes of ``task``, one at a time.
+    """Rolls ``policy`` over the recipe's test episodes of ``task``, one at a time.
 
     Episode ``i`` is seeded with ``seed + i`` as the recipe's final evaluation does; each rollout
     stops at the episode's end. Yields ``(env, rollout, at_reset(env))``: the environment as the
     episode left it, the rollout, and what ``at_reset`` read from the scene just after the reset
-    (``None`` without it). The environment is closed at the end.
+    (``None`` without it). The environment is closed at the end. The policy acts with its mean
+    action (the test's) unless ``exploration`` says otherwise (``ExplorationType.RANDOM``: sampled).
 
     Examples:
         >>> from torchrl_csirl.modules import make_actor
@@ -73,7 +75,7 @@ def roll_test_episodes(policy, task: str, episodes: int, seed: int, max_steps: i
     """
     env = make_env(task)
     try:
-        with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
+        with set_exploration_type(exploration), torch.no_grad():
             for i in range(episodes):
                 env.set_seed(seed + i)  # the reset below is the one of evaluate_policy's rollout
                 start = env.reset()
@@ -83,6 +85,22 @@ def roll_test_episodes(policy, task: str, episodes: int, seed: int, max_steps: i
                 yield env, rollout, before
     finally:
         env.close()
+
+
+def first_crash_step(rollout: TensorDictBase) -> int | None:
+    """The step (counted from 1) at which the environment first reports ``("next", "crashed")``; ``None``
+    if it never does or has no such entry (AntMaze: the ant flipped; highway: a collision).
+
+    Examples:
+        >>> from tensordict import TensorDict
+        >>> crashed = torch.tensor([[False], [False], [True], [True]])
+        >>> first_crash_step(TensorDict({"next": {"crashed": crashed}}, [4]))
+        3
+    """
+    if ("next", "crashed") not in rollout.keys(True):
+        return None
+    crashed = rollout["next", "crashed"].reshape(-1).nonzero()
+    return int(crashed[0, 0]) + 1 if crashed.numel() else None
 
 
 def mean_or_none(values: list[float]) -> float | None:

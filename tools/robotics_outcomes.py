@@ -26,7 +26,7 @@ import sys
 from collections import Counter, defaultdict
 
 import numpy as np
-from policy_cli import format_cell, load_test_policy, mean_or_none, roll_test_episodes
+from policy_cli import first_crash_step, format_cell, load_test_policy, mean_or_none, roll_test_episodes
 
 from torchrl_csirl.envs import accomplish_rate_from_rollout, gym_env_of
 from torchrl_csirl.envs.robotics import ROBOTICS_TASKS
@@ -42,8 +42,7 @@ def route_cell(task_env, position: np.ndarray) -> str:
 
 def antmaze_record(rollout, task_env) -> dict:
     """One AntMaze episode: outcome, the first flipped step, the end position and its route cell."""
-    flipped_steps = rollout["next", "crashed"].reshape(-1).nonzero()
-    flip_step = int(flipped_steps[0, 0]) + 1 if flipped_steps.numel() else None
+    flip_step = first_crash_step(rollout)
     if bool(rollout["next", "success"].any()):
         outcome = "goal"
     else:
