@@ -1,6 +1,6 @@
 """The command line of the scripts that roll a saved policy out on the recipe's test episodes
-(``tools/policy_outcomes.py``, ``tools/robotics_outcomes.py``): the arguments, the policy and
-its task, checked; and the small formatting helpers of their tables.
+(``tools/policy_outcomes.py``, ``tools/robotics_outcomes.py``; ``tools/locomotion_probe.py`` rolls with it too): the
+arguments, the policy and its task, checked; the test episodes; and the small formatting helpers of their tables.
 """
 from __future__ import annotations
 
