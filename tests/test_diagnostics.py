@@ -143,6 +143,13 @@ def test_each_check_flags_its_own_failure_and_passes_a_healthy_figure():
     assert where_episodes_end(torch.tensor([[10.0, 0.0], [9.5, 0.1]]), path).ok is True
     short = where_episodes_end(torch.tensor([[1.0, 0.0]]), path)
     assert short.ok is False and short.figures["progress_median"] == pytest.approx(0.1)
+    assert "moved on without the policy" not in short.message  # no curriculum given
+    # the subgoal far ahead of where the episodes stop: the curriculum moved on without the policy (AntMaze's runs)
+    ahead = where_episodes_end(torch.tensor([[1.0, 0.0]]), path, subgoal_share=0.98)
+    assert ahead.ok is False and "moved on without the policy" in ahead.message
+    assert ahead.figures["subgoal_lead"] == pytest.approx(0.88)
+    assert "moved on" not in where_episodes_end(torch.tensor([[1.0, 0.0]]), path, subgoal_share=0.3).message
+    assert where_episodes_end(torch.tensor([[10.0, 0.0]]), path, subgoal_share=1.0).ok is True  # level: healthy
     # a goal-conditioned matching reward: each episode against the demonstration of its goal (here, leftward)
     left = -path
     ends = torch.tensor([[10.0, 0.0], [-10.0, 0.0]])

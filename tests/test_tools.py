@@ -17,7 +17,8 @@ def test_the_analysis_scripts_live_in_tools_and_recipes_holds_what_users_run():
     assert SCRIPTS == ["anchor_records.py", "compare_runs.py", "entropy_bonus_records.py", "locomotion_probe.py", "matching_route_probe.py",
                        "meta_gradient_balance.py", "off_demonstrations.py", "plot_curves.py", "point_maze_experts.py", "policy_outcomes.py",
                        "record_runs.py",
-                       "robotics_outcomes.py", "summarize_runs.py", "termination_probe.py", "warm_start_probe.py"]
+                       "robotics_outcomes.py", "subgoal_lead_records.py", "summarize_runs.py", "termination_probe.py",
+                       "warm_start_probe.py"]
     assert not set(SCRIPTS) & set(os.listdir(os.path.join(ROOT, "recipes")))
 
 
@@ -145,3 +146,17 @@ def test_entropy_bonus_records_rereads_a_recorded_critic_check_with_sacs_entropy
     assert policy["recorded_ok"] is False and policy["reread_ok"] is True
     assert policy["soft_return"] == pytest.approx(policy["return"] + row["bonus"])
     assert json.loads(capsys.readouterr().out.strip().splitlines()[-1])[0]["record"] == record
+
+
+def test_subgoal_lead_records_reads_where_a_recorded_curriculum_left_its_policy(capsys):
+    """AntMaze anchored with the `path` target: each subgoal at the end of the demonstration, each ant stopped within a
+    third of the way: the curriculum moved on without the policy; on the U-maze, CSIRL's point mass ends at the goal."""
+    import subgoal_lead_records
+
+    records = [os.path.join(ROOT, "docs", "runs", "antmaze-bc-path", f"antmaze-umaze-csirl-s{seed}") for seed in range(3)]
+    maze = os.path.join(ROOT, "docs", "runs", "pointmaze", "PointMaze_UMaze-v3-csirl-s0")
+    result = subgoal_lead_records.main([*records, maze, ROOT])  # ROOT: no health.json, skipped
+    assert result["records"] == 4 and result["moved_on"] == records
+    ant = result["rows"][0]
+    assert ant["subgoal_share"] > 0.9 and ant["progress_median"] < 0.4 and ant["episodes_flagged"] is True
+    assert "| yes |" in capsys.readouterr().err

@@ -28,11 +28,13 @@ __all__ = [
     "OFF_DEMONSTRATION_SD",
     "ROUTE_OPENING_SHARE",
     "SATURATION_LIMIT",
+    "SUBGOAL_LEAD_LIMIT",
     "VALUE_RATIO_LIMIT",
     "WARM_START_KEPT_SHARE",
     "HealthCheck",
     "action_saturation",
     "critic_calibration",
+    "curriculum_moved_on",
     "demonstrations_share_a_goal",
     "expert_transitions_reward",
     "learned_reward_share",
@@ -57,6 +59,9 @@ ENTROPY_FLOOR_PER_DIM = -3.0
 #: the share of the demonstrations' route total that the route may cost before it pays (its opening) under the
 #: matching reward; beyond it, standing still beats walking the first stretch
 ROUTE_OPENING_SHARE = 0.1
+#: how far (a share of the demonstration) the curriculum's last subgoal may lie ahead of where the policy's episodes end
+#: (median) before :func:`where_episodes_end` says the curriculum moved on without the policy
+SUBGOAL_LEAD_LIMIT = 0.5
 #: below the first, the learned reward cannot move the policy; above the second, it drowns the matching reward
 LEARNED_REWARD_SHARE_RANGE = (0.01, 0.8)
 
@@ -267,7 +272,7 @@ def critic_calibration(values: torch.Tensor, returns: torch.Tensor, where: str,
 
 
 def where_episodes_end(final_features: torch.Tensor, path_features: torch.Tensor,
-                       episode_paths: Sequence[torch.Tensor] = ()) -> HealthCheck:
+                       episode_paths: Sequence[torch.Tensor] = (), subgoal_share: float | None = None) -> HealthCheck:
     """Where the policy's episodes end compared with the demonstrations' path (the matching features).
 
     Args:
@@ -275,6 +280,15 @@ def where_episodes_end(final_features: torch.Tensor, path_features: torch.Tensor
         path_features: ``[L, F]`` the curriculum trajectory's matching features.
         episode_paths: ``[L_e, F]`` per episode, the path to compare it with (the demonstration of its goal, with a
             goal-conditioned matching reward); empty: ``path_features`` for every episode.
+        subgoal_share: the curriculum's last subgoal as a share of its trajectory (None: no curriculum). Where the
+            episodes stop short and the subgoal is more than :data:`SUBGOAL_LEAD_LIMIT` ahead of them, the message
+            says the curriculum moved on without the policy.
+
+    Examples:
+        >>> path = torch.stack([torch.arange(11.0), torch.zeros(11)], -1)
+        >>> check = where_episodes_end(torch.tensor([[1.0, 0.0]]), path, subgoal_share=0.95)
+        >>> check.ok, check.figures["subgoal_lead"]
+        (False, 0.85)
     """
     name = "where_episodes_end"
     paths = list(episode_paths) if episode_paths else [path_features] * final_features.shape[0]
@@ -293,14 +307,38 @@ def where_episodes_end(final_features: torch.Tensor, path_features: torch.Tensor
                "distance_over_path_length": float(nearest_t.median()) / extent}
     which = "the demonstration of its goal" if episode_paths else "the demonstration"
     off_path = figures["distance_over_path_length"] > 0.2
+    if subgoal_share is not None:
+        figures["subgoal_share"] = float(subgoal_share)
+        figures["subgoal_lead"] = round(float(subgoal_share) - figures["progress_median"], 4)
     if off_path or figures["progress_median"] < 0.5:
         where = (f"{figures['distance_over_path_length']:.0%} of the path's length away from it" if off_path
                  else "on the path")
         return HealthCheck(name, False, (
             f"the policy's episodes end {where}, {figures['progress_median']:.0%} of the way along {which} "
-            "(median): it stops short of the goal or leaves the path"), figures)
+            "(median): it stops short of the goal or leaves the path" + _subgoal_ahead(figures)), figures)
     return HealthCheck(name, True, f"the policy's episodes end {figures['progress_median']:.0%} of the way along "
                                    f"{which} (median), near its path", figures)
+
+
+def curriculum_moved_on(subgoal_share: float | None, progress: float) -> bool:
+    """Whether the curriculum's last subgoal (``subgoal_share`` of its trajectory) lies more than
+    :data:`SUBGOAL_LEAD_LIMIT` ahead of ``progress``, where the policy's episodes end (the same share, median).
+
+    Examples:
+        >>> curriculum_moved_on(0.98, 0.2), curriculum_moved_on(0.98, 0.9), curriculum_moved_on(None, 0.0)
+        (True, False, False)
+    """
+    return subgoal_share is not None and subgoal_share - progress > SUBGOAL_LEAD_LIMIT
+
+
+def _subgoal_ahead(figures: dict[str, Any]) -> str:
+    """The clause of :func:`where_episodes_end`'s message for a curriculum that moved on without the policy."""
+    if not curriculum_moved_on(figures.get("subgoal_share"), figures["progress_median"]):
+        return ""
+    return (f"; the curriculum's subgoal is already {figures['subgoal_share']:.0%} of the way along its demonstration: "
+            "it moved on without the policy (the subgoal follows the critics' agreement along the demonstration, not "
+            "how far the policy gets), so the run now trains as it would without a curriculum and what holds the "
+            "policy back is the learner or the reward, not the subgoal")
 
 
 def demonstrations_share_a_goal(final_features: torch.Tensor, path_features: torch.Tensor,

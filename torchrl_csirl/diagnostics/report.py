@@ -112,14 +112,23 @@ def _metrics_checks(rows: list[dict[str, Any]], action_dim: int, curriculum_leng
     return checks
 
 
-def _probe_checks(probe: LearnerProbe, expert_fraction: float, names: list[str] | None = None) -> list[HealthCheck]:
+def _last_subgoal_share(rows: list[dict[str, Any]], curriculum_length: int | None) -> float | None:
+    """The last logged subgoal as a share of the curriculum trajectory (None: no curriculum or no subgoal logged)."""
+    subgoals = [int(r["subgoal"]) for r in rows if r.get("subgoal") is not None]
+    if curriculum_length is None or not subgoals:
+        return None
+    return subgoals[-1] / max(curriculum_length - 1, 1)
+
+
+def _probe_checks(probe: LearnerProbe, expert_fraction: float, names: list[str] | None = None,
+                  subgoal_share: float | None = None) -> list[HealthCheck]:
     return [
         critic_calibration(probe.expert_values, probe.expert_returns, "expert", probe.expert_entropy_returns),
         critic_calibration(probe.policy_values, probe.policy_returns, "policy", probe.policy_entropy_returns),
         matching_along_demonstrations(probe.matching_to_subgoal),
         route_opening(probe.matching_along_routes, probe.matching_target),
         expert_transitions_reward(probe.expert_rewards, probe.policy_rewards, expert_fraction),
-        where_episodes_end(probe.final_features, probe.path_features, probe.episode_paths),
+        where_episodes_end(probe.final_features, probe.path_features, probe.episode_paths, subgoal_share),
         demonstrations_share_a_goal(probe.demo_final_features, probe.path_features, probe.goal_conditioned),
         states_off_the_demonstrations(probe.observations, probe.demo_observations, probe.matched_features, names),
         action_saturation(probe.actions),
@@ -150,7 +159,8 @@ def health_report(run: Any, method: str, *, episodes: int = 5, metrics_dir: str 
     demonstration_reward = float(to_subgoal.mean()) if to_subgoal.numel() else None
     report.checks += _metrics_checks(rows, run.spec.action_dim, parts.curriculum.length, test, demonstration_reward)
     names = [run.spec.feature_name(i) for i in range(run.spec.obs_dim)]
-    report.checks += _probe_checks(report.probe, cfg.replay_buffer.expert_fraction, names)
+    report.checks += _probe_checks(report.probe, cfg.replay_buffer.expert_fraction, names,
+                                   _last_subgoal_share(rows, parts.curriculum.length))
     return report
 
 
