@@ -149,6 +149,9 @@ def test_each_check_flags_its_own_failure_and_passes_a_healthy_figure():
     assert ahead.ok is False and "moved on without the policy" in ahead.message
     assert ahead.figures["subgoal_lead"] == pytest.approx(0.88)
     assert "moved on" not in where_episodes_end(torch.tensor([[1.0, 0.0]]), path, subgoal_share=0.3).message
+    assert "without a curriculum" not in ahead.message  # not at the end: the curriculum still sets the subgoal
+    at_end = where_episodes_end(torch.tensor([[1.0, 0.0]]), path, subgoal_share=1.0)
+    assert "trains as it would without a curriculum" in at_end.message
     assert where_episodes_end(torch.tensor([[10.0, 0.0]]), path, subgoal_share=1.0).ok is True  # level: healthy
     # a goal-conditioned matching reward: each episode against the demonstration of its goal (here, leftward)
     left = -path
@@ -156,6 +159,8 @@ def test_each_check_flags_its_own_failure_and_passes_a_healthy_figure():
     assert where_episodes_end(ends, path).ok is False  # the second episode is 20 away from the first path's end
     own = where_episodes_end(ends, path, [path, left])
     assert own.ok is True and own.figures["progress"] == [1.0, 1.0] and "of its goal" in own.message
+    short_of_goals = where_episodes_end(torch.tensor([[1.0, 0.0], [-1.0, 0.0]]), path, [path, left], subgoal_share=0.9)
+    assert short_of_goals.ok is False and "the same share of each goal's demonstration" in short_of_goals.message
     assert subgoal_progress([5, 5, 5, 5], 40).ok is False and subgoal_progress([5, 9, 20], 40).ok is True
     assert policy_entropy([{"entropy": -9.0, "alpha": 1e-4}], action_dim=2).ok is False
     assert action_saturation(torch.ones(10, 2)).ok is False and action_saturation(torch.zeros(10, 2)).ok is True

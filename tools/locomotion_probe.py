@@ -170,8 +170,7 @@ def policy_episodes(run_dir: str, task: str, episodes: int, seed: int, stochasti
     mode = ExplorationType.RANDOM if stochastic else ExplorationType.DETERMINISTIC
     episodes_rolled = roll_test_episodes(load_actor(run_dir, task), task, episodes, seed,
                                          resolve_scenario(task).max_steps, exploration=mode)
-    for _, rollout, _ in episodes_rolled:
-        yield rollout
+    yield from (rollout for _, rollout, _ in episodes_rolled)
 
 
 def probe(run_dir: str, episodes: int = 1, seed: int | None = None, stochastic: bool = False,

@@ -9,8 +9,9 @@ matching reward does not read, the mean gap to the nearest demonstration state i
 deviations, read per episode, the worst one reported). With ``--holdout`` it sets the run's last five demonstrations
 (at most all but one) against the others instead of a policy: the figure an expert gets. One line per run, then the
 figures as a JSON line per run (with ``first_crash_per_episode``: where the environment reports ``crashed``, each
-episode's first such step, counted from 1; AntMaze's is a flipped ant). CSIRL's health report makes the same check at the end of every
-run; this tool makes it for the baselines too, and calibrates its threshold (docs/own-task.md#a-cheetah-on-its-back).
+episode's first such step, counted from 1; AntMaze's is a flipped ant). CSIRL's health report makes the same check at
+the end of every run; this tool makes it for the baselines too, and calibrates its threshold
+(docs/own-task.md#a-cheetah-on-its-back).
 """
 from __future__ import annotations
 

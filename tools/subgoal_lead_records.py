@@ -21,24 +21,34 @@ from torchrl_csirl.diagnostics import HEALTH_FILE, curriculum_moved_on
 
 
 def read_record(record: str) -> dict[str, object] | None:
-    """One record's last subgoal share, its episodes' median progress, whether ``where_episodes_end`` flagged, and
-    whether the curriculum moved on without the policy; None for a record without both figures."""
+    """One record's curriculum against its policy.
+
+    Args:
+        record: a record directory (its ``health.json``).
+
+    Returns:
+        ``subgoal_share`` (the last subgoal's share of the curriculum trajectory), ``progress_median`` (where the
+        probe episodes end along the demonstration), ``episodes_flagged`` (``where_episodes_end`` out of range) and
+        ``curriculum_moved_on``; None for a record without a report or without both figures (a run of under three
+        rounds, a report from before the checks).
+    """
     path = os.path.join(record, HEALTH_FILE)
     if not os.path.isfile(path):
         return None
     with open(path, encoding="utf-8") as f:
-        checks = {c["name"]: c for c in json.load(f)["checks"]}
-    share = checks.get("subgoal_progress", {}).get("figures", {}).get("final_share")
+        checks = {c.get("name"): c for c in json.load(f).get("checks", [])}
+    share = (checks.get("subgoal_progress", {}).get("figures") or {}).get("final_share")
     end = checks.get("where_episodes_end", {})
-    if share is None or not end.get("figures"):
+    progress = (end.get("figures") or {}).get("progress_median")
+    if share is None or progress is None:
         return None
-    progress = float(end["figures"]["progress_median"])
-    moved_on = end["ok"] is False and curriculum_moved_on(share, progress)
-    return {"record": record, "subgoal_share": round(float(share), 3), "progress_median": round(progress, 3),
-            "episodes_flagged": end["ok"] is False, "curriculum_moved_on": moved_on}
+    moved_on = end.get("ok") is False and curriculum_moved_on(share, progress)
+    return {"record": record, "subgoal_share": round(float(share), 3), "progress_median": round(float(progress), 3),
+            "episodes_flagged": end.get("ok") is False, "curriculum_moved_on": moved_on}
 
 
 def main(argv: list[str] | None = None) -> dict[str, object]:
+    """Reads each record; prints the table (stderr) and the JSON line; returns what the JSON line holds."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("records", nargs="+", help="record directories (docs/runs/<group>/<cell>)")
     args = parser.parse_args(argv)

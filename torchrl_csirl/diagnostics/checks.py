@@ -280,15 +280,15 @@ def where_episodes_end(final_features: torch.Tensor, path_features: torch.Tensor
         path_features: ``[L, F]`` the curriculum trajectory's matching features.
         episode_paths: ``[L_e, F]`` per episode, the path to compare it with (the demonstration of its goal, with a
             goal-conditioned matching reward); empty: ``path_features`` for every episode.
-        subgoal_share: the curriculum's last subgoal as a share of its trajectory (None: no curriculum). Where the
-            episodes stop short and the subgoal is more than :data:`SUBGOAL_LEAD_LIMIT` ahead of them, the message
-            says the curriculum moved on without the policy.
+        subgoal_share: the curriculum's subgoal as a share of its trajectory (None: no curriculum, or one fixed at
+            the end). Where the episodes stop short and the subgoal is more than :data:`SUBGOAL_LEAD_LIMIT` ahead of
+            them (:func:`curriculum_moved_on`), the message says the curriculum moved on without the policy.
 
     Examples:
         >>> path = torch.stack([torch.arange(11.0), torch.zeros(11)], -1)
         >>> check = where_episodes_end(torch.tensor([[1.0, 0.0]]), path, subgoal_share=0.95)
-        >>> check.ok, check.figures["subgoal_lead"]
-        (False, 0.85)
+        >>> check.ok, round(check.figures["subgoal_lead"], 2), "moved on without the policy" in check.message
+        (False, 0.85, True)
     """
     name = "where_episodes_end"
     paths = list(episode_paths) if episode_paths else [path_features] * final_features.shape[0]
@@ -309,13 +309,14 @@ def where_episodes_end(final_features: torch.Tensor, path_features: torch.Tensor
     off_path = figures["distance_over_path_length"] > 0.2
     if subgoal_share is not None:
         figures["subgoal_share"] = float(subgoal_share)
-        figures["subgoal_lead"] = round(float(subgoal_share) - figures["progress_median"], 4)
+        figures["subgoal_lead"] = float(subgoal_share) - figures["progress_median"]
     if off_path or figures["progress_median"] < 0.5:
         where = (f"{figures['distance_over_path_length']:.0%} of the path's length away from it" if off_path
                  else "on the path")
         return HealthCheck(name, False, (
             f"the policy's episodes end {where}, {figures['progress_median']:.0%} of the way along {which} "
-            "(median): it stops short of the goal or leaves the path" + _subgoal_ahead(figures)), figures)
+            "(median): it stops short of the goal or leaves the path" + _subgoal_ahead(figures, bool(episode_paths))),
+            figures)
     return HealthCheck(name, True, f"the policy's episodes end {figures['progress_median']:.0%} of the way along "
                                    f"{which} (median), near its path", figures)
 
@@ -331,14 +332,19 @@ def curriculum_moved_on(subgoal_share: float | None, progress: float) -> bool:
     return subgoal_share is not None and subgoal_share - progress > SUBGOAL_LEAD_LIMIT
 
 
-def _subgoal_ahead(figures: dict[str, Any]) -> str:
+def _subgoal_ahead(figures: dict[str, Any], per_goal: bool) -> str:
     """The clause of :func:`where_episodes_end`'s message for a curriculum that moved on without the policy."""
-    if not curriculum_moved_on(figures.get("subgoal_share"), figures["progress_median"]):
+    share = figures.get("subgoal_share")
+    if not curriculum_moved_on(share, figures["progress_median"]):
         return ""
-    return (f"; the curriculum's subgoal is already {figures['subgoal_share']:.0%} of the way along its demonstration: "
-            "it moved on without the policy (the subgoal follows the critics' agreement along the demonstration, not "
-            "how far the policy gets), so the run now trains as it would without a curriculum and what holds the "
-            "policy back is the learner or the reward, not the subgoal")
+    along = "the same share of each goal's demonstration" if per_goal else "its demonstration"
+    clause = (f"; the curriculum's subgoal is already {share:.0%} of the way along {along}: it moved on without the "
+              "policy (the subgoal follows the critics' agreement along the demonstration, not how far the policy "
+              "gets) and no longer sets a target within its reach")
+    if share >= 1.0:
+        clause += (", and the run now trains as it would without a curriculum (csirl.fixed_subgoal=true): what holds "
+                   "the policy back is the learner or the reward, not the subgoal")
+    return clause
 
 
 def demonstrations_share_a_goal(final_features: torch.Tensor, path_features: torch.Tensor,

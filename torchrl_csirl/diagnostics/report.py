@@ -112,12 +112,13 @@ def _metrics_checks(rows: list[dict[str, Any]], action_dim: int, curriculum_leng
     return checks
 
 
-def _last_subgoal_share(rows: list[dict[str, Any]], curriculum_length: int | None) -> float | None:
-    """The last logged subgoal as a share of the curriculum trajectory (None: no curriculum or no subgoal logged)."""
-    subgoals = [int(r["subgoal"]) for r in rows if r.get("subgoal") is not None]
-    if curriculum_length is None or not subgoals:
+def _moving_subgoal_share(run: Any) -> float | None:
+    """The curriculum's subgoal, the one the probe scored against, as a share of its trajectory; None where the
+    subgoal is fixed at the end from the start (``csirl.fixed_subgoal``: no curriculum to move on)."""
+    curriculum = run.parts.curriculum
+    if run.cfg.csirl.fixed_subgoal:
         return None
-    return subgoals[-1] / max(curriculum_length - 1, 1)
+    return curriculum.subgoal / max(curriculum.length - 1, 1)
 
 
 def _probe_checks(probe: LearnerProbe, expert_fraction: float, names: list[str] | None = None,
@@ -159,8 +160,7 @@ def health_report(run: Any, method: str, *, episodes: int = 5, metrics_dir: str 
     demonstration_reward = float(to_subgoal.mean()) if to_subgoal.numel() else None
     report.checks += _metrics_checks(rows, run.spec.action_dim, parts.curriculum.length, test, demonstration_reward)
     names = [run.spec.feature_name(i) for i in range(run.spec.obs_dim)]
-    report.checks += _probe_checks(report.probe, cfg.replay_buffer.expert_fraction, names,
-                                   _last_subgoal_share(rows, parts.curriculum.length))
+    report.checks += _probe_checks(report.probe, cfg.replay_buffer.expert_fraction, names, _moving_subgoal_share(run))
     return report
 
 
