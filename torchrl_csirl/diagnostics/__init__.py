@@ -33,6 +33,7 @@ from torchrl_csirl.diagnostics.checks import (
     route_opening,
     states_off_the_demonstrations,
     subgoal_progress,
+    subgoal_share,
     warm_start_kept,
     where_episodes_end,
 )
@@ -75,6 +76,7 @@ __all__ = [
     "route_opening",
     "states_off_the_demonstrations",
     "subgoal_progress",
+    "subgoal_share",
     "warm_start_kept",
     "where_episodes_end",
     "write_health_report",

@@ -45,6 +45,7 @@ __all__ = [
     "route_opening",
     "states_off_the_demonstrations",
     "subgoal_progress",
+    "subgoal_share",
     "warm_start_kept",
     "where_episodes_end",
 ]
@@ -377,6 +378,16 @@ def demonstrations_share_a_goal(final_features: torch.Tensor, path_features: tor
                        figures)
 
 
+def subgoal_share(subgoal: int, curriculum_length: int) -> float:
+    """``subgoal``'s place on the curriculum trajectory of ``curriculum_length`` states: 0 at its first, 1 at its last.
+
+    Examples:
+        >>> subgoal_share(140, 281), subgoal_share(0, 1)
+        (0.5, 0.0)
+    """
+    return subgoal / max(curriculum_length - 1, 1)
+
+
 def subgoal_progress(subgoals: Sequence[int], curriculum_length: int) -> HealthCheck:
     """The subgoal over rounds: a curriculum that never moves cannot lead anywhere.
 
@@ -389,7 +400,7 @@ def subgoal_progress(subgoals: Sequence[int], curriculum_length: int) -> HealthC
         return HealthCheck(name, None, "too few rounds to follow the curriculum")
     last = curriculum_length - 1
     figures = {"subgoals": list(subgoals), "curriculum_length": curriculum_length,
-               "final_share": subgoals[-1] / max(last, 1)}
+               "final_share": subgoal_share(subgoals[-1], curriculum_length)}
     if max(subgoals) == min(subgoals) and subgoals[-1] < last:
         return HealthCheck(name, False, (
             f"the curriculum never moved: subgoal {subgoals[-1]} of {last} in every round; the critics' dispersion "

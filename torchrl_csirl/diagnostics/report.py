@@ -26,6 +26,7 @@ from torchrl_csirl.diagnostics.checks import (
     route_opening,
     states_off_the_demonstrations,
     subgoal_progress,
+    subgoal_share,
     warm_start_kept,
     where_episodes_end,
 )
@@ -115,10 +116,9 @@ def _metrics_checks(rows: list[dict[str, Any]], action_dim: int, curriculum_leng
 def _moving_subgoal_share(run: Any) -> float | None:
     """The curriculum's subgoal, the one the probe scored against, as a share of its trajectory; None where the
     subgoal is fixed at the end from the start (``csirl.fixed_subgoal``: no curriculum to move on)."""
-    curriculum = run.parts.curriculum
     if run.cfg.csirl.fixed_subgoal:
         return None
-    return curriculum.subgoal / max(curriculum.length - 1, 1)
+    return subgoal_share(run.parts.curriculum.subgoal, run.parts.curriculum.length)
 
 
 def _probe_checks(probe: LearnerProbe, expert_fraction: float, names: list[str] | None = None,
