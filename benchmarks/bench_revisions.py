@@ -58,9 +58,10 @@ def _worker(tree: str, args: argparse.Namespace) -> subprocess.Popen:
     cmd = [sys.executable, "-c", _WORKER, *map(str, (args.batch, args.threads, args.warmup, args.hidden)),
            *_STEPS.values()]
     proc = subprocess.Popen(cmd, cwd=tree, env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
-    if proc.stdout.readline().strip() != "ready":
-        raise RuntimeError(f"the worker in {tree} did not start")
-    return proc
+    for line in proc.stdout:  # log lines (TorchRL's logger writes to stdout) come before it
+        if line.strip() == "ready":
+            return proc
+    raise RuntimeError(f"the worker in {tree} did not start")
 
 
 def _ask(proc: subprocess.Popen, step: str) -> float:

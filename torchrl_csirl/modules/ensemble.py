@@ -113,7 +113,7 @@ class FusedCriticEnsemble:
             bias = None if bias_key is None else params.get(bias_key)
             h = _first_layer(x, weight) if index == 0 else torch.bmm(h, weight.transpose(1, 2))
             if bias is not None:
-                h = h + bias.unsqueeze(1)
+                h = h.add_(bias.unsqueeze(1))  # in place: the matmul output is fresh, and its backward does not read it
             if index < len(self.activations):
                 z = h
                 h = self.activations[index](h)
