@@ -122,9 +122,12 @@ def _moving_subgoal_share(run: Any) -> float | None:
 
 
 def _demonstration_features(probe: LearnerProbe) -> list[Any]:
-    """Every demonstration's matching features (its observations' matched entries)."""
+    """Every demonstration's matching features (its observations' matched entries; none where they are not the
+    path's features)."""
     matched = list(probe.matched_features)
-    return [d[:, matched] for d in probe.demo_observations if d.ndim == 2 and d.shape[0]] if matched else []
+    if len(matched) != probe.path_features.shape[-1]:
+        return []
+    return [d[:, matched] for d in probe.demo_observations if d.ndim == 2 and d.shape[0]]
 
 
 def _probe_checks(probe: LearnerProbe, expert_fraction: float, names: list[str] | None = None,
