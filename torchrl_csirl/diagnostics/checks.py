@@ -497,7 +497,7 @@ def demonstrations_share_a_goal(final_features: torch.Tensor, path_features: tor
         path_features: ``[L, F]`` the curriculum trajectory's matching features (its last row: its end).
         goal_conditioned: the matching reward follows the demonstration of each episode's goal.
         goal_gaps: with ``goal_conditioned``, per probe episode, the distance from its goal to the goal of the
-            demonstration it is matched against, over that demonstration's length (the goal in the matching
+            demonstration it is matched against, over the curriculum trajectory's length (the goal in the matching
             features' units, as a goal-conditioned task's ``desired_goal`` and ``achieved_goal`` are); fewer than
             :data:`SHARED_GOAL_SHARE` of them under :data:`SHARED_GOAL_DISTANCE` is flagged.
 
@@ -540,7 +540,8 @@ def _goals_covered(goal_gaps: Sequence[float] | None) -> HealthCheck:
         return HealthCheck(name, False, (
             f"each transition is matched against the demonstration of its goal, but for only {covered:.0%} of the "
             "probe episodes does that demonstration's goal lie near the episode's own (within a tenth of the "
-            f"demonstration's length; the median gap {sorted(gaps)[len(gaps) // 2]:.0%} of it): the demonstrations do "
+            f"curriculum trajectory's length; the median gap {sorted(gaps)[len(gaps) // 2]:.0%} of it): the "
+            "demonstrations do "
             "not cover the goals the "
             "episodes draw, and the matching reward leads the others to another demonstration's goal; more "
             "demonstrations (expert.num_trajectories), spread over the goals"), figures)

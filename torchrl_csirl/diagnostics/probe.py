@@ -43,7 +43,8 @@ class LearnerProbe:
         episode_paths: ``[L_e, F]`` per episode, the matching features of the demonstration its goal selects
             (a goal-conditioned matching reward), else empty.
         goal_gaps: per episode (a goal-conditioned matching reward), the distance from its goal to the goal of the
-            demonstration it selects, over that demonstration's length along its matching features; else empty.
+            demonstration it selects, over the curriculum trajectory's length along its matching features (the
+            share :func:`~torchrl_csirl.diagnostics.checks.demonstrations_share_a_goal` reads); else empty.
         actions: ``[T, A]`` the policy's actions.
         goal_conditioned: the matching reward follows the demonstration of each episode's goal
             (:class:`~torchrl_csirl.transforms.GoalConditionedMatchingReward`), not the first one only.
@@ -165,6 +166,7 @@ def probe_learner(*, env: EnvBase, policy, loss, transforms, matching, demos, ga
     policy_values, policy_returns, policy_entropy, policy_rewards = [], [], [], []
     finals, actions, paths, observations, goal_gaps = [], [], [], [], []
     position = matching.position_feature_indices.cpu()
+    curriculum_path = matching.expert_observations.index_select(-1, matching.position_feature_indices).float().cpu()
     with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
         for i in range(episodes):
             env.set_seed(seed + i)
@@ -182,7 +184,7 @@ def probe_learner(*, env: EnvBase, policy, loss, transforms, matching, demos, ga
                 chosen = int(matching.demonstration_of(first).reshape(-1)[0])
                 paths.append(matching.demonstration_positions(chosen).float().cpu())
                 goal_gaps.append(_goal_gap(matching.goal_of(first).reshape(-1), matching.demonstration_goals[chosen],
-                                           paths[-1]))
+                                           curriculum_path))
     expert_values, expert_returns, expert_entropy, expert_rewards = [], [], [], []
     for i in range(min(demonstrations, demos.num_trajectories)):
         values, returns, entropy_returns, rewards = _episode_figures(demos.trajectory(i).to(device), transforms, loss,
@@ -206,7 +208,7 @@ def probe_learner(*, env: EnvBase, policy, loss, transforms, matching, demos, ga
         expert_values=torch.cat(expert_values, -1), expert_returns=torch.cat(expert_returns),
         policy_rewards=torch.cat(policy_rewards), expert_rewards=torch.cat(expert_rewards),
         matching_to_subgoal=to_subgoal, final_features=torch.stack(finals).float(), demo_final_features=demo_finals.cpu(),
-        path_features=matching.expert_observations.index_select(-1, matching.position_feature_indices).float().cpu(),
+        path_features=curriculum_path,
         actions=torch.cat(actions).float(), goal_conditioned=hasattr(matching, "demonstration_of"), episode_paths=tuple(paths),
         goal_gaps=tuple(goal_gaps),
         matching_along_routes=routes, matching_target=getattr(matching, "target", "final"),
@@ -216,8 +218,8 @@ def probe_learner(*, env: EnvBase, policy, loss, transforms, matching, demos, ga
 
 
 def _goal_gap(goal: torch.Tensor, demonstration_goal: torch.Tensor, path: torch.Tensor) -> float:
-    """The distance from an episode's ``goal`` to the goal of the demonstration it is matched against, over that
-    demonstration's length along ``path`` (``[L, F]``, its matching features).
+    """The distance from an episode's ``goal`` to the goal of the demonstration it is matched against, over the length
+    along ``path`` (``[L, F]``: the curriculum trajectory's matching features).
 
     Examples:
         >>> _goal_gap(torch.tensor([1.0, 0.5]), torch.tensor([1.0, 0.0]), torch.tensor([[0.0, 0.0], [1.0, 0.0]]))
