@@ -133,9 +133,11 @@ def test_each_check_flags_its_own_failure_and_passes_a_healthy_figure():
     # the remedies point the right way: a minimum over more critics lowers the targets, over fewer raises them
     assert "more critics" in over and "expert_fraction" in over and "fewer" in under
     assert critic_calibration(torch.full((5, 10), 33.0), returns, "expert").ok is True
-    # Q(s, a) values the policy's continuation: below the demonstration's return on the expert's states is no fault
+    # Q(s, a) values the policy's continuation: below the demonstration's return on the expert's states, the message
+    # names both causes (a policy that leaves the expert's route, critics that under-value) and how to tell them apart
     below = critic_calibration(torch.full((5, 10), 3.0), returns, "expert")
-    assert below.ok is True and "does not follow the expert" in below.message
+    assert below.ok is False and "does not continue the expert's route" in below.message
+    assert "critic_calibration_policy" in below.message
     # soft critics: a return whose entropy bonus is negative (SAC's target entropy -dim(A)) is read with it
     soft = critic_calibration(torch.full((5, 10), -60.0), torch.full((10,), -55.0), "policy", torch.full((10,), -75.0))
     assert soft.ok is True and soft.figures["entropy_return_mean"] == -75.0 and "entropy bonus" in soft.message

@@ -14,7 +14,8 @@ SCRIPTS = sorted(name for name in os.listdir(TOOLS) if name.endswith(".py") and 
 
 
 def test_the_analysis_scripts_live_in_tools_and_recipes_holds_what_users_run():
-    assert SCRIPTS == ["anchor_records.py", "compare_runs.py", "entropy_bonus_records.py", "locomotion_probe.py", "matching_route_probe.py",
+    assert SCRIPTS == ["anchor_records.py", "compare_runs.py", "entropy_bonus_records.py", "health_flag_table.py",
+                       "locomotion_probe.py", "matching_route_probe.py",
                        "meta_gradient_balance.py", "off_demonstrations.py", "plot_curves.py", "point_maze_experts.py", "policy_outcomes.py",
                        "record_runs.py",
                        "robotics_outcomes.py", "subgoal_lead_records.py", "summarize_runs.py", "termination_probe.py",
@@ -160,3 +161,29 @@ def test_subgoal_lead_records_reads_where_a_recorded_curriculum_left_its_policy(
     ant = result["rows"][0]
     assert ant["subgoal_share"] > 0.9 and ant["progress_median"] < 0.4 and ant["episodes_flagged"] is True
     assert "| yes |" in capsys.readouterr().err
+
+
+def test_health_flag_table_counts_flags_on_failed_and_succeeded_records(capsys):
+    """The HalfCheetah's CSIRL runs (0.94, 0.87 and 0.27 of the expert's return, the expert's record beside them) and
+    PointMaze U-maze with one demonstration (success 0.52): the flipped cheetah and the maze are failures; only they
+    flag states_off_the_demonstrations and demonstrations_share_a_goal. With --held-out every one is left out: each
+    set a threshold."""
+    import health_flag_table
+
+    cheetahs = [os.path.join(ROOT, "docs", "runs", "mujoco", f"halfcheetah-csirl-s{seed}") for seed in range(3)]
+    maze = os.path.join(ROOT, "docs", "runs", "pointmaze-onedemo", "PointMaze_UMaze-v3-csirl-s0")
+    result = health_flag_table.main([*cheetahs, maze, ROOT, "--runs"])  # ROOT: no record, skipped
+    assert result["records"] == 4 and result["succeeded"] == 2 and result["bar"] == health_flag_table.BAR
+    scores = {os.path.basename(r["record"]): (round(r["score"], 2), r["metric"]) for r in result["rows"]}
+    assert scores["halfcheetah-csirl-s2"] == (0.27, "return over the expert's")
+    assert scores["PointMaze_UMaze-v3-csirl-s0"] == (0.52, "success rate")
+    off = result["checks"]["states_off_the_demonstrations"]
+    assert (off["failed_flagged"], off["failed"], off["succeeded_flagged"], off["succeeded"]) == (1, 1, 0, 2)
+    assert off["unanswered"] == 1  # the maze's report predates the check
+    goal = result["checks"]["demonstrations_share_a_goal"]
+    assert (goal["failed_flagged"], goal["succeeded_flagged"]) == (1, 0)
+    table = capsys.readouterr().err
+    assert "| `states_off_the_demonstrations` | 1 of 1 (100%) | 0 of 2 (0%) | 1 |" in table
+    held_out = health_flag_table.main([*cheetahs, maze, "--held-out"])
+    assert held_out["records"] == 0 and len(held_out["left_out"]) == 4
+    assert health_flag_table.main([maze, "--bar", "0.5"])["succeeded"] == 1  # the bar decides

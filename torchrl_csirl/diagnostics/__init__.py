@@ -7,6 +7,7 @@
   the expert, episodes that end short of the goal, demonstrations that do not share the curriculum trajectory's goal,
   a policy whose states the demonstrations never visit).
 * :mod:`~torchrl_csirl.diagnostics.probe`: the figures measured on a learner's own networks.
+* :mod:`~torchrl_csirl.diagnostics.calibration`: every threshold's frozen value and the recorded runs that set it.
 * :mod:`~torchrl_csirl.diagnostics.report`: every check of a run, written at the end of each CSIRL run and by
   ``torchrl-csirl diagnose <run dir>``.
 
@@ -16,6 +17,7 @@ Examples:
     >>> check.ok, round(check.figures["share"], 4)
     (False, 0.0002)
 """
+from torchrl_csirl.diagnostics.calibration import CALIBRATION, calibration_runs, calibration_table
 from torchrl_csirl.diagnostics.checks import (
     OFF_DEMONSTRATION_SD,
     SUBGOAL_LEAD_LIMIT,
@@ -49,6 +51,7 @@ from torchrl_csirl.diagnostics.report import (
 )
 
 __all__ = [
+    "CALIBRATION",
     "HEALTH_FILE",
     "HEALTH_PICTURE",
     "OFF_DEMONSTRATION_SD",
@@ -57,6 +60,8 @@ __all__ = [
     "HealthReport",
     "LearnerProbe",
     "action_saturation",
+    "calibration_runs",
+    "calibration_table",
     "check_line",
     "critic_calibration",
     "curriculum_moved_on",

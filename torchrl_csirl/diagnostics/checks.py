@@ -22,13 +22,22 @@ from typing import Any
 import torch
 
 __all__ = [
+    "ACTION_BOUND",
     "ENTROPY_FLOOR_PER_DIM",
     "HACKING_RISE_FLOOR",
+    "HACKING_RISE_SHARE",
     "LEARNED_REWARD_SHARE_RANGE",
     "OFF_DEMONSTRATION_SD",
+    "OFF_PATH_SHARE",
     "ROUTE_OPENING_SHARE",
     "SATURATION_LIMIT",
+    "SHARED_GOAL_DISTANCE",
+    "SHARED_GOAL_SHARE",
+    "SHORTCUT_RATIO",
+    "SHORT_PROGRESS",
+    "SOLVED",
     "SUBGOAL_LEAD_LIMIT",
+    "TASK_FLAT_SHARE",
     "VALUE_RATIO_LIMIT",
     "WARM_START_KEPT_SHARE",
     "HealthCheck",
@@ -53,7 +62,9 @@ __all__ = [
 #: the critics' mean value over the Monte Carlo return of the learner's own reward (or the inverse) above which
 #: the critics are called over- (under-) valued
 VALUE_RATIO_LIMIT = 3.0
-#: the share of actions at a bound (|a| > 0.99) above which the policy is called saturated
+#: an action entry beyond this (in ``[-1, 1]``) sits at a bound (a Tanh squashed to its ends)
+ACTION_BOUND = 0.99
+#: the share of actions at a bound (|a| > :data:`ACTION_BOUND`) above which the policy is called saturated
 SATURATION_LIMIT = 0.5
 #: entropy per action dimension below which the policy is called collapsed (a Tanh-Normal's entropy goes to -inf)
 ENTROPY_FLOOR_PER_DIM = -3.0
@@ -114,6 +125,11 @@ SOLVED = 0.9
 #: the rise of the matching reward per step, as a share of what the demonstration is paid per step, below which it
 #: is too small to call hacking (a relative rise on a near-zero base: a learner that stands still)
 HACKING_RISE_FLOOR = 0.01
+#: the matching reward's rise, first third to last, as a share of its larger magnitude, from which it counts as risen
+HACKING_RISE_SHARE = 0.25
+#: the task's success or accomplish rate may gain this much (the environment's return this share of its magnitude)
+#: and still count as flat
+TASK_FLAT_SHARE = 0.05
 
 
 def reward_tracks_the_task(rows: Sequence[dict], test: Mapping[str, Any] | None = None,
@@ -150,10 +166,10 @@ def reward_tracks_the_task(rows: Sequence[dict], test: Mapping[str, Any] | None 
     e0, e1 = _thirds(rows, "eval_env_return")
     spread = max(abs(m0), abs(m1), 1e-8)
     floor = HACKING_RISE_FLOOR * abs(demonstration_reward) if demonstration_reward is not None else 0.0
-    rose_relative = (m1 - m0) / spread > 0.25
+    rose_relative = (m1 - m0) / spread > HACKING_RISE_SHARE
     reward_rose = rose_relative and m1 - m0 > floor
-    task_flat = (math.isnan(s1) or s1 - s0 <= 0.05) and (math.isnan(a1) or a1 - a0 <= 0.05) and (
-        math.isnan(e1) or e1 - e0 <= 0.05 * max(abs(e0), abs(e1), 1e-8))
+    task_flat = (math.isnan(s1) or s1 - s0 <= TASK_FLAT_SHARE) and (math.isnan(a1) or a1 - a0 <= TASK_FLAT_SHARE) and (
+        math.isnan(e1) or e1 - e0 <= TASK_FLAT_SHARE * max(abs(e0), abs(e1), 1e-8))
     figures = {"matching_reward_first": m0, "matching_reward_last": m1, "success_first": s0, "success_last": s1,
                "accomplish_first": a0, "accomplish_last": a1, "env_return_first": e0, "env_return_last": e1,
                "demonstration_reward": demonstration_reward}
@@ -225,10 +241,10 @@ def critic_calibration(values: torch.Tensor, returns: torch.Tensor, where: str,
 
     A soft critic estimates the learner's reward plus SAC's entropy bonus (``-alpha log pi`` at every next state);
     ``returns`` holds both, ``entropy_returns`` the bonus's part, stated in the message: with SAC's target entropy
-    ``-dim(A)`` it is negative, and ignoring it reads calibrated critics as under-valuing. Over-valuation is flagged on
-    either set of states. Under-valuation only on the policy's: ``Q(s, a)`` values the policy's continuation, so on
-    the expert's states it falls below the demonstration's return whenever the policy does not continue the route
-    (the message says so; the policy's own states judge the critics).
+    ``-dim(A)`` it is negative, and ignoring it reads calibrated critics as under-valuing. Over- and under-valuation are
+    flagged on either set of states. On the expert's, ``Q(s, a)`` values the policy's continuation, so an
+    under-valuation there has two causes, which the message names: critics that under-value, or a policy that does
+    not continue the expert's route from the expert's states (``critic_calibration_policy`` in range: the latter).
 
     Args:
         values: ``[K, N]`` the ensemble's ``Q_k(s, a)`` (or ``[N]``).
@@ -260,10 +276,12 @@ def critic_calibration(values: torch.Tensor, returns: torch.Tensor, where: str,
             "targets feed on this (try fewer expert transitions in the batch, replay_buffer.expert_fraction; more "
             "critics in the minimum, csirl.num_qvalue_nets; or a smaller csirl.gamma)"), figures)
     if under and where == "expert":
-        return HealthCheck(name, True, (
-            f"the critics value the expert's states at {q:.3g}, below the demonstration's return {returned}: the "
-            "value of the policy's continuation, lower where the policy does not follow the expert from there "
-            "(the policy's states judge the critics)"), figures)
+        return HealthCheck(name, False, (
+            f"the critics value the expert's states at {q:.3g}, under the demonstration's return {returned}: Q(s, a) "
+            "values the policy's continuation, so either the policy does not continue the expert's route from the "
+            "expert's states (where critic_calibration_policy is in range: the critics are right, look at where the "
+            "policy goes: where_episodes_end, states_off_the_demonstrations, warm_start_kept) or the critics "
+            "under-value (a short run, or the minimum over many critics: fewer, csirl.num_qvalue_nets)"), figures)
     if under:
         return HealthCheck(name, False, (
             f"the critics under-value the {where}'s states: {q:.3g} on average where they return {returned} (a short "
@@ -272,9 +290,71 @@ def critic_calibration(values: torch.Tensor, returns: torch.Tensor, where: str,
                        figures)
 
 
+#: the median distance from the episodes' ends to their path, as a share of the path's length, beyond which
+#: :func:`where_episodes_end` calls them off the path (and an episode's end this far from every demonstration state
+#: off every demonstration)
+OFF_PATH_SHARE = 0.2
+#: the median progress along the demonstration (its nearest state's share of it) under which the episodes stop short
+SHORT_PROGRESS = 0.5
+#: an episode that ends on the path with more than :data:`OFF_PATH_SHARE` of the path's length still to walk to the
+#: matching target takes a shortcut where the straight line from its end to the target is under this share of the
+#: route along the demonstration between them (a wall or a detour lies between)
+SHORTCUT_RATIO = 0.5
+#: the order in which :func:`where_episodes_end` names an episode's end when as many episodes end each way
+_END_KINDS = ("off", "shortcut", "short")
+
+
+def _arc_lengths(path: torch.Tensor) -> torch.Tensor:
+    """``[L]`` the length along ``path`` (``[L, F]``) from its first state to each.
+
+    Examples:
+        >>> _arc_lengths(torch.tensor([[0.0, 0.0], [3.0, 4.0], [3.0, 5.0]])).tolist()
+        [0.0, 5.0, 6.0]
+    """
+    steps = (path[1:] - path[:-1]).norm(dim=-1)
+    return torch.cat([steps.new_zeros(1), steps.cumsum(0)])
+
+
+def _episode_end(final: torch.Tensor, path: torch.Tensor, subgoal_share: float | None,
+                 demonstrations: Sequence[torch.Tensor]) -> dict[str, Any]:
+    """One episode's end against its path (``[L, F]``): its distance to the nearest path state, that state's share of
+    the path, the straight line and the route along the path to the matching target (the subgoal's state, else the
+    path's end), each as a share of the path's length, and how it ends (``off``, ``shortcut``, ``short``,
+    ``reached``)."""
+    path = path.float()
+    arc = _arc_lengths(path)
+    extent = max(float(arc[-1]), 1e-8)
+    distance, index = torch.cdist(final[None], path)[0].min(-1)
+    last = path.shape[0] - 1
+    target = last if subgoal_share is None else min(last, max(0, round(float(subgoal_share) * last)))
+    route = max(0.0, float(arc[target] - arc[index])) / extent
+    straight = float((final - path[target]).norm()) / extent
+    every = [float(torch.cdist(final[None], d.float())[0].min()) for d in demonstrations if d.shape[0]]
+    nearest_any = min([float(distance), *every]) / extent
+    off = float(distance) / extent > OFF_PATH_SHARE
+    if off:
+        kind = "off" if nearest_any > OFF_PATH_SHARE else "other"
+    elif route > OFF_PATH_SHARE and straight < SHORTCUT_RATIO * route:
+        kind = "shortcut"
+    else:
+        kind = "short" if float(index) / last < SHORT_PROGRESS else "reached"
+    return {"distance": float(distance), "progress": float(index) / last, "extent": extent, "route": route,
+            "straight": straight, "target_share": target / last, "nearest_demonstration": nearest_any, "kind": kind}
+
+
 def where_episodes_end(final_features: torch.Tensor, path_features: torch.Tensor,
-                       episode_paths: Sequence[torch.Tensor] = (), subgoal_share: float | None = None) -> HealthCheck:
-    """Where the policy's episodes end compared with the demonstrations' path (the matching features).
+                       episode_paths: Sequence[torch.Tensor] = (), subgoal_share: float | None = None,
+                       demonstrations: Sequence[torch.Tensor] = (), target: str = "final") -> HealthCheck:
+    """Where the policy's episodes end compared with the demonstrations' path (the matching features), and, where
+    they stop short, why.
+
+    Flagged where the episodes end (median) more than :data:`OFF_PATH_SHARE` of the path's length from it, or under
+    :data:`SHORT_PROGRESS` of the way along it. Each episode's end is then read on its own: off every demonstration
+    (farther than :data:`OFF_PATH_SHARE` from every demonstration state: somewhere the expert never goes), off its
+    path near another demonstration's states, on the path where the straight line to the matching target is under
+    :data:`SHORTCUT_RATIO` of the route along the demonstration (a shortcut across a wall or a detour, which a
+    straight-line matching target pays), or on the path short of the goal; the message names the most common, its
+    likely cause and what to try.
 
     Args:
         final_features: ``[E, F]`` the matching features of each episode's last state.
@@ -282,44 +362,92 @@ def where_episodes_end(final_features: torch.Tensor, path_features: torch.Tensor
         episode_paths: ``[L_e, F]`` per episode, the path to compare it with (the demonstration of its goal, with a
             goal-conditioned matching reward); empty: ``path_features`` for every episode.
         subgoal_share: the curriculum's subgoal as a share of its trajectory (None: no curriculum, or one fixed at
-            the end). Where the episodes stop short and the subgoal is more than :data:`SUBGOAL_LEAD_LIMIT` ahead of
-            them (:func:`curriculum_moved_on`), the message says the curriculum moved on without the policy.
+            the end): the matching target on each path (else its end). Where the episodes stop short and the
+            subgoal is more than :data:`SUBGOAL_LEAD_LIMIT` ahead of them (:func:`curriculum_moved_on`), the message
+            says the curriculum moved on without the policy.
+        demonstrations: ``[L_i, F]`` every demonstration's matching features (default: the paths alone), to tell
+            an episode off every demonstration from one that follows another demonstration.
+        target: the matching target rule (``csirl.matching_target``), for the remedy.
 
     Examples:
         >>> path = torch.stack([torch.arange(11.0), torch.zeros(11)], -1)
         >>> check = where_episodes_end(torch.tensor([[1.0, 0.0]]), path, subgoal_share=0.95)
         >>> check.ok, round(check.figures["subgoal_lead"], 2), "moved on without the policy" in check.message
         (False, 0.85, True)
+        >>> where_episodes_end(torch.tensor([[1.0, 9.0]]), path).figures["episode_ends"]  # far from every state
+        ['off']
     """
     name = "where_episodes_end"
     paths = list(episode_paths) if episode_paths else [path_features] * final_features.shape[0]
     if final_features.numel() == 0 or min(p.shape[0] for p in paths) < 2:
         return HealthCheck(name, None, "no episode or no path to compare")
-    nearest, progress, extents = [], [], []
-    for final, path in zip(final_features.float(), paths):
-        distance, index = torch.cdist(final[None], path.float())[0].min(-1)
-        nearest.append(float(distance))
-        progress.append(float(index) / (path.shape[0] - 1))
-        extents.append(max(float((path[1:] - path[:-1]).norm(dim=-1).sum()), 1e-8))
-    nearest_t, progress_t = torch.tensor(nearest), torch.tensor(progress)
-    extent = float(torch.tensor(extents).median())
-    figures = {"progress_median": float(progress_t.median()), "progress": progress,
+    ends = [_episode_end(final, path, subgoal_share, demonstrations) for final, path in zip(final_features.float(), paths)]
+    nearest_t, progress_t = torch.tensor([e["distance"] for e in ends]), torch.tensor([e["progress"] for e in ends])
+    extent = float(torch.tensor([e["extent"] for e in ends]).median())
+    figures = {"progress_median": float(progress_t.median()), "progress": [e["progress"] for e in ends],
                "distance_to_path_median": float(nearest_t.median()), "path_length": extent,
-               "distance_over_path_length": float(nearest_t.median()) / extent}
+               "distance_over_path_length": float(nearest_t.median()) / extent,
+               "episode_ends": [e["kind"] for e in ends], "straight_to_target": [e["straight"] for e in ends],
+               "route_to_target": [e["route"] for e in ends],
+               "nearest_demonstration_over_path_length": [e["nearest_demonstration"] for e in ends]}
     which = "the demonstration of its goal" if episode_paths else "the demonstration"
-    off_path = figures["distance_over_path_length"] > 0.2
+    off_path = figures["distance_over_path_length"] > OFF_PATH_SHARE
     if subgoal_share is not None:
         figures["subgoal_share"] = float(subgoal_share)
         figures["subgoal_lead"] = float(subgoal_share) - figures["progress_median"]
-    if off_path or figures["progress_median"] < 0.5:
+    if off_path or figures["progress_median"] < SHORT_PROGRESS:
         where = (f"{figures['distance_over_path_length']:.0%} of the path's length away from it" if off_path
                  else "on the path")
         return HealthCheck(name, False, (
             f"the policy's episodes end {where}, {figures['progress_median']:.0%} of the way along {which} "
-            "(median): it stops short of the goal or leaves the path" + _subgoal_ahead(figures, bool(episode_paths))),
+            f"(median){_end_cause(ends, which, target, subgoal_share)}" + _subgoal_ahead(figures, bool(episode_paths))),
             figures)
     return HealthCheck(name, True, f"the policy's episodes end {figures['progress_median']:.0%} of the way along "
                                    f"{which} (median), near its path", figures)
+
+
+def _end_cause(ends: Sequence[dict[str, Any]], which: str, target: str, subgoal_share: float | None) -> str:
+    """The clause of :func:`where_episodes_end`'s message naming how most short episodes end, why, and what to try.
+
+    Examples:
+        >>> end = {"kind": "off", "nearest_demonstration": 0.7}
+        >>> _end_cause([end], "the demonstration", "final", None).split(" (")[0]
+        '; 1 of 1 end off every demonstration'
+    """
+    kinds = [e["kind"] for e in ends]
+    counted = [k for k in (*_END_KINDS, "other") if k in kinds]
+    if not counted:
+        return ": it stops short of the goal or leaves the path"
+    kind = max(counted, key=kinds.count)  # the most common; ties to the first of _END_KINDS
+    chosen = [e for e in ends if e["kind"] == kind]
+    n = f"; {len(chosen)} of {len(ends)}"
+    middle = float(torch.tensor([e["nearest_demonstration"] for e in chosen]).median())
+    if kind == "off":
+        return (f"{n} end off every demonstration ({middle:.0%} of the path's length from the nearest demonstration "
+                "state): the policy goes where the expert never does, and the matching reward, read against the "
+                "nearest demonstration state, gives it no route back; a warm start on the demonstrations that keeps the "
+                "actor near them starts it on the route (csirl.actor_pretrain_updates with csirl.actor_bc_coef)")
+    if kind == "other":
+        return (f"{n} end off {which}'s path but near another demonstration's states: the policy follows another route "
+                "or goal the expert shows than the one it is matched against (demonstrations_share_a_goal; "
+                "csirl.goal_conditioned)")
+    if kind == "shortcut":
+        straight = float(torch.tensor([e["straight"] for e in chosen]).median())
+        route = float(torch.tensor([e["route"] for e in chosen]).median())
+        at = "the curriculum's subgoal" if subgoal_share is not None else "the demonstration's end"
+        clause = (f"{n} stop on the path where the straight line to the matching target ({at}) is {straight:.0%} of "
+                  f"the path's length and the route along the demonstration {route:.0%}: a wall or a detour lies "
+                  "between them")
+        if target == "path":
+            return clause + (" though the matching reward already measures progress along the demonstration "
+                             "(csirl.matching_target=path): what stops the policy is the learner (critic_calibration_*, "
+                             "warm_start_kept), not the target")
+        return clause + (f", and the matching reward (csirl.matching_target={target}) pays the straight-line distance, "
+                         "a shortcut through it: walking the route's next stretch, away from the target, is paid less "
+                         "than standing still; csirl.matching_target=path measures progress along the demonstration "
+                         "(route_opening says whether the route pays)")
+    return (f"{n} stop on the path short of the goal, on the route the expert takes (the learner: critic_calibration_*, "
+            "learned_reward_share; where the curriculum's subgoal stops there too, subgoal_progress)")
 
 
 def curriculum_moved_on(subgoal_share: float | None, progress: float) -> bool:
@@ -348,34 +476,77 @@ def _subgoal_ahead(figures: dict[str, Any], per_goal: bool) -> str:
     return clause
 
 
+#: a demonstration whose end lies within this share of the curriculum trajectory's length of its end (of an episode's
+#: goal, with a goal-conditioned matching reward) shares its goal
+SHARED_GOAL_DISTANCE = 0.1
+#: the share of the demonstrations (of the probe episodes) under which :func:`demonstrations_share_a_goal` says the
+#: goal is not shared (not covered)
+SHARED_GOAL_SHARE = 0.5
+
+
 def demonstrations_share_a_goal(final_features: torch.Tensor, path_features: torch.Tensor,
-                                goal_conditioned: bool = False) -> HealthCheck:
+                                goal_conditioned: bool = False, goal_gaps: Sequence[float] | None = None
+                                ) -> HealthCheck:
     """Whether the demonstrations end where the curriculum trajectory ends: CSIRL's matching reward leads every
-    episode along that one trajectory, so a task whose goal changes per episode cannot be matched (unless the
-    matching reward is goal-conditioned: each transition against the demonstration of its goal).
+    episode along that one trajectory, so a task whose goal changes per episode cannot be matched. A goal-conditioned
+    matching reward matches each transition against the demonstration of its goal instead; the check then reads
+    whether that demonstration leads to the episode's goal (the demonstrations cover the goals the episodes draw).
 
     Args:
         final_features: ``[N, F]`` the matching features of each demonstration's last state.
         path_features: ``[L, F]`` the curriculum trajectory's matching features (its last row: its end).
         goal_conditioned: the matching reward follows the demonstration of each episode's goal.
+        goal_gaps: with ``goal_conditioned``, per probe episode, the distance from its goal to the goal of the
+            demonstration it is matched against, over the curriculum trajectory's length (the goal in the matching
+            features' units, as a goal-conditioned task's ``desired_goal`` and ``achieved_goal`` are); fewer than
+            :data:`SHARED_GOAL_SHARE` of them under :data:`SHARED_GOAL_DISTANCE` is flagged.
+
+    Examples:
+        >>> path = torch.stack([torch.arange(11.0), torch.zeros(11)], -1)
+        >>> demonstrations_share_a_goal(torch.tensor([[10.0, 0.0], [0.0, 5.0]]), path, True, [0.02, 0.4, 0.3]).ok
+        False
     """
     name = "demonstrations_share_a_goal"
+    if goal_conditioned:
+        return _goals_covered(goal_gaps)
     if final_features.shape[0] < 2 or path_features.shape[0] < 2:
         return HealthCheck(name, None, "fewer than two demonstrations")
     extent = max(float((path_features[1:] - path_features[:-1]).norm(dim=-1).sum()), 1e-8)
     distance = (final_features.float() - path_features[-1].float()).norm(dim=-1) / extent
-    near = float((distance < 0.1).float().mean())
+    near = float((distance < SHARED_GOAL_DISTANCE).float().mean())
     figures = {"near_share": near, "end_distance_over_path_length": distance.tolist()}
-    if goal_conditioned:
-        return HealthCheck(name, True, (f"{near:.0%} of the demonstrations end near the curriculum trajectory's end; "
-                                        "each transition is matched against the demonstration of its goal"), figures)
-    if near < 0.5:
+    if near < SHARED_GOAL_SHARE:
         return HealthCheck(name, False, (
             f"only {near:.0%} of the demonstrations end near the curriculum trajectory's end (within a tenth of its "
             "length): the goal changes from episode to episode, and the matching reward leads every episode to the "
-            "first demonstration's goal; give the task one goal, or demonstrations that share it"), figures)
+            "first demonstration's goal; give the task one goal, demonstrations that share it, or a matching reward "
+            "that follows each episode's goal (csirl.goal_conditioned=true, where the observation has a desired_goal)"),
+            figures)
     return HealthCheck(name, True, f"{near:.0%} of the demonstrations end near the curriculum trajectory's end",
                        figures)
+
+
+def _goals_covered(goal_gaps: Sequence[float] | None) -> HealthCheck:
+    """:func:`demonstrations_share_a_goal` with a goal-conditioned matching reward: whether the demonstration each
+    probe episode is matched against leads to the episode's own goal."""
+    name = "demonstrations_share_a_goal"
+    gaps = [float(g) for g in goal_gaps or ()]
+    if not gaps:
+        return HealthCheck(name, None, "each transition is matched against the demonstration of its goal; no probe "
+                                       "episode's goal to compare with it")
+    covered = sum(g < SHARED_GOAL_DISTANCE for g in gaps) / len(gaps)
+    figures = {"covered_share": covered, "goal_gap_over_path_length": gaps}
+    if covered < SHARED_GOAL_SHARE:
+        return HealthCheck(name, False, (
+            f"each transition is matched against the demonstration of its goal, but for only {covered:.0%} of the "
+            "probe episodes does that demonstration's goal lie near the episode's own (within a tenth of the "
+            f"curriculum trajectory's length; the median gap {sorted(gaps)[len(gaps) // 2]:.0%} of it): the "
+            "demonstrations do "
+            "not cover the goals the "
+            "episodes draw, and the matching reward leads the others to another demonstration's goal; more "
+            "demonstrations (expert.num_trajectories), spread over the goals"), figures)
+    return HealthCheck(name, True, (f"each transition is matched against the demonstration of its goal: for {covered:.0%} "
+                                    "of the probe episodes its goal lies near the episode's own"), figures)
 
 
 def subgoal_share(subgoal: int, curriculum_length: int) -> float:
@@ -430,8 +601,9 @@ def action_saturation(actions: torch.Tensor) -> HealthCheck:
     name = "action_saturation"
     if actions.numel() == 0:
         return HealthCheck(name, None, "no action to look at")
-    share = float((actions.abs() > 0.99).float().mean())
-    figures = {"saturated_share": share, "per_dimension": (actions.abs() > 0.99).float().mean(0).tolist()}
+    at_bound = (actions.abs() > ACTION_BOUND).float()
+    share = float(at_bound.mean())
+    figures = {"saturated_share": share, "per_dimension": at_bound.mean(0).tolist()}
     if share > SATURATION_LIMIT:
         return HealthCheck(name, False, f"{share:.0%} of the policy's actions sit at a bound: it pushes as hard "
                                         "as it can, a sign of a reward that grows without limit", figures)

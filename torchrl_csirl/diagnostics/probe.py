@@ -42,6 +42,9 @@ class LearnerProbe:
         path_features: ``[L, F]`` the curriculum trajectory's matching features.
         episode_paths: ``[L_e, F]`` per episode, the matching features of the demonstration its goal selects
             (a goal-conditioned matching reward), else empty.
+        goal_gaps: per episode (a goal-conditioned matching reward), the distance from its goal to the goal of the
+            demonstration it selects, over the curriculum trajectory's length along its matching features (the
+            share :func:`~torchrl_csirl.diagnostics.checks.demonstrations_share_a_goal` reads); else empty.
         actions: ``[T, A]`` the policy's actions.
         goal_conditioned: the matching reward follows the demonstration of each episode's goal
             (:class:`~torchrl_csirl.transforms.GoalConditionedMatchingReward`), not the first one only.
@@ -63,6 +66,7 @@ class LearnerProbe:
     actions: torch.Tensor
     goal_conditioned: bool = False
     episode_paths: tuple[torch.Tensor, ...] = ()
+    goal_gaps: tuple[float, ...] = ()
     matching_along_routes: tuple[torch.Tensor, ...] = ()
     matching_target: str = "final"
     policy_entropy_returns: torch.Tensor = field(default_factory=lambda: torch.zeros(0))
@@ -160,8 +164,9 @@ def probe_learner(*, env: EnvBase, policy, loss, transforms, matching, demos, ga
         device: the learner's device.
     """
     policy_values, policy_returns, policy_entropy, policy_rewards = [], [], [], []
-    finals, actions, paths, observations = [], [], [], []
+    finals, actions, paths, observations, goal_gaps = [], [], [], [], []
     position = matching.position_feature_indices.cpu()
+    curriculum_path = matching.expert_observations.index_select(-1, matching.position_feature_indices).float().cpu()
     with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
         for i in range(episodes):
             env.set_seed(seed + i)
@@ -175,8 +180,11 @@ def probe_learner(*, env: EnvBase, policy, loss, transforms, matching, demos, ga
             actions.append(episode["action"].reshape(episode.shape[0], -1))
             observations.append(flat_observations(episode["next"]))
             if hasattr(matching, "demonstration_of"):  # goal-conditioned: the path of the episode's goal
-                chosen = int(matching.demonstration_of(episode["observation"][:1].to(device)).reshape(-1)[0])
+                first = episode["observation"][:1].to(device)
+                chosen = int(matching.demonstration_of(first).reshape(-1)[0])
                 paths.append(matching.demonstration_positions(chosen).float().cpu())
+                goal_gaps.append(_goal_gap(matching.goal_of(first).reshape(-1), matching.demonstration_goals[chosen],
+                                           curriculum_path))
     expert_values, expert_returns, expert_entropy, expert_rewards = [], [], [], []
     for i in range(min(demonstrations, demos.num_trajectories)):
         values, returns, entropy_returns, rewards = _episode_figures(demos.trajectory(i).to(device), transforms, loss,
@@ -200,12 +208,25 @@ def probe_learner(*, env: EnvBase, policy, loss, transforms, matching, demos, ga
         expert_values=torch.cat(expert_values, -1), expert_returns=torch.cat(expert_returns),
         policy_rewards=torch.cat(policy_rewards), expert_rewards=torch.cat(expert_rewards),
         matching_to_subgoal=to_subgoal, final_features=torch.stack(finals).float(), demo_final_features=demo_finals.cpu(),
-        path_features=matching.expert_observations.index_select(-1, matching.position_feature_indices).float().cpu(),
+        path_features=curriculum_path,
         actions=torch.cat(actions).float(), goal_conditioned=hasattr(matching, "demonstration_of"), episode_paths=tuple(paths),
+        goal_gaps=tuple(goal_gaps),
         matching_along_routes=routes, matching_target=getattr(matching, "target", "final"),
         policy_entropy_returns=torch.cat(policy_entropy), expert_entropy_returns=torch.cat(expert_entropy),
         observations=tuple(observations), matched_features=tuple(position.tolist()),
         demo_observations=tuple(flat_observations(demos.trajectory(i)) for i in range(demos.num_trajectories)))
+
+
+def _goal_gap(goal: torch.Tensor, demonstration_goal: torch.Tensor, path: torch.Tensor) -> float:
+    """The distance from an episode's ``goal`` to the goal of the demonstration it is matched against, over the length
+    along ``path`` (``[L, F]``: the curriculum trajectory's matching features).
+
+    Examples:
+        >>> _goal_gap(torch.tensor([1.0, 0.5]), torch.tensor([1.0, 0.0]), torch.tensor([[0.0, 0.0], [1.0, 0.0]]))
+        0.5
+    """
+    length = float((path[1:] - path[:-1]).norm(dim=-1).sum()) if path.shape[0] > 1 else 0.0
+    return float((goal.float().cpu() - demonstration_goal.float().cpu()).norm()) / max(length, 1e-8)
 
 
 def flat_observations(trajectory: TensorDictBase) -> torch.Tensor:

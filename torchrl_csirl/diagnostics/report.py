@@ -121,6 +121,15 @@ def _moving_subgoal_share(run: Any) -> float | None:
     return subgoal_share(run.parts.curriculum.subgoal, run.parts.curriculum.length)
 
 
+def _demonstration_features(probe: LearnerProbe) -> list[Any]:
+    """Every demonstration's matching features (its observations' matched entries; none where they are not the
+    path's features)."""
+    matched = list(probe.matched_features)
+    if len(matched) != probe.path_features.shape[-1]:
+        return []
+    return [d[:, matched] for d in probe.demo_observations if d.ndim == 2 and d.shape[0]]
+
+
 def _probe_checks(probe: LearnerProbe, expert_fraction: float, names: list[str] | None = None,
                   subgoal_share: float | None = None) -> list[HealthCheck]:
     return [
@@ -129,8 +138,10 @@ def _probe_checks(probe: LearnerProbe, expert_fraction: float, names: list[str] 
         matching_along_demonstrations(probe.matching_to_subgoal),
         route_opening(probe.matching_along_routes, probe.matching_target),
         expert_transitions_reward(probe.expert_rewards, probe.policy_rewards, expert_fraction),
-        where_episodes_end(probe.final_features, probe.path_features, probe.episode_paths, subgoal_share),
-        demonstrations_share_a_goal(probe.demo_final_features, probe.path_features, probe.goal_conditioned),
+        where_episodes_end(probe.final_features, probe.path_features, probe.episode_paths, subgoal_share,
+                           _demonstration_features(probe), probe.matching_target),
+        demonstrations_share_a_goal(probe.demo_final_features, probe.path_features, probe.goal_conditioned,
+                                    probe.goal_gaps),
         states_off_the_demonstrations(probe.observations, probe.demo_observations, probe.matched_features, names),
         action_saturation(probe.actions),
     ]

@@ -171,6 +171,15 @@ class GoalConditionedMatchingReward(SubgoalMatchingReward):
         """int: the demonstrations matched against (the curriculum trajectory included)."""
         return int(self._lengths.shape[0])
 
+    @property
+    def demonstration_goals(self) -> torch.Tensor:
+        """torch.Tensor: ``[K, G]`` each demonstration's goal (its first observation's goal entries)."""
+        return self._demonstration_goals
+
+    def goal_of(self, observation: torch.Tensor) -> torch.Tensor:
+        """``[*B, G]`` each observation's goal entries (``goal_feature_indices``)."""
+        return observation.index_select(-1, self._goal_idx.to(observation.device))
+
     def demonstration_of(self, observation: torch.Tensor) -> torch.Tensor:
         """``[*B]`` the demonstration each observation's goal selects."""
         goals = observation.reshape(-1, observation.shape[-1]).to(self._demonstration_goals.dtype)
