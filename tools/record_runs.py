@@ -3,8 +3,10 @@
 A record is what a table, its curves and the figures quoted about a run's training are rebuilt from
 (``docs/runs/README.md``):
 
-* the run's ``summary.json``, ``config.yaml`` and ``health.json`` (its health report), and its ``resumes.jsonl``
-  where the run was resumed with changed settings;
+* the run's ``summary.json``, ``config.yaml``, ``provenance.json`` (the commit, dirty flag and diff hash, package
+  versions, CPU and threads it ran with: ``torchrl_csirl.launch.provenance``) and ``health.json`` (its health report),
+  and its ``resumes.jsonl`` where the run was resumed with changed settings; a run made before issue 110 has no
+  ``provenance.json``, and its record says ``provenance: unknown`` when it is made;
 * ``metrics.jsonl`` trimmed to the evaluation rows (``frames``, ``updates``, ``round`` and the ``eval_*``
   keys: the curves of ``benchmark.py report``; the test is in the summary);
 * ``rounds.csv``: one row per round of training (:func:`round_rows`): the run's position at the round's
@@ -39,8 +41,10 @@ import os
 import shutil
 import sys
 
+from torchrl_csirl.launch.provenance import PROVENANCE_FILE
+
 #: the files a record copies as they are (``resumes.jsonl`` only where it exists)
-COPIED = ("summary.json", "config.yaml", "resumes.jsonl", "health.json")
+COPIED = ("summary.json", "config.yaml", PROVENANCE_FILE, "resumes.jsonl", "health.json")
 #: the outputs of tools/ a record copies where the run has them: ``termination_probe.py`` writes its own; the
 #: others are the last line of ``locomotion_probe.py`` / ``policy_outcomes.py`` / ``robotics_outcomes.py`` redirected
 #: there; ``policy_scale.json`` is the one hand-made series a record holds (docs/benchmark.md)
@@ -230,6 +234,9 @@ def record_run(run_dir: str, into: str, force: bool = False, max_rounds: int = M
         handle.writelines(json.dumps(row) + "\n" for row in rows)
     if rounds:
         write_rounds(os.path.join(target, ROUNDS_FILE), rounds)
+    if not os.path.isfile(os.path.join(run_dir, PROVENANCE_FILE)):
+        print(f"record_runs.py: {target}: provenance: unknown (the run has no {PROVENANCE_FILE}: made before issue 110)",
+              file=sys.stderr)
     return target
 
 

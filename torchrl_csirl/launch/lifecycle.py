@@ -15,6 +15,7 @@ from omegaconf import DictConfig, OmegaConf
 from torchrl_csirl.launch.assembly import Run
 from torchrl_csirl.launch.collection import use_main_threads
 from torchrl_csirl.launch.config import flatten_config
+from torchrl_csirl.launch.provenance import record_resume_provenance, write_provenance
 from torchrl_csirl.launch.run import (
     default_run_name,
     make_run_dir,
@@ -30,13 +31,15 @@ if TYPE_CHECKING:
 
 # ---------------------------------------------------------------------------------------- starting and resuming
 def start_run(cfg: DictConfig, method: str, build: Callable[[DictConfig, str], Any]) -> Any:
-    """A new run: its directory (``logger.*``) with ``config.yaml``, then ``build(cfg, run_dir)``.
+    """A new run: its directory (``logger.*``) with ``config.yaml`` and ``provenance.json`` (the code, packages and
+    machine it runs on, :mod:`torchrl_csirl.launch.provenance`), then ``build(cfg, run_dir)``.
 
     If ``build`` fails (e.g. a bad expert file) the new directory, which holds no run, is removed.
     """
     run_dir = make_run_dir(cfg.logger.output_dir, cfg.logger.exp_name,
                            default_run_name(cfg.env.scenario, method, cfg.seed), cfg.logger.overwrite)
     OmegaConf.save(cfg, os.path.join(run_dir, "config.yaml"))
+    write_provenance(run_dir)
     try:
         return build(cfg, run_dir)
     except BaseException:
@@ -46,7 +49,8 @@ def start_run(cfg: DictConfig, method: str, build: Callable[[DictConfig, str], A
 
 def resume_run(cfg: DictConfig, run_dir: str, checkpoint: str, make_trainer: Callable[..., Run]) -> Run:
     """A killed run continued: ``make_trainer(cfg, run_dir, frames_done=, resume_frames=)`` with the
-    checkpoint's counters, then the checkpoint (and the online buffer, if saved) restored."""
+    checkpoint's counters, then the checkpoint (and the online buffer, if saved) restored; the resuming process's
+    provenance is appended to the run's ``provenance.json``."""
     from torchrl_csirl.trainers import load_checkpoint, read_checkpoint_state
 
     counters = read_checkpoint_state(checkpoint)["counters"]  # an unreadable file: one CheckpointError line
@@ -58,6 +62,7 @@ def resume_run(cfg: DictConfig, run_dir: str, checkpoint: str, make_trainer: Cal
         raise
     print(f"resumed {run_dir} at {counters['frames']} frames, {counters['updates']} updates", file=sys.stderr)
     record_resumed_settings(cfg, run_dir, counters["frames"])
+    record_resume_provenance(run_dir, counters["frames"])
     return run
 
 
