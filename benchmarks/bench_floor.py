@@ -42,6 +42,7 @@ from torch.nn import functional as F
 
 from torchrl_csirl._compat import sac_alpha
 from torchrl_csirl.modules import LearnerPrecision, has_native_bf16
+from torchrl_csirl.modules.actor_critic import masked_relu
 
 _HALF_LOG_2PI = math.log(math.sqrt(2 * math.pi))
 _LOG_2 = math.log(2.0)
@@ -50,22 +51,8 @@ Layers = list[tuple[torch.Tensor, torch.Tensor]]
 
 
 # ----------------------------------------------------------------------------------- the maths, plainly
-class _ReLU(torch.autograd.Function):
-    """ReLU whose backward reads its output detached: the double backward has no edge through the mask."""
-
-    @staticmethod
-    def forward(ctx, x: torch.Tensor) -> torch.Tensor:
-        out = torch.relu(x)
-        ctx.save_for_backward(out.detach())
-        return out
-
-    @staticmethod
-    def backward(ctx, grad: torch.Tensor) -> torch.Tensor:
-        (out,) = ctx.saved_tensors
-        return torch.ops.aten.threshold_backward(grad, out, 0)
-
-
-relu = _ReLU.apply
+# ReLU whose backward reads its output detached (no second-order edge through the mask), as our networks use
+relu = masked_relu
 
 
 def _hidden(h: torch.Tensor, layers: Layers, low: torch.dtype | None) -> torch.Tensor:
