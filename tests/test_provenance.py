@@ -56,6 +56,11 @@ def test_a_run_writes_its_provenance_and_its_record_keeps_it(two_runs, tmp_path)
     assert prov["machine"]["torch_threads"] >= 1 and prov["machine"]["cpu"]
     target = record_runs.record_run(run_dir, str(tmp_path / "docs"))
     assert provenance.read_provenance(target) == prov
+    import summarize_runs  # the group's code column: the commit, or 'provenance: unknown' for an older record
+
+    assert summarize_runs.code_of(target).startswith((prov["code"]["commit"] or "not a checkout")[:10])
+    os.remove(os.path.join(target, provenance.PROVENANCE_FILE))
+    assert summarize_runs.code_of(target) == "provenance: unknown"
 
 
 def test_provenance_is_cheap_and_never_fails(monkeypatch, tmp_path):
