@@ -138,6 +138,9 @@ def test_resume_gives_the_uninterrupted_metrics(full_run, tmp_path):
     assert OmegaConf.load(os.path.join(out, "part", "config.yaml")).collector.total_frames == 600
     with open(os.path.join(out, "part", "resumes.jsonl")) as f:
         assert [json.loads(line) for line in f] == [{"frames": 400, "changed": {"collector.total_frames": [400, 600]}}]
+    with open(os.path.join(out, "part", "provenance.json")) as f:  # the resuming process's code beside the start's
+        provenance = json.load(f)
+    assert [r["frames"] for r in provenance["resumed"]] == [400] and provenance["resumed"][0]["code"] == provenance["code"]
     # the total wall time counts the first process (up to its checkpoint) as well as this one
     assert part_summary["wall_s"] <= resumed["earlier_wall_s"] <= part_summary["total_wall_s"]
     assert resumed["total_wall_s"] > resumed["earlier_wall_s"] and resumed["total_wall_s"] >= resumed["wall_s"]

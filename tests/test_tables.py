@@ -1,8 +1,8 @@
 """The results tables of docs/benchmark.md and README.md against their records in docs/runs.
 
 Every cell is recomputed with the benchmark's own report code (``torchrl_csirl.scripts.benchmark``:
-``read_runs``, ``table_rows``, Welch's t of ``torchrl_csirl.launch.summaries``) and compared at the precision the page prints, so a
-figure cannot drift from the records it quotes.
+``read_runs``, ``table_rows``, Welch's t and the verdict rule of ``torchrl_csirl.launch.verdicts``) and compared
+at the precision the page prints, so a figure cannot drift from the records it quotes.
 """
 from __future__ import annotations
 
@@ -33,6 +33,25 @@ def numbers(text: str) -> list[tuple[float, float]]:
 
 def agrees(shown: tuple[float, float], value: float | None) -> bool:
     return value is not None and abs(shown[0] - value) <= shown[1]
+
+
+def difference_agrees(cell: str, row: dict) -> bool:
+    """A difference cell against its row (the verdict rule, ``torchrl_csirl.launch.verdicts``): ``d (t x)`` in bold
+    beyond seed noise, else ``d (t x; detectable m)`` with the minimum detectable difference."""
+    shown = numbers(cell)
+    if cell.startswith("**") != row["vs_csirl_beyond_noise"] or len(shown) != (2 if row["vs_csirl_beyond_noise"] else 3):
+        return False
+    values = [row["vs_csirl"], row["vs_csirl_t"], row["vs_csirl_detectable"]]
+    return all(agrees(s, v) for s, v in zip(shown, values)) and (len(shown) == 2 or "detectable" in cell)
+
+
+def caption_counts_the_comparisons(path: str, header: str, rows: dict) -> bool:
+    """The caption above the table ``header`` names the Holm correction's number of comparisons, its rows'."""
+    with open(os.path.join(ROOT, path)) as f:
+        text = f.read()
+    caption = text[:text.index(header)].rsplit("\n\n", 2)[-2]
+    counts = {r["vs_csirl_comparisons"] for r in rows.values() if r["vs_csirl"] is not None}
+    return len(counts) == 1 and f"across the table's {counts.pop()} comparisons" in caption.replace("\n", " ")
 
 
 def markdown_table(path: str, header: str, occurrence: int = 0) -> dict[str, dict[str, str]]:
@@ -99,12 +118,10 @@ def test_outcome_and_difference_tables_are_their_records(driving):
             success, crash = numbers(cell)
             assert agrees(success, row["success_rate_mean"]) and agrees(crash, row["crash_rate_mean"]), (method, cell)
     differences = markdown_table("docs/benchmark.md", "| − csirl |")
+    assert caption_counts_the_comparisons("docs/benchmark.md", "| − csirl |", driving)
     for method, columns in differences.items():
         for scenario, cell in columns.items():
-            row = driving[(method, scenario)]
-            difference, t = numbers(cell)
-            assert agrees(difference, row["vs_csirl"]) and agrees(t, row["vs_csirl_t"]), (method, scenario, cell)
-            assert cell.startswith("**") == row["vs_csirl_beyond_noise"], (method, scenario, cell)
+            assert difference_agrees(cell, driving[(method, scenario)]), (method, scenario, cell)
 
 
 def test_robotics_table_is_its_records(robotics):
@@ -144,15 +161,14 @@ def test_locomotion_differences_are_their_records():
     rows = table_cells("mujoco")
     table = markdown_table("docs/benchmark.md", "| − csirl, test return |")
     assert set(table) == {m for m, _ in rows} - {"expert", "random", "csirl"}
+    assert caption_counts_the_comparisons("docs/benchmark.md", "| − csirl, test return |", rows)
     for method, columns in table.items():
         for task, scenario in (("Hopper", "hopper"), ("HalfCheetah", "halfcheetah")):
             row, cell = rows.get((method, scenario)), columns[task]
             if row is None or row["vs_csirl"] is None:  # fewer than two seeds on a side
                 assert cell == "—", (method, task, cell)
                 continue
-            difference, t = numbers(cell)
-            assert agrees(difference, row["vs_csirl"]) and agrees(t, row["vs_csirl_t"]), (method, task, cell)
-            assert cell.startswith("**") == row["vs_csirl_beyond_noise"], (method, task, cell)
+            assert difference_agrees(cell, row), (method, task, cell)
 
 
 def test_published_comparison_is_its_data_and_its_records_in_raw_returns():
@@ -223,6 +239,7 @@ def test_point_maze_table_is_its_records():
     rows = table_cells("pointmaze")
     table = markdown_table("docs/benchmark.md", "| method | U-maze success")
     assert set(table) == {method for method, _ in rows}
+    assert caption_counts_the_comparisons("docs/benchmark.md", "| method | U-maze success", rows)
     for method, columns in table.items():
         for maze, scenario in (("U-maze", "PointMaze_UMaze-v3"), ("Medium", "PointMaze_Medium-v3")):
             row = rows.get((method, scenario))
@@ -237,6 +254,4 @@ def test_point_maze_table_is_its_records():
             if row["vs_csirl"] is None:  # csirl itself, or fewer than two seeds on a side
                 assert difference == "—", (method, maze, difference)
                 continue
-            change, t = numbers(difference)
-            assert agrees(change, row["vs_csirl"]) and agrees(t, row["vs_csirl_t"]), (method, maze, difference)
-            assert difference.startswith("**") == row["vs_csirl_beyond_noise"], (method, maze, difference)
+            assert difference_agrees(difference, row), (method, maze, difference)

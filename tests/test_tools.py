@@ -33,12 +33,14 @@ def test_a_tool_runs_from_another_directory(script, tmp_path):
 
 
 def test_compare_runs_sets_two_seed_sets_side_by_side_with_welchs_test(capsys):
-    """The recorded CSIRL and CSIRL-B runs on merge: each side's mean over its 3 seeds, Welch's t of B - A."""
+    """The recorded CSIRL and CSIRL-B runs on merge: each side's mean over its 3 seeds, Welch's t of B - A, the
+    verdict and, for records made before provenance existed, ``provenance: unknown``."""
     import json
 
     import compare_runs
 
-    from torchrl_csirl.launch.summaries import find_summaries, welch_test
+    from torchrl_csirl.launch.summaries import find_summaries
+    from torchrl_csirl.launch.verdicts import compare_seeds
 
     runs = os.path.join(ROOT, "docs", "runs")
     first = [os.path.join(runs, "csirl", f"merge-csirl-s{s}") for s in range(3)]
@@ -50,8 +52,10 @@ def test_compare_runs_sets_two_seed_sets_side_by_side_with_welchs_test(capsys):
     values = [[json.load(open(p))["normalized_accomplish_rate"] for p in find_summaries(side)] for side in (first, second)]
     assert row["n"] == [3, 3] and row["methods"] == ["csirl", "csirl-b"]
     assert row["first"]["mean"] == pytest.approx(sum(values[0]) / 3)
-    assert row["test"]["t"] == pytest.approx(welch_test(values[1], values[0])["t"])
-    assert "| merge" in table.splitlines()[-1] and json.loads(last.splitlines()[-1])["labels"] == ["csirl", "csirl-b"]
+    assert row["test"]["t"] == pytest.approx(compare_seeds(values[1], values[0]).t)
+    assert row["test"]["verdict"] == compare_seeds(values[1], values[0]).verdict
+    assert "| merge" in table and json.loads(last.splitlines()[-1])["labels"] == ["csirl", "csirl-b"]
+    assert "provenance: unknown for 6 runs" in table
 
 
 def test_compare_runs_across_scenarios_sets_a_task_against_its_variant():

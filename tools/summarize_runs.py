@@ -2,7 +2,8 @@
 
 Reads ``summary.json`` of every run directory given (or found under a folder), groups the runs by
 (scenario, method, preset, variant) and prints a Markdown table (to stderr) and, last, one JSON
-line with the per-group statistics (and, for CSIRL, where each seed's curriculum ended). The
+line with the per-group statistics (and, for CSIRL, where each seed's curriculum ended; for every group the
+code its runs ran, from their ``provenance.json``, ``provenance: unknown`` for records made before it). The
 *variant* lists the run's configuration values that differ from its preset's defaults (read from
 the run's ``config.yaml``; seeds, logging, checkpointing and thread counts do not count), e.g.
 ``replay_buffer.expert_fraction=0``.
@@ -25,16 +26,20 @@ import functools
 import json
 import os
 import sys
-from collections import defaultdict
+from collections import Counter, defaultdict
 
 from omegaconf import OmegaConf
 
 from torchrl_csirl.launch.config import ConfigError, flatten_config, format_override
+from torchrl_csirl.launch.provenance import processes, read_provenance
 from torchrl_csirl.launch.recipes import load_config_for
 from torchrl_csirl.launch.summaries import find_summaries, mean_std
 
 #: configuration keys that do not change what a run learns (or are shown elsewhere in the key)
 NOT_A_VARIANT = ("seed", "device", "preset", "env.scenario", "csirl.intrinsic", "collector.main_threads", "logger.", "checkpoint.")
+
+#: a run's code where it has no ``provenance.json``
+UNKNOWN = "provenance: unknown"
 
 #: summary fields reported as mean / std over seeds
 FIELDS = (
@@ -110,8 +115,32 @@ def summarize(summaries: list[dict]) -> dict[str, dict]:
         ends = curriculum_ends(runs)
         if ends:
             stats["final_subgoal"] = ends
+        stats["code"] = ", ".join(f"{code} ({n})" for code, n in Counter(r.get("code", UNKNOWN) for r in runs).items())
         out[key] = stats
     return out
+
+
+def code_of(run_dir: str) -> str:
+    """The code a run ran, in short: its commit's first 10 characters (``+dirty <diff hash's first 8>`` for a dirty
+    tree, ``a -> b`` where a resume ran other code), ``not a checkout`` without a commit, :data:`UNKNOWN` without
+    ``provenance.json`` (records made before issue 110).
+
+    Examples:
+        >>> import tempfile
+        >>> code_of(tempfile.mkdtemp())
+        'provenance: unknown'
+    """
+    prov = read_provenance(run_dir)
+    if prov is None:
+        return UNKNOWN
+    states = []
+    for process in processes(prov):
+        code = process.get("code") or {}
+        state = code["commit"][:10] if code.get("commit") else "not a checkout"
+        if code.get("dirty"):
+            state += f"+dirty {str(code.get('diff_sha256'))[:8]}"
+        states.append(state)
+    return " -> ".join(dict.fromkeys(states))
 
 
 def curriculum_ends(runs: list[dict]) -> str:
@@ -128,7 +157,7 @@ def curriculum_ends(runs: list[dict]) -> str:
 def markdown_table(stats: dict[str, dict]) -> str:
     """One row per group: mean ± std of the main figures."""
     head = ("| scenario / method / preset | seeds | accomplish (raw) | expert-normalised | success | crash | AUC | frames "
-            "| updates | wall [min] | final subgoal |")
+            "| updates | wall [min] | final subgoal | code (runs) |")
     rows = [head, "|---" * (head.count("|") - 1) + "|"]
 
     def cell(s: dict, field: str, fmt: str = "{:.3f}", scale: float = 1.0) -> str:
@@ -142,7 +171,7 @@ def markdown_table(stats: dict[str, dict]) -> str:
             f"{cell(s, 'normalized_accomplish_rate')} | {cell(s, 'success_rate', '{:.2f}')} | "
             f"{cell(s, 'crash_rate', '{:.2f}')} | {cell(s, 'auc')} | "
             f"{cell(s, 'frames', '{:.0f}')} | {cell(s, 'updates', '{:.0f}')} | {cell(s, 'total_wall_s', '{:.1f}', 1 / 60)} | "
-            f"{s.get('final_subgoal') or 'n/a'} |"
+            f"{s.get('final_subgoal') or 'n/a'} | {s['code']} |"
         )
     return "\n".join(rows)
 
@@ -155,6 +184,7 @@ def main(argv: list[str] | None = None) -> dict[str, dict]:
     for path in find_summaries(args.paths):
         with open(path) as f:
             summary = json.load(f)
+        summary["code"] = code_of(os.path.dirname(path))
         summary["variant"] = variant(os.path.dirname(path), summary.get("preset", "default"),
                                      summary.get("method", "csirl"))
         summaries.append(summary)

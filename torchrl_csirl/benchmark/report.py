@@ -30,6 +30,7 @@ from torchrl_csirl.benchmark.plan import (
 )
 from torchrl_csirl.benchmark.published import PAPER_TABLE, PUBLISHED_EXPERTS, PUBLISHED_GAP, PUBLISHED_LOCOMOTION, published_gap
 from torchrl_csirl.benchmark.results import off_budget
+from torchrl_csirl.launch.verdicts import ALPHA, BEYOND_NOISE, NO_DIFFERENCE, POWER
 
 __all__ = ["budget_caption", "driving_tables", "locomotion_tables", "markdown_table", "published_table",
            "robotics_tables", "write_csv"]
@@ -90,11 +91,20 @@ def _cost(row: dict[str, Any] | None) -> str:
 
 
 def _difference(row: dict[str, Any] | None, fmt: str = "+.3f") -> str:
-    """``+d (t x)`` against ``csirl``, in bold beyond seed noise, ``—`` without a comparison."""
+    """``+d (t x)`` against ``csirl``, in bold beyond seed noise (the verdict rule,
+    :mod:`torchrl_csirl.launch.verdicts`), else ``+d (t x; detectable m)`` with the minimum detectable difference;
+    ``—`` without a comparison.
+
+    Examples:
+        >>> row = {"vs_csirl": -0.05, "vs_csirl_t": -1.39, "vs_csirl_beyond_noise": False, "vs_csirl_detectable": 0.193}
+        >>> _difference(row), _difference(dict(row, vs_csirl_beyond_noise=True))
+        ('-0.050 (t -1.4; detectable 0.193)', '**-0.050 (t -1.4)**')
+    """
     if row is None or row.get("vs_csirl") is None:
         return "—"
-    text = f"{row['vs_csirl']:{fmt}} (t {row['vs_csirl_t']:.1f})"
-    return f"**{text}**" if row["vs_csirl_beyond_noise"] else text
+    if row["vs_csirl_beyond_noise"]:
+        return f"**{row['vs_csirl']:{fmt}} (t {row['vs_csirl_t']:.1f})**"
+    return f"{row['vs_csirl']:{fmt}} (t {row['vs_csirl_t']:.1f}; detectable {row['vs_csirl_detectable']:{fmt.lstrip('+')}})"
 
 
 def _method_table(caption: str, methods: list[str], scenarios: list[str],
@@ -114,13 +124,14 @@ def _columns(rows: list[dict[str, Any]], order: tuple[str, ...]) -> tuple[list[s
 def _comparison_table(rows: list[dict[str, Any]], scenarios: list[str], cell: dict, what: str,
                       fmt: str) -> list[str]:
     """The rows' difference from ``csirl`` (``what``), if any row has one."""
-    compared = list(dict.fromkeys(r["method"] for r in rows if r["vs_csirl"] is not None and r["scenario"] in scenarios))
+    compared = [r for r in rows if r["vs_csirl"] is not None and r["scenario"] in scenarios]
     if not compared:
         return []
     return [""] + _method_table(
-        f"Difference from csirl ({what}; Welch's t over seeds; **bold**: beyond seed noise, two-sided 5 % at the "
-        "Welch-Satterthwaite degrees of freedom).",
-        compared, scenarios, lambda m, s: _difference(cell.get((m, s)), fmt))
+        f"Difference from csirl ({what}; Welch's t over seeds; **bold**: {BEYOND_NOISE}, Holm-adjusted two-sided p "
+        f"< {ALPHA} across the table's {compared[0]['vs_csirl_comparisons']} comparisons; otherwise {NO_DIFFERENCE}, "
+        f"with the smallest difference the test detects with power {POWER} at two-sided {ALPHA}).",
+        list(dict.fromkeys(r["method"] for r in compared)), scenarios, lambda m, s: _difference(cell.get((m, s)), fmt))
 
 
 def driving_tables(rows: list[dict[str, Any]]) -> list[str]:

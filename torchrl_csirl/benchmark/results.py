@@ -1,5 +1,6 @@
 """A sweep's finished runs and the table's rows: each run's ``summary.json`` read with its row's method,
-grouped by (method, scenario) into mean ± std over seeds, set against ``csirl`` (Welch's test) and the
+grouped by (method, scenario) into mean ± std over seeds, set against ``csirl`` (Welch's test and the verdict
+rule of :mod:`torchrl_csirl.launch.verdicts`, Holm's correction across one table's comparisons) and the
 paper's value (:mod:`torchrl_csirl.benchmark.published`).
 
 The rows are plain dicts, the CSV's lines; :mod:`torchrl_csirl.benchmark.report` writes them as Markdown.
@@ -21,6 +22,7 @@ from torchrl_csirl.benchmark.plan import (
     ABLATIONS,
     LOCOMOTION_ORDER,
     METHOD_ORDER,
+    REFERENCE_METHODS,
     SCENARIO_ORDER,
     TABLE_BUDGETS,
     known_methods,
@@ -28,10 +30,11 @@ from torchrl_csirl.benchmark.plan import (
     score_key,
 )
 from torchrl_csirl.benchmark.published import PAPER_TABLE
-from torchrl_csirl.launch.summaries import find_summaries, mean_std, welch_test
+from torchrl_csirl.launch.summaries import find_summaries, mean_std
+from torchrl_csirl.launch.verdicts import compare_family
 
-__all__ = ["add_comparison_to_csirl", "add_normalized_returns", "best_evaluation", "cell_method", "eval_curve",
-           "off_budget", "read_runs", "table_rows"]
+__all__ = ["add_comparison_to_csirl", "add_normalized_returns", "best_evaluation", "cell_method", "comparison_table",
+           "eval_curve", "off_budget", "read_runs", "table_rows"]
 
 
 def cell_method(summary: dict[str, Any], run_dir: str) -> str:
@@ -139,21 +142,50 @@ def table_rows(runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return rows
 
 
+def comparison_table(scenario: str) -> str:
+    """The table a scenario's comparisons are printed in, one study section for Holm's correction: ``driving``
+    (the paper's scenes), ``locomotion`` or ``return`` (every other task's, robotics and goal-conditioned).
+
+    Examples:
+        >>> comparison_table("merge"), comparison_table("hopper"), comparison_table("PointMaze_UMaze-v3")
+        ('driving', 'locomotion', 'return')
+    """
+    if scenario in SCENARIO_ORDER:
+        return "driving"
+    return "locomotion" if scenario in LOCOMOTION_ORDER else "return"
+
+
 def add_comparison_to_csirl(rows: list[dict[str, Any]], groups: dict[tuple[str, str], list[dict]]) -> None:
     """Each row's difference from ``csirl`` on its scenario (in its :func:`score_key`: expert-normalised on the
-    driving scenarios, the return on the robotics tasks; Welch's t-test over seeds,
-    :func:`~torchrl_csirl.launch.summaries.welch_test`): ``vs_csirl``, ``vs_csirl_t``, ``vs_csirl_beyond_noise``."""
+    driving scenarios, the return on the robotics tasks), with Welch's test over seeds and the verdict rule
+    (:func:`~torchrl_csirl.launch.verdicts.compare_family`: Holm's correction across the comparisons of one
+    :func:`comparison_table`): ``vs_csirl`` (the difference), ``vs_csirl_t``, ``vs_csirl_p``, ``vs_csirl_p_holm``,
+    ``vs_csirl_comparisons``, ``vs_csirl_detectable`` (the minimum detectable difference), ``vs_csirl_beyond_noise``
+    and ``vs_csirl_verdict``; None without a comparison (``csirl`` itself, the reference rows ``expert`` and
+    ``random``, which no page compares, fewer than two seeds on a side)."""
     def values(method: str, scenario: str) -> list[float]:
         key = score_key(scenario)
         return [float(r[key]) for r in groups.get((method, scenario), []) if r.get(key) is not None]
 
+    sections: dict[str, list[dict[str, Any]]] = defaultdict(list)
     for row in rows:
-        test = None
-        if row["method"] != "csirl":
-            test = welch_test(values(row["method"], row["scenario"]), values("csirl", row["scenario"]))
-        row["vs_csirl"] = None if test is None else test["difference"]
-        row["vs_csirl_t"] = None if test is None else test["t"]
-        row["vs_csirl_beyond_noise"] = None if test is None else test["beyond_noise"]
+        if row["method"] != "csirl" and row["method"] not in REFERENCE_METHODS:
+            sections[comparison_table(row["scenario"])].append(row)
+    for row in rows:
+        for field in _COMPARISON_FIELDS:
+            row[f"vs_csirl{field}"] = None
+    for section in sections.values():
+        family = compare_family([(values(r["method"], r["scenario"]), values("csirl", r["scenario"])) for r in section])
+        for row, test in zip(section, family):
+            if test is not None:
+                row.update({"vs_csirl": test.difference, "vs_csirl_t": test.t, "vs_csirl_p": test.p,
+                            "vs_csirl_p_holm": test.p_holm, "vs_csirl_comparisons": test.comparisons,
+                            "vs_csirl_detectable": test.detectable, "vs_csirl_beyond_noise": test.beyond_noise,
+                            "vs_csirl_verdict": test.verdict})
+
+
+#: the comparison's fields of a table row, after ``vs_csirl``
+_COMPARISON_FIELDS = ("", "_t", "_p", "_p_holm", "_comparisons", "_detectable", "_beyond_noise", "_verdict")
 
 
 def off_budget(row: dict[str, Any]) -> bool:

@@ -21,7 +21,9 @@ an installed wheel) are thin calls into this layer. Its modules:
   :mod:`~torchrl_csirl.launch.lifecycle` (start, resume, train, :func:`run_recipe`),
   :mod:`~torchrl_csirl.launch.final` (the final test and summary).
 * :mod:`torchrl_csirl.launch.summaries`: finished runs' ``summary.json`` files, mean / std over
-  seeds, Welch's test.
+  seeds; :mod:`torchrl_csirl.launch.verdicts`: the one rule for verdict words (Welch's test, Holm's correction,
+  the minimum detectable difference, the seeds a difference needs).
+* :mod:`torchrl_csirl.launch.provenance`: a run's ``provenance.json`` (commit, dirty tree, package versions, CPU).
 * :mod:`torchrl_csirl.launch.processes`: a local sweep's cell processes (pid files; SIGTERM stops
   them at a checkpoint before the sweep exits).
 * :mod:`torchrl_csirl.launch.csirl` / :mod:`torchrl_csirl.launch.imitation`: CSIRL's and the
