@@ -9,7 +9,7 @@ count, when it holds more) leaves p < 0.05, else "no difference detected" with t
 could have detected. Below the table, every configuration key (``config.yaml``) whose values differ between the two
 sides or within one, and every difference of code (``provenance.json``: commit, dirty tree and its diff's hash,
 package versions; the machine's CPU and threads beside them); runs without ``provenance.json`` (records made before
-issue 110) are ``provenance: unknown``.
+runs wrote it) are ``provenance: unknown``.
 
 ``--one-change KEY`` asks for a comparison of one change: it is refused, in one line and exit status 2, when anything
 but ``KEY`` differs (a configuration key between or within the sides, the code, or a run's unknown provenance), or
@@ -207,7 +207,7 @@ def describe_differences(found: dict[str, Any], labels: tuple[str, str]) -> list
             lines.append(f"  {key} ({where}): {labels[0]} {_counts(d['first'])}; {labels[1]} {_counts(d['second'])}")
     for part, file in (("provenance_unknown", "provenance.json"), ("configuration_unknown", "config.yaml")):
         if found[part]:
-            lines.append(f"{part.replace('_', ': ', 1)} for {_runs(found[part])} (no {file}: recorded before issue 110)"
+            lines.append(f"{part.replace('_', ': ', 1)} for {_runs(found[part])} (no {file}: recorded before runs wrote it)"
                          if part == "provenance_unknown" else f"configuration: unknown for {_runs(found[part])} (no {file})")
     return lines
 

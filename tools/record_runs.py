@@ -5,7 +5,7 @@ A record is what a table, its curves and the figures quoted about a run's traini
 
 * the run's ``summary.json``, ``config.yaml``, ``provenance.json`` (the commit, dirty flag and diff hash, package
   versions, CPU and threads it ran with: ``torchrl_csirl.launch.provenance``) and ``health.json`` (its health report),
-  and its ``resumes.jsonl`` where the run was resumed with changed settings; a run made before issue 110 has no
+  and its ``resumes.jsonl`` where the run was resumed with changed settings; a run made before runs wrote it has no
   ``provenance.json``, and its record says ``provenance: unknown`` when it is made;
 * ``metrics.jsonl`` trimmed to the evaluation rows (``frames``, ``updates``, ``round`` and the ``eval_*``
   keys: the curves of ``benchmark.py report``; the test is in the summary);
@@ -235,7 +235,7 @@ def record_run(run_dir: str, into: str, force: bool = False, max_rounds: int = M
     if rounds:
         write_rounds(os.path.join(target, ROUNDS_FILE), rounds)
     if not os.path.isfile(os.path.join(run_dir, PROVENANCE_FILE)):
-        print(f"record_runs.py: {target}: provenance: unknown (the run has no {PROVENANCE_FILE}: made before issue 110)",
+        print(f"record_runs.py: {target}: provenance: unknown (the run has no {PROVENANCE_FILE}: made before runs wrote it)",
               file=sys.stderr)
     return target
 

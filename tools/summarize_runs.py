@@ -123,7 +123,7 @@ def summarize(summaries: list[dict]) -> dict[str, dict]:
 def code_of(run_dir: str) -> str:
     """The code a run ran, in short: its commit's first 10 characters (``+dirty <diff hash's first 8>`` for a dirty
     tree, ``a -> b`` where a resume ran other code), ``not a checkout`` without a commit, :data:`UNKNOWN` without
-    ``provenance.json`` (records made before issue 110).
+    ``provenance.json`` (records made before runs wrote it).
 
     Examples:
         >>> import tempfile

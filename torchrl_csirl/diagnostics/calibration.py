@@ -1,7 +1,7 @@
 """The health report's calibration, frozen: every threshold of :mod:`~torchrl_csirl.diagnostics.checks` (and the
 probe's measuring settings), its value, and the recorded runs (``docs/runs/<group>/<cell>``) that set it.
 
-A threshold chosen on the runs it then diagnoses says little about runs it was not tuned on (issue 110): this table
+A threshold chosen on the runs it then diagnoses says little about runs it was not tuned on: this table
 is the calibration set, so that a held-out set can leave it out, and ``tests/test_health_checks.py`` holds every
 value, so that a change after the held-out runs shows in review. ``runs`` lists only runs with a record; what else
 set a value (runs without a record, planted inputs) is in ``note``. The own-task page's table is
@@ -69,7 +69,7 @@ _REPORTED_AT_E26B1EE = (*(cell for group in _ANTMAZE_GROUPS for cell in _cells(g
                         *_cells("antmaze-paper", _ANTMAZE, range(2)), *_cells("mujoco", "halfcheetah-csirl"),
                         *_cells("halfcheetah-noexp", "halfcheetah-csirl-noexp"), *_POINTMAZE, *_ONE_DEMONSTRATION,
                         *_cells("pointmaze-fixed", "PointMaze_UMazeFixedGoal-v3-csirl"))
-_BEFORE_ANY_RECORD = "set with the report (issue 87, part 1) before any record kept a report: chosen, not fitted"
+_BEFORE_ANY_RECORD = "set with the report before any record kept a report: chosen, not fitted"
 
 _THRESHOLDS = (
     Threshold("HACKING_RISE_SHARE", 0.25, ("reward_tracks_the_task",), "7c03465", (), _BEFORE_ANY_RECORD),
@@ -89,12 +89,12 @@ _THRESHOLDS = (
               "cloned actors (8, 10, 17 of 50) have no record"),
     Threshold("VALUE_RATIO_LIMIT", 3.0, ("critic_calibration_expert", "critic_calibration_policy"), "7c03465", (),
               _BEFORE_ANY_RECORD + "; the exemption of under-valuation on the expert's states (f6d458d), set on the "
-                                   "records tools/entropy_bonus_records.py re-read, is undone (issue 110): it could "
+                                   "records tools/entropy_bonus_records.py re-read, is undone: it could "
                                    "not flag"),
     Threshold("OFF_PATH_SHARE", 0.2, ("where_episodes_end",), "7c03465", (), _BEFORE_ANY_RECORD),
     Threshold("SHORT_PROGRESS", 0.5, ("where_episodes_end",), "7c03465", (), _BEFORE_ANY_RECORD),
-    Threshold("SHORTCUT_RATIO", 0.5, ("where_episodes_end",), "issue 110", (),
-              "how an episode ends (issue 110): planted inputs alone (tests/test_health_checks.py)"),
+    Threshold("SHORTCUT_RATIO", 0.5, ("where_episodes_end",), "67ccb05", (),
+              "how an episode ends: planted inputs alone (tests/test_health_checks.py)"),
     Threshold("SUBGOAL_LEAD_LIMIT", 0.5, ("where_episodes_end",), "e26b1ee", _REPORTED_AT_E26B1EE,
               "read on the 56 records with a report then: 23 lead by more, every one failed, none that passed (its "
               "'none passed' holds on the runs it was set on)"),
@@ -108,7 +108,7 @@ _THRESHOLDS = (
     Threshold("SHARED_GOAL_DISTANCE", 0.1, ("demonstrations_share_a_goal",), "0bbc923",
               ("pointmaze-onedemo/PointMaze_UMaze-v3-csirl-s0",),
               "the U-maze run with one demonstration (12 % of the demonstrations end near the first one's end); its "
-              "goal-conditioned reading (issue 110) uses the same tenth, set on no run"),
+              "goal-conditioned reading uses the same tenth, set on no run"),
     Threshold("SHARED_GOAL_SHARE", 0.5, ("demonstrations_share_a_goal",), "0bbc923",
               ("pointmaze-onedemo/PointMaze_UMaze-v3-csirl-s0",), "as SHARED_GOAL_DISTANCE"),
     Threshold("OFF_DEMONSTRATION_SD", 5.0, ("states_off_the_demonstrations",), "9aeef0f", (

@@ -14,7 +14,7 @@ at other code says so. The file holds:
   a resume that changes settings rewrites it and appends the change to ``resumes.jsonl``).
 
 Collecting it takes a few git calls (tens of milliseconds) and never fails a run: what cannot be found is None.
-Records made before issue 110 have no ``provenance.json``: :func:`read_provenance` gives None and the tools say
+Records made before runs wrote it have no ``provenance.json``: :func:`read_provenance` gives None and the tools say
 ``provenance: unknown``.
 
 Examples:
@@ -155,7 +155,7 @@ def _save(run_dir: str, provenance: dict[str, Any]) -> bool:
 
 
 def read_provenance(run_dir: str) -> dict[str, Any] | None:
-    """A run's (or record's) ``provenance.json``, None when it has none (made before issue 110) or it is not JSON."""
+    """A run's (or record's) ``provenance.json``, None when it has none (made before runs wrote it) or it is not JSON."""
     try:
         with open(os.path.join(run_dir, PROVENANCE_FILE)) as f:
             return json.load(f)

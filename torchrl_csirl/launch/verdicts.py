@@ -1,7 +1,7 @@
 """One rule for the pages' verdict words: two seed sets -> Welch's t-test, Holm's correction across the
 comparisons of one study section, and the smallest difference the test could have detected.
 
-The rule (issue 110): a difference is **"beyond seed noise"** when its Holm-adjusted p is below
+The rule: a difference is **"beyond seed noise"** when its Holm-adjusted p is below
 :data:`ALPHA` (two-sided 5 %); otherwise it is **"no difference detected"**, printed with the *minimum
 detectable difference* at that number of seeds and those spreads, so that a reader sees how large a
 difference the test could have missed. Nothing else ("level", "no effect", "fixed") is a verdict.
