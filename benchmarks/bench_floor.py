@@ -23,6 +23,7 @@ Usage::
 
     python benchmarks/bench_floor.py --batch 256 --rounds 20      # fp32 and bf16 (where native)
     python benchmarks/bench_floor.py --batch 64 --precisions fp32
+    python benchmarks/bench_floor.py --hidden 8 --batch 8 --threads 1 --precisions fp32   # the per-call overhead
 
 Prints one final JSON line.
 """
@@ -32,8 +33,8 @@ import argparse
 import contextlib
 import json
 import math
+import os
 import statistics
-import time
 from collections.abc import Sequence
 
 import bench_update
@@ -48,6 +49,7 @@ _HALF_LOG_2PI = math.log(math.sqrt(2 * math.pi))
 _LOG_2 = math.log(2.0)
 
 Layers = list[tuple[torch.Tensor, torch.Tensor]]
+CPU = torch.device("cpu")
 
 
 # ----------------------------------------------------------------------------------- the maths, plainly
@@ -272,12 +274,6 @@ class AutocastLeanLearner(LeanLearner):
 
 
 # ------------------------------------------------------------------------------------------ timing
-def _timed(fn) -> float:
-    start = time.perf_counter()
-    fn()
-    return (time.perf_counter() - start) * 1e3
-
-
 def measure(batch: int, precisions: Sequence[str], rounds: int, block: int, plain_autocast: bool) -> dict:
     """Ours and the lean learner, per precision, alternated in blocks of ``block`` steps; medians and ratios.
 
@@ -300,7 +296,7 @@ def measure(batch: int, precisions: Sequence[str], rounds: int, block: int, plai
             for name, learner in learners.items():
                 fn = getattr(learner, f"{step}_step")
                 fn()
-                times[name][step].append(statistics.median(_timed(fn) for _ in range(max(block - 1, 1))))
+                times[name][step].append(statistics.median(bench_update._timed(fn, CPU) for _ in range(max(block - 1, 1))))
     result = {}
     for name in learners:
         for step, label in (("plain", "sac_update_ms"), ("csirl", "csirl_iteration_ms")):
@@ -325,16 +321,23 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--precisions", nargs="+", default=None, choices=("fp32", "bf16"),
                         help="default: fp32, and bf16 where the CPU multiplies bfloat16 natively")
+    parser.add_argument("--hidden", type=int, default=0,
+                        help="hidden width of the actor and critics (0: bench_update.py's 256; 8 with --batch 8 "
+                             "--threads 1 leaves the per-call overhead)")
     parser.add_argument("--plain-autocast", action="store_true",
                         help="also time the lean learner with every layer under bfloat16 autocast")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
+    if args.hidden:  # smaller networks, as bench_revisions.py --hidden makes them
+        make_actor, make_qvalue = bench_update.make_actor, bench_update.make_qvalue
+        bench_update.make_actor = lambda obs, act: make_actor(obs, act, hidden=(args.hidden, args.hidden))
+        bench_update.make_qvalue = lambda obs, act: make_qvalue(obs, act, hidden=(args.hidden, args.hidden))
     precisions = args.precisions or (["fp32", "bf16"] if has_native_bf16("cpu") else ["fp32"])
-    result = {"batch": args.batch, "threads": args.threads, "rounds": args.rounds, "block": args.block,
+    result = {"batch": args.batch, "hidden": args.hidden or 256, "threads": args.threads, "rounds": args.rounds, "block": args.block,
               "cpu": torch.cpu.get_capabilities().get("cpu_name"), "native_bf16": has_native_bf16("cpu"),
               "torch": torch.__version__}
     with contextlib.suppress(OSError):
-        result["load_average"] = round(__import__("os").getloadavg()[0], 2)
+        result["load_average"] = round(os.getloadavg()[0], 2)
     result.update(measure(args.batch, precisions, args.rounds, args.block, args.plain_autocast))
     print(json.dumps(result))
 
