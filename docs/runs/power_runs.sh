@@ -1,0 +1,16 @@
+#!/bin/bash
+# The power and bfloat16 runs of docs/runs/power-*: one commit, resumable (a finished cell is skipped).
+export RL_WARNINGS=0
+B="torchrl-csirl benchmark --max-concurrent 2"
+COMMON="collector.main_threads=1 logger.backend=csv"
+PM="collector.total_frames=30000 collector.num_workers=1"
+set -x
+$B --methods bc --scenarios PointMaze_Medium-v3 --seeds 3 4 5 6 7 8 9 --output-dir runs/q-pm -- $PM $COMMON
+$B --methods csirl --scenarios merge --seeds 3 4 --output-dir runs/q-merge -- $COMMON
+$B --methods csirl --scenarios merge --seeds 3 4 --output-dir runs/q-merge-bf16 -- optim.precision=bf16 $COMMON
+$B --methods csirl-nocur --scenarios merge --seeds 0 1 2 3 4 --output-dir runs/q-merge -- $COMMON
+$B --methods csirl --scenarios roundabout --seeds 3 4 --output-dir runs/q-round -- collector.total_frames=60000 $COMMON
+$B --methods csirl --scenarios roundabout --seeds 3 4 --output-dir runs/q-round-bf16 -- collector.total_frames=60000 optim.precision=bf16 $COMMON
+$B --methods csirl csirl-nocur --scenarios PointMaze_Medium-v3 --seeds 3 4 5 6 7 8 9 --output-dir runs/q-pm -- $PM $COMMON
+$B --methods sac gail --scenarios PointMaze_Medium-v3 --seeds 3 4 --output-dir runs/q-pm -- $PM $COMMON
+echo QUEUE DONE
