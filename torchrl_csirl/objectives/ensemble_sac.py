@@ -212,7 +212,7 @@ class EnsembleSACLoss(SACLoss):
         alpha_init (float): entropy coefficient (its initial value unless ``fixed_alpha``).
             Defaults to ``0.01``.
         fixed_alpha (bool): keep alpha fixed. Defaults to ``False``: SAC's automatic temperature,
-            as the recipes (the paper: ``True``, ``preset=paper``; before issue 89 this default was ``True``).
+            as the recipes (the paper: ``True``, ``preset=paper``).
         gamma (float): discount of the TD(0) target. Defaults to ``0.99``.
         loss_function (str): critic regression loss. Defaults to ``"l2"`` (squared error,
             as in the published code; ``SACLoss`` defaults to ``"smooth_l1"``).
