@@ -336,8 +336,8 @@ class MetaRewardLoss(LossModule):
                 f"loss_function={sac_loss.loss_function!r}."
             )
         super().__init__()
-        # not registered as a submodule: meta_loss.parameters() are the reward's only.
-        self.__dict__["sac_loss"] = sac_loss
+        # object.__setattr__, not nn.Module's: the SAC loss is not a submodule, meta_loss.parameters() are the reward's only
+        object.__setattr__(self, "sac_loss", sac_loss)
         self.reward_network = reward_network
         self.lr_inner = float(lr_inner)
         self.scale = float(scale)
@@ -675,7 +675,7 @@ class MetaRewardLoss(LossModule):
         loss_imitation = self.imitation_loss(expert, theta_new)
         g = _grads_or_zeros(loss_imitation, [phi_new.get(k) for k in keys])
         with torch.no_grad():
-            fused = sac.__dict__["_fused_qvalue"]
+            fused = sac._fused_qvalue
             tangents = phi.empty()
             for key, tangent in zip(keys, g):
                 tangents.set(key, tangent)
@@ -688,7 +688,8 @@ class MetaRewardLoss(LossModule):
     def _sac_losses(
         self, td: TensorDictBase, loss_q: torch.Tensor, grads_phi: list[torch.Tensor]
     ) -> dict[str, torch.Tensor]:
-        """The ordinary SAC losses, reusing ``L_Q(phi, w)`` and its gradient."""
+        """The ordinary SAC losses, reusing ``L_Q(phi, w)`` and its gradient (``loss_qvalue`` is a linear surrogate
+        carrying it); the actor loss sees the critics before their update, as in the published code."""
         sac = self.sac_loss
         phi_real = list(sac.qvalue_network_params.values(True, True))
         loss_qvalue = _linear_surrogate(loss_q, phi_real, grads_phi)
