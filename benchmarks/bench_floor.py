@@ -135,7 +135,7 @@ class LeanLearner:
 
     def __init__(self, ours: bench_update._Learner, precision: LearnerPrecision | None = None) -> None:
         sac = ours.sac
-        fused_q, fused_pi = sac.__dict__["_fused_qvalue"], sac.__dict__["_fused_actor"]
+        fused_q, fused_pi = sac._fused_qvalue, sac._fused_actor
         self.low = None if precision is None or precision.dtype == torch.float32 else precision.dtype
 
         def flat(params, linear_keys) -> list[torch.Tensor]:

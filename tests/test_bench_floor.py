@@ -51,7 +51,7 @@ def test_csirl_iteration_losses_and_gradients_equal_ours(float64):
     ref = lean.csirl_losses()
     for key in ("loss_qvalue", "loss_actor", "loss_meta", "loss_imitation", "loss_inner_actor"):
         _close(ref[key], out[key])
-    fused_q, fused_pi = ours.sac.__dict__["_fused_qvalue"], ours.sac.__dict__["_fused_actor"]
+    fused_q, fused_pi = ours.sac._fused_qvalue, ours.sac._fused_actor
     groups = {
         "qvalue": [ours.sac.qvalue_network_params.get(k) for pair in fused_q.linear_keys for k in pair],
         "actor": [ours.sac.actor_network_params.get(k) for pair in fused_pi.linear_keys for k in pair],

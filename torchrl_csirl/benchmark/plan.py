@@ -36,7 +36,7 @@ CSIRL_RECIPE, IMITATION_RECIPE = "csirl_highway", "imitation_highway"
 #: the robotics tasks' recipes (the same learners on ``env.task=relocate | antmaze-umaze``)
 CSIRL_ROBOTICS_RECIPE, IMITATION_ROBOTICS_RECIPE = "csirl_robotics", "imitation_robotics"
 RECIPES = (CSIRL_RECIPE, IMITATION_RECIPE, CSIRL_ROBOTICS_RECIPE, IMITATION_ROBOTICS_RECIPE)
-#: CSIRL and its ablations (issue 17, section 4): cells of the CSIRL recipe with these switches
+#: CSIRL and its ablations: cells of the CSIRL recipe with these switches
 CSIRL_METHODS: dict[str, tuple[str, ...]] = {
     "csirl": (),
     "csirl-b": ("csirl.intrinsic=false",),  # no learned reward r_w
@@ -75,7 +75,7 @@ PAPER_ROBOTICS_METHODS = ("sqil", "dac", "valuedice", "iqlearn", "csirl")
 #: scene's column is compared at the same budget (the roundabout's own default for CSIRL, 110 000 frames, is
 #: the junction study's: docs/studies/junctions.md#a-longer-budget)
 TABLE_BUDGETS: dict[str, int] = {scene: 60_000 for scene in (*SCENARIO_ORDER, *ROBOTICS_ORDER)}
-#: the locomotion tasks: 300 000 frames (the issue's cap). The published baselines report at 100 000 frames with
+#: the locomotion tasks: 300 000 frames (the benchmark's cap). The published baselines report at 100 000 frames with
 #: 5 updates per frame (ValueDICE), about 500 000 with 1 (IQ-Learn's code) or on curves to 1 000 000 (DAC):
 #: none documents a plateau below the cap (docs/benchmark.md#published-results)
 TABLE_BUDGETS.update({task: 300_000 for task in LOCOMOTION_ORDER})

@@ -43,7 +43,7 @@ PUBLISHED_LOCOMOTION: dict[str, dict[str, dict[str, Any]]] = {
 
 
 #: how far below its paper a baseline may sit before it is treated as a suspected implementation difference
-#: (issue 58): a gap beyond it is bold in the report and explained in docs/benchmark.md#published-results
+#: a gap beyond it is bold in the report and explained in docs/benchmark.md#published-results
 PUBLISHED_GAP = 0.2
 
 

@@ -54,10 +54,10 @@ class ExpertConfig:
             vehicle ahead in its own lane; other vehicles' IDM counts a vehicle within 1 m of their lane
             as in it, so the vehicle beside it in the next lane, which the ego now seems to be ahead
             of, brakes and opens a gap; the ego moves over once the gap behind it is free (see
-            :meth:`~torchrl_csirl.envs.route_follower.RouteFollower.nudge_control`). Two slow vehicles side by side no longer block both
-            lanes. The nudge candidates follow with the ``close_following`` gap (at the highest target
-            speed), which must be short enough for the ego to get ahead of the centre of the vehicle
-            beside it.
+            :meth:`~torchrl_csirl.envs.route_follower.RouteFollower.nudge_control`), so that two slow
+            vehicles side by side do not block both lanes. The nudge candidates follow with the
+            ``close_following`` gap (at the highest target speed), which must be short enough for the
+            ego to get ahead of the centre of the vehicle beside it.
         episode_end_x: the scenario ends the episode once the ego passes this x [m] (merge: 370 m);
             the look-ahead stops there, so that a long horizon at high speed does not count driving
             off the end of the road, which the episode never reaches, as a failure.

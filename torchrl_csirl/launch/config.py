@@ -272,41 +272,42 @@ def load_config(schema: type, overrides: list[str] | None = None, config_dir: st
 RESUME_FIXED_KEYS = ("preset", "valuedice.normalize_states", "iqlearn.value_loss")
 
 
-#: settings added after runs were made, whose default changed what such a run does: a saved configuration without
-#: the key ran with this value, which a resumed (or diagnosed) run keeps
-BEHAVIOUR_BEFORE_THE_KEY: dict[str, object] = {
-    # goal-conditioned matching, on by default (null) where the observation has a desired_goal, since issue 87
+#: the value a saved configuration that lacks the key is read with, where that differs from the schema's default:
+#: a resumed (or diagnosed) run keeps the value it ran with
+VALUES_OF_MISSING_KEYS: dict[str, object] = {
+    # the schema's null turns goal-conditioned matching on where the observation has a desired_goal; a saved
+    # configuration without the key matched without the goal
     "csirl.goal_conditioned": False,
 }
 
 
-def pin_settings_the_run_predates(saved: DictConfig) -> DictConfig:
-    """``saved`` with each :data:`BEHAVIOUR_BEFORE_THE_KEY` it lacks (where it has the key's section) set to the
-    behaviour it ran with, instead of the schema's later default.
+def pin_missing_settings(saved: DictConfig) -> DictConfig:
+    """``saved`` with each key of :data:`VALUES_OF_MISSING_KEYS` it lacks (where it has the key's section) set to
+    that value, the one the run ran with, instead of the schema's default.
 
     Examples:
         >>> from omegaconf import OmegaConf
-        >>> pin_settings_the_run_predates(OmegaConf.create({"csirl": {"delta": 5.0}})).csirl.goal_conditioned
+        >>> pin_missing_settings(OmegaConf.create({"csirl": {"delta": 5.0}})).csirl.goal_conditioned
         False
     """
-    for key, before in BEHAVIOUR_BEFORE_THE_KEY.items():
+    for key, value in VALUES_OF_MISSING_KEYS.items():
         section, _, leaf = key.rpartition(".")
         parent = OmegaConf.select(saved, section)
         if parent is not None and leaf not in parent:
-            OmegaConf.update(saved, key, before)
+            OmegaConf.update(saved, key, value)
     return saved
 
 
 def load_run_config(schema: type, run_dir: str, overrides: list[str] | None = None) -> DictConfig:
     """A run's saved ``config.yaml`` over the schema, updated by ``overrides`` (resume).
 
-    ``checkpoint.resume`` of the saved file is dropped, the :data:`RESUME_FIXED_KEYS` cannot change, and a setting
-    the run predates keeps the behaviour the run had (:func:`pin_settings_the_run_predates`).
+    ``checkpoint.resume`` of the saved file is dropped, the :data:`RESUME_FIXED_KEYS` cannot change, and a key the
+    saved file lacks keeps the value the run had (:func:`pin_missing_settings`).
     """
     path = os.path.join(run_dir, "config.yaml")
     if not os.path.isfile(path):
         raise ConfigError(f"checkpoint.resume={run_dir}: no config.yaml there")
-    saved = pin_settings_the_run_predates(OmegaConf.load(path))
+    saved = pin_missing_settings(OmegaConf.load(path))
     if "checkpoint" in saved and "resume" in saved.checkpoint:
         saved.checkpoint.resume = None
     cli = parse_overrides(list(overrides or []))

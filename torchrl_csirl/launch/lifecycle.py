@@ -70,8 +70,8 @@ def record_resumed_settings(cfg: DictConfig, run_dir: str, frames: int) -> dict[
     """A resume that changes settings (``key=value`` beside ``checkpoint.resume``) writes them into the run's
     ``config.yaml``, so the next resume keeps them and the file says what the run ran with, and appends
     ``{"frames", "changed": {key: [before, after]}}`` to ``<run dir>/resumes.jsonl``, so the settings of
-    the frames before stay on record. Keys the saved file lacks (settings the schema gained since the run
-    started) hold their defaults and are no change. Returns the changes (empty: nothing written).
+    the frames before stay on record. Keys the saved file lacks (settings its schema did not have) hold
+    their defaults and are no change. Returns the changes (empty: nothing written).
 
     Examples:
         >>> import tempfile, os

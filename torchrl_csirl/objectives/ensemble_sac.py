@@ -27,8 +27,8 @@ from torchrl_csirl._compat import (
     vmap_qvalue_networks,
 )
 from torchrl_csirl.hyperparameters import CSIRL_DEFAULTS, DISPERSIONS
-from torchrl_csirl.modules.ensemble import fused_critic_ensemble
-from torchrl_csirl.modules.fused_actor import fused_tanh_normal_actor
+from torchrl_csirl.modules.ensemble import FusedCriticEnsemble, fused_critic_ensemble
+from torchrl_csirl.modules.fused_actor import FusedTanhNormalActor, fused_tanh_normal_actor
 
 __all__ = ["EnsembleSACLoss", "qvalue_dispersion", "reinitialize_module"]
 
@@ -212,7 +212,7 @@ class EnsembleSACLoss(SACLoss):
         alpha_init (float): entropy coefficient (its initial value unless ``fixed_alpha``).
             Defaults to ``0.01``.
         fixed_alpha (bool): keep alpha fixed. Defaults to ``False``: SAC's automatic temperature,
-            as the recipes (the paper: ``True``, ``preset=paper``; before issue 89 this default was ``True``).
+            as the recipes (the paper: ``True``, ``preset=paper``).
         gamma (float): discount of the TD(0) target. Defaults to ``0.99``.
         loss_function (str): critic regression loss. Defaults to ``"l2"`` (squared error,
             as in the published code; ``SACLoss`` defaults to ``"smooth_l1"``).
@@ -247,6 +247,13 @@ class EnsembleSACLoss(SACLoss):
         >>> loss.qvalues(td).shape, loss.qvalue_dispersion(td).shape
         (torch.Size([5, 6]), torch.Size([6]))
     """
+
+    # plain attributes, none of them module state; the class values hold while SACLoss.__init__ runs
+    # (it calls _make_vmap before they are set)
+    _fused_qvalue: FusedCriticEnsemble | None = None
+    _fused_actor: FusedTanhNormalActor | None = None
+    _differentiable_reward: bool = False
+    _actor_loss_qvalue_params: TensorDictBase | None = None
 
     def __init__(
         self,
@@ -290,10 +297,9 @@ class EnsembleSACLoss(SACLoss):
         self.make_value_estimator(ValueEstimators.TD0, gamma=gamma)
         self.dispersion = dispersion
         self.differentiable_reward = differentiable_reward
-        self.__dict__["_actor_loss_qvalue_params"] = None
-        self.__dict__["_fused_qvalue"] = ensemble
+        self._fused_qvalue = ensemble
         self._make_vmap()
-        self.__dict__["_fused_actor"] = self._make_fused_actor(actor_network, fused)
+        self._fused_actor = self._make_fused_actor(actor_network, fused)
         _log_sacloss_differences_once(
             num_qvalue_nets=num_qvalue_nets, alpha_init=alpha_init, loss_function=loss_function,
             reinitialized=reinitialize_qvalue and not isinstance(qvalue_network, (list, tuple)),
@@ -317,7 +323,7 @@ class EnsembleSACLoss(SACLoss):
     @property
     def fused(self) -> bool:
         """Whether the SAC losses take the fused path (:meth:`fused_applies` says when it applies)."""
-        return self.__dict__.get("_fused_actor") is not None
+        return self._fused_actor is not None
 
     def fused_applies(self) -> bool:
         """Whether the next loss evaluation takes the fused path.
@@ -333,11 +339,11 @@ class EnsembleSACLoss(SACLoss):
     @property
     def fused_qvalue(self) -> bool:
         """Whether the critics are evaluated by a fused ensemble (``False``: ``torch.vmap``)."""
-        return self.__dict__.get("_fused_qvalue") is not None
+        return self._fused_qvalue is not None
 
     def _make_vmap(self) -> None:
         super()._make_vmap()
-        fused = self.__dict__.get("_fused_qvalue")
+        fused = self._fused_qvalue
         if fused is not None:
             set_qvalue_ensemble_evaluator(self, fused)
 
@@ -411,11 +417,11 @@ class EnsembleSACLoss(SACLoss):
     @property
     def differentiable_reward(self) -> bool:
         """Whether the critic target carries the graph of the reward."""
-        return self.__dict__.get("_differentiable_reward", False)
+        return self._differentiable_reward
 
     @differentiable_reward.setter
     def differentiable_reward(self, value: bool) -> None:
-        self.__dict__["_differentiable_reward"] = bool(value)
+        self._differentiable_reward = bool(value)
 
     @contextlib.contextmanager
     def differentiable_reward_mode(self, mode: bool = True) -> Iterator[EnsembleSACLoss]:
@@ -493,7 +499,7 @@ class EnsembleSACLoss(SACLoss):
         """SACLoss's actor loss ``alpha log pi(a|s) - min_k Q_k(s, a)``, ``a ~ pi(s)`` reparameterised."""
         if not self.fused_applies():
             return super().actor_loss(tensordict)
-        fused_actor = self.__dict__["_fused_actor"]
+        fused_actor = self._fused_actor
         loc, scale = fused_actor.dist_params(tensordict.get(fused_actor.in_key), self.actor_network_params)
         action, log_prob = fused_actor.rsample_and_log_prob(loc, scale)
         qvalue = self._critic_values(tensordict, self._cached_detached_qvalue_params, action)
@@ -524,7 +530,7 @@ class EnsembleSACLoss(SACLoss):
             a ``[*B, action]`` tensor, differentiable w.r.t. ``actor_params``.
         """
         params = self.actor_network_params if actor_params is None else actor_params
-        fused_actor = self.__dict__.get("_fused_actor")
+        fused_actor = self._fused_actor
         if fused_actor is not None:
             loc, scale = fused_actor.dist_params(observation, params)
             return fused_actor.deterministic_sample(loc) if deterministic else fused_actor.rsample(loc, scale)
@@ -579,7 +585,7 @@ class EnsembleSACLoss(SACLoss):
         activations: list | None = None,
     ) -> torch.Tensor:
         """``[N, *B, 1]`` values of the critics on ``tensordict``'s entries (``action`` replacing its action)."""
-        fused_qvalue = self.__dict__["_fused_qvalue"]
+        fused_qvalue = self._fused_qvalue
         action_key = self.tensor_keys.action
         inputs = [
             action if action is not None and key == action_key else tensordict.get(key)
@@ -589,7 +595,7 @@ class EnsembleSACLoss(SACLoss):
 
     def _fused_target(self, tensordict: TensorDictBase) -> torch.Tensor:
         """SACLoss's TD(0) target ``r + gamma (1 - terminated) min_k (Q'_k(s', a') - alpha log pi(a'|s'))``."""
-        fused_actor = self.__dict__["_fused_actor"]
+        fused_actor = self._fused_actor
         estimator = self.value_estimator
         keys = estimator.tensor_keys
         next_td = tensordict.get("next")
@@ -617,7 +623,7 @@ class EnsembleSACLoss(SACLoss):
     # ------------------------------------------------------------------ parameter swapping
     @property
     def _cached_detached_qvalue_params(self):
-        override = self.__dict__.get("_actor_loss_qvalue_params")
+        override = self._actor_loss_qvalue_params
         if override is not None:
             return override
         return detached_qvalue_params(self)
@@ -656,10 +662,15 @@ class EnsembleSACLoss(SACLoss):
                 )
             swapped[name] = current
             self._modules[name] = params
-        prev_override = self.__dict__.get("_actor_loss_qvalue_params")
-        self.__dict__["_actor_loss_qvalue_params"] = actor_loss_qvalue_params
+        prev_override = self._actor_loss_qvalue_params
+        self._set_actor_loss_qvalue_params(actor_loss_qvalue_params)
         try:
             yield self
         finally:
             self._modules.update(swapped)
-            self.__dict__["_actor_loss_qvalue_params"] = prev_override
+            self._set_actor_loss_qvalue_params(prev_override)
+
+    def _set_actor_loss_qvalue_params(self, params: TensorDictBase | None) -> None:
+        """Sets the critic parameters :meth:`actor_loss` reads without registering them: a ``TensorDictParams``
+        (an ``nn.Module``) assigned the usual way would become a submodule, in ``parameters()`` and the state dict."""
+        object.__setattr__(self, "_actor_loss_qvalue_params", params)

@@ -170,113 +170,66 @@ def _linear_surrogate(
     return _WithGradients.apply(value.detach(), tuple(g.detach() for g in grads), *params)
 
 
+@dataclass
+class _MetaStep:
+    """What one meta-gradient computation gives :meth:`MetaRewardLoss.forward`."""
+
+    td: TensorDictBase  # the online batch with its local reward
+    loss: torch.Tensor  # L_meta
+    loss_imitation: torch.Tensor
+    loss_l1: torch.Tensor
+    loss_q: torch.Tensor  # L_Q(phi, w), of the inner critic step
+    loss_pi: torch.Tensor  # L_pi(theta, phi'), of the inner actor step
+    grads_phi: list[torch.Tensor]  # grad_phi L_Q
+    td_error: torch.Tensor  # per sample, detached
+    grads: list[torch.Tensor]  # dL_meta/dw
+    grads_imitation: list[torch.Tensor]  # its imitation part
+    grads_l1: list[torch.Tensor] | None  # its regulariser part (None: no regulariser)
+
+
 class MetaRewardLoss(LossModule):
     r"""Meta-gradient loss of the CSIRL intrinsic reward network ``r_w`` (paper Eq. 11-15).
 
-    On an online batch whose reward is ``r = r_m + r_w(s)`` (matching reward already in
-    the batch, intrinsic reward recomputed here with its graph):
+    Trains ``r_w`` so that one SAC step on the local reward ``r = r_m + r_w(s)`` brings the actor
+    closer to the expert: from the current critics ``phi`` and actor ``theta`` it takes an inner
+    critic step ``phi'`` (:meth:`inner_critic_step`) and an inner actor step ``theta'``
+    (:meth:`inner_actor_step`), both differentiable in ``w``, and scores ``theta'`` on expert pairs:
+    ``L_meta = scale * (mean (a_hat - a_e)^2 + reward_l1_coef * mean |r_w(s)|)``,
+    ``a_hat ~ pi_theta'(s_e)`` (:meth:`imitation_loss`).
 
-    1. ``phi' = phi - lr_in * grad_phi L_Q(phi, w)`` (critic loss of the ensemble SAC,
-       reward differentiable, graph kept);
-    2. ``theta' = theta - lr_in * grad_theta L_pi(theta, phi')`` (actor loss evaluated with
-       the *non-detached* ``phi'``, graph kept);
-    3. ``L_meta = scale * (mean_e (a_hat - a_e)^2 + reward_l1_coef * mean |r_w(s)|)`` with
-       ``a_hat ~ pi_theta'(s_e)`` reparameterised (or its deterministic mean action).
-
-    All SAC math is delegated to ``sac_loss`` (its ``qvalue_v2_loss`` and ``actor_loss``
-    evaluated with swapped-in parameters through :meth:`EnsembleSACLoss.using_params`).
-    The current actor/critic parameters enter as detached leaves sharing their storage:
-    the meta-loss never writes gradients into the actor or the critic.
-
-    **Gradient delivery.** ``forward`` computes the meta-gradient ``dL_meta/dw`` eagerly
-    with ``torch.autograd.grad`` restricted to the reward parameters (so autograd prunes
-    the second-order paths towards ``phi``/``theta`` that are never needed) and returns
-    ``"loss_meta"`` as a linear surrogate with the value of ``L_meta`` whose gradient is
-    exactly that meta-gradient: ``loss_meta.backward()`` fills ``reward_network``'s
-    ``.grad`` and nothing else. Call it before stepping the actor/critic optimisers or
-    after, it does not matter (the graph is already consumed).
-
-    **Rewards.** The reward the critic regresses on is
-    ``td["next", matching_reward] + td_reward_net[intrinsic_reward]`` where the reward
-    network is applied to the online batch's root entries (``"observation"`` for the
-    state-only ``r_w(s)``), and it is written (on a shallow copy) at
-    ``("next", sac_loss.tensor_keys.reward)``, the key the critic loss reads. With
-    ``use_matching_reward=False`` only ``r_w`` is used. The entry ``("next", reward)`` of the input batch (if any) is ignored.
-
-    **No** :class:`~torchrl_csirl.transforms.IntrinsicReward` **needed for this loss.** ``r_w`` must
-    carry its graph here, so the loss evaluates it itself: the ``("next", "intrinsic_reward")``
-    and ``("next", "reward")`` that such a buffer transform writes are ignored, and on the batches
-    of the meta step (online and regulariser) that transform is wasted work. A buffer sampled only
-    for this loss needs the matching reward alone (e.g.
-    :class:`~torchrl_csirl.transforms.SubgoalMatchingReward`); keep ``IntrinsicReward`` +
-    ``CombineRewards`` where plain SAC steps read ``("next", "reward")`` from the same buffer
-    (:class:`~torchrl_csirl.trainers.MetaRewardUpdate` with ``meta_every > 1``).
-
-    **Calling it.** ``loss(td)`` with one TensorDict, TorchRL's way: the online batch at the root,
-    the expert batch at ``tensor_keys.expert`` and the regulariser's (optional) at
-    ``tensor_keys.regularizer`` (:meth:`meta_batch` packs three batches,
-    :meth:`sample_meta_batch` samples three replay buffers). ``loss(online, expert, regularizer)``
-    runs the same code. Either way the online batch's TD errors are written at
-    ``"td_error"`` (the SAC loss's ``tensor_keys.priority``) of the TensorDict passed first, so a
-    :class:`~torchrl.data.TensorDictPrioritizedReplayBuffer`'s ``update_tensordict_priority`` can
-    read them.
-
-    **Balance of the two parts.** With ``gradient_balance="sum"`` (the paper) the reward network
-    receives ``dL_meta/dw``, in which the regulariser's part is 3 to 10^5 times the
-    imitation part (it does not pass through the two inner steps; docs/algorithm.md section 5);
-    with ``"normalized"`` it receives :func:`balanced_meta_gradient` of the two parts, which
-    weighs their directions ``1 : reward_l1_coef`` whatever their sizes. ``"loss_meta"`` keeps the
-    value of ``L_meta`` either way; ``"meta_grad_norm"`` is the norm of what is applied.
-
-    **Two ways to the same meta-gradient.** ``meta_gradient="double_backward"`` (the default)
-    keeps the graph of both inner steps and differentiates through them. ``"jvp"`` uses the
-    closed form of the inner critic step: with ``L_Q = reduce_i sum_k (Q_k(s_i, a_i) - y_i)^2``
-    and ``y_i`` linear in ``r_w(s_i)`` (``dy_i / dr_i = 1`` for TD(0)),
-
-    ``dL/dw = 2 lr_in sum_i rho_i (sum_k grad_phi_k Q_k(s_i, a_i) . g_k) dr_w(s_i)/dw`` with
-    ``g = dL/dphi'`` (``rho_i`` the weight of sample ``i`` in the reduction, ``1 / B`` for a
-    mean): the critic step is taken without a graph, ``g`` comes from a backward through the inner actor step
-    alone (still a double backward: the actor step's gradient depends on ``phi'``), the
-    bracket is one forward-mode pass of the critic ensemble along ``g``
-    (:meth:`~torchrl_csirl.modules.FusedCriticEnsemble.jvp`) and the last factor a backward
-    through the reward network alone. The same gradient up to rounding (float64 parity in
-    ``tests/test_meta_loss.py``); the SAC losses of ``joint_sac_update`` are bit-identical.
-    It needs the fused critic ensemble, the ``"l2"`` critic loss and a TD(0) target.
-
-    Hyper-parameter notes: ``lr_in = 0.01`` (plain SGD) and the reward Adam learning rate
-    ``1e-3`` follow the published code; the paper states the two swapped (0.001 / 0.01).
-    ``scale = 100`` and the ``|r_w|`` regulariser also come from the code.
+    ``"loss_meta"`` has the value of ``L_meta`` and backpropagates into the reward network only: the
+    actor and the critics are never written to, and ``meta.parameters()`` are the reward network's.
+    The online batch's TD errors are written at ``"td_error"`` (the SAC loss's
+    ``tensor_keys.priority``) for a prioritised buffer. docs/components/meta-reward.md shows a full
+    update; docs/algorithm.md (the meta-gradient of r_w) derives it and discusses the two parts'
+    balance and the ``"jvp"`` path.
 
     Args:
         sac_loss (EnsembleSACLoss): the learner's loss; its current parameters are used.
-        reward_network (TensorDictModule): ``r_w``; writes ``intrinsic_reward``.
+        reward_network (TensorDictModule): ``r_w``; reads the online batch's root entries
+            (``"observation"``) and writes ``intrinsic_reward``.
 
     Keyword Args:
-        lr_inner (float): inner SGD step size. Defaults to ``0.01``.
+        lr_inner (float): inner SGD step size (the published code's). Defaults to ``0.01``.
         scale (float): multiplies the meta-objective (the recipes' ``csirl.meta_scale``). Defaults to ``100.0``.
-        reward_l1_coef (float): weight of ``mean |r_w(s)|``. ``0`` disables it.
-            Defaults to ``1.0``.
+        reward_l1_coef (float): weight of ``mean |r_w(s)|``. ``0`` disables it. Defaults to ``1.0``.
         deterministic_expert_action (bool): use the mean action of ``pi_theta'`` instead of
             a reparameterised sample. Defaults to ``False``.
-        use_matching_reward (bool): add ``("next", matching_reward)`` to ``r_w``.
-            Defaults to ``True``.
+        use_matching_reward (bool): add ``("next", matching_reward)`` to ``r_w``; ``False``: ``r_w``
+            alone. Defaults to ``True``.
         gradient_balance (str): ``"sum"`` (the gradient of ``L_meta``) or ``"normalized"``
-            (each part scaled to unit norm, then ``scale * (g_I + reward_l1_coef * g_R)``).
+            (:func:`balanced_meta_gradient` of the imitation and regulariser parts).
             Defaults to ``"sum"``.
-        joint_sac_update (bool): also return the ordinary SAC losses of ``sac_loss`` on
-            the same batch and local reward (``"loss_qvalue"``, ``"loss_actor"``,
-            ``"loss_alpha"``, ``"alpha"``, ``"entropy"``), sharing the critic-target and
-            critic forward/backward computations with the meta step (the critic loss
-            ``L_Q(phi, w)`` and its gradient are the same quantities; ``loss_qvalue``
-            carries that gradient as a linear surrogate). One backward of
-            ``loss_qvalue + loss_actor + loss_meta`` then yields the real SAC gradients
-            and the meta-gradient. Inner steps are then taken from the pre-update
-            actor/critic, as in the published code (which loads its inner copies before
-            the real steps); the real actor loss also sees the pre-update critics.
-            Defaults to ``False``.
-        meta_gradient (str): ``"double_backward"`` (differentiate through both inner steps)
-            or ``"jvp"`` (the closed form of the critic step, see above). Defaults to
-            ``"double_backward"``.
+        joint_sac_update (bool): also return the ordinary SAC losses of ``sac_loss`` on the same
+            batch and local reward (``"loss_qvalue"``, ``"loss_actor"``, ``"loss_alpha"``,
+            ``"alpha"``, ``"entropy"``), sharing the critic pass with the inner critic step, so that
+            one backward of ``loss_qvalue + loss_actor + loss_meta`` gives the SAC gradients and the
+            meta-gradient. The inner steps then start from the pre-update networks, as in the
+            published code. Defaults to ``False``.
+        meta_gradient (str): ``"double_backward"`` (differentiate through both inner steps) or
+            ``"jvp"`` (the inner critic step differentiated in closed form, the same gradient up
+            to rounding; needs the fused critic ensemble, the ``"l2"`` critic loss and a TD(0)
+            target). Defaults to ``"double_backward"``.
 
     Examples:
         >>> import torch
@@ -296,8 +249,8 @@ class MetaRewardLoss(LossModule):
         >>> expert = TensorDict({"observation": torch.randn(3, 4), "action": torch.rand(3, 2)}, [3])
         >>> out = meta(online, expert)
         >>> out["loss_meta"].backward()
-        >>> reward.module[0].weight.grad is not None
-        True
+        >>> reward.module[0].weight.grad is not None, all(p.grad is None for p in sac.parameters())
+        (True, True)
         >>> td = meta.meta_batch(online, expert)  # one TensorDict: the expert batch at "expert"
         >>> td["expert"].batch_size, td.batch_size
         (torch.Size([6, 3]), torch.Size([6]))
@@ -383,8 +336,8 @@ class MetaRewardLoss(LossModule):
                 f"loss_function={sac_loss.loss_function!r}."
             )
         super().__init__()
-        # not registered as a submodule: meta_loss.parameters() are the reward's only.
-        self.__dict__["sac_loss"] = sac_loss
+        # object.__setattr__, not nn.Module's: the SAC loss is not a submodule, meta_loss.parameters() are the reward's only
+        object.__setattr__(self, "sac_loss", sac_loss)
         self.reward_network = reward_network
         self.lr_inner = float(lr_inner)
         self.scale = float(scale)
@@ -591,68 +544,109 @@ class MetaRewardLoss(LossModule):
         w_params = [p for p in self.reward_network.parameters() if p.requires_grad]
         if not w_params:
             raise ValueError("The reward network has no trainable parameters.")
+        # the SAC losses run on detached leaves sharing the networks' storage (swapped in by
+        # ``sac.using_params``): the meta-loss never writes gradients into the actor or the critics
         theta = _leaves_like(sac.actor_network_params)
         phi = _leaves_like(sac.qvalue_network_params)
-
-        jvp = self.meta_gradient == "jvp"
         r_w = self.intrinsic_reward(tensordict)
+        meta_gradient = self._jvp_meta_gradient if self.meta_gradient == "jvp" else self._double_backward_meta_gradient
+        step = meta_gradient(tensordict, expert, regularizer, r_w, theta, phi, w_params)
+        grads = step.grads
+        if self.gradient_balance == "normalized":
+            grads = balanced_meta_gradient(
+                step.grads_imitation, step.grads_l1, l1_weight=self.reward_l1_coef, scale=self.scale
+            )
+        out = {
+            # the gradient is already computed, restricted to w (autograd prunes the second-order paths
+            # towards phi and theta): "loss_meta" has the value of L_meta and hands exactly ``grads`` to w
+            "loss_meta": _linear_surrogate(step.loss, w_params, grads),
+            "loss_imitation": step.loss_imitation.detach(),
+            "loss_reward_l1": step.loss_l1.detach(),
+            "loss_inner_qvalue": step.loss_q.detach(),
+            "loss_inner_actor": step.loss_pi.detach(),
+            "intrinsic_reward_mean": r_w.detach().mean(),
+            "meta_grad_norm": _norm(grads),
+            "meta_grad_norm_imitation": _norm(step.grads_imitation),
+            "meta_grad_norm_l1": _norm(step.grads_l1) if step.grads_l1 is not None else r_w.new_zeros(()),
+        }
+        if self.joint_sac_update:
+            out.update(self._sac_losses(step.td, step.loss_q, step.grads_phi))
+        return TensorDict(out, batch_size=[]), step.td_error
+
+    def _with_local_reward(self, tensordict: TensorDictBase, r_w: torch.Tensor) -> TensorDictBase:
+        """A shallow copy of the online batch whose ``("next", reward)``, the key the critic loss reads, is
+        :meth:`local_reward` (the batch's own ``("next", reward)``, if any, is not read)."""
         td = tensordict.copy()
         td.set("next", tensordict.get("next").copy())
-        # the jvp path differentiates the critic step by hand: its target needs no graph
-        td.set(("next", sac.tensor_keys.reward), self.local_reward(tensordict, r_w.detach() if jvp else r_w))
+        td.set(("next", self.sac_loss.tensor_keys.reward), self.local_reward(tensordict, r_w))
+        return td
 
-        if jvp:
-            loss_q, grads_phi, loss_pi, loss_imitation, cotangent, td_error = self._jvp_chain(td, expert, theta, phi)
-        else:
-            phi_new, loss_q, grads_phi, td_error = self._inner_critic_step(td, theta, phi)
-            theta_new, loss_pi = self.inner_actor_step(td, theta, phi_new)
-            loss_imitation = self.imitation_loss(expert, theta_new)
-
+    def _meta_objective(
+        self, loss_imitation: torch.Tensor, r_w: torch.Tensor, regularizer: TensorDictBase | None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """``L_meta`` and the regulariser ``mean |r_w|`` (on ``regularizer``, else on the online batch's ``r_w``)."""
         if self.reward_l1_coef > 0:
             r_reg = r_w if regularizer is None else self.intrinsic_reward(regularizer)
             loss_l1 = r_reg.abs().mean()
-            loss = self.scale * (loss_imitation + self.reward_l1_coef * loss_l1)
-        else:
-            loss_l1 = r_w.new_zeros(())
-            loss = self.scale * loss_imitation
+            return self.scale * (loss_imitation + self.reward_l1_coef * loss_l1), loss_l1
+        return self.scale * loss_imitation, r_w.new_zeros(())
 
+    def _double_backward_meta_gradient(
+        self,
+        tensordict: TensorDictBase,
+        expert: TensorDictBase,
+        regularizer: TensorDictBase | None,
+        r_w: torch.Tensor,
+        theta: TensorDictBase,
+        phi: TensorDictBase,
+        w_params: list[torch.Tensor],
+    ) -> _MetaStep:
+        """``meta_gradient="double_backward"``: both inner steps keep their graphs, ``dL_meta/dw`` goes through them."""
+        td = self._with_local_reward(tensordict, r_w)
+        phi_new, loss_q, grads_phi, td_error = self._inner_critic_step(td, theta, phi)
+        theta_new, loss_pi = self.inner_actor_step(td, theta, phi_new)
+        loss_imitation = self.imitation_loss(expert, theta_new)
+        loss, loss_l1 = self._meta_objective(loss_imitation, r_w, regularizer)
         grads_l1 = None
-        if jvp:  # the imitation part: a backward through r_w alone; then the regulariser's
-            retain = self.reward_l1_coef > 0 and regularizer is None
-            grads_imitation = _grads_or_zeros(
-                r_w, w_params, grad_outputs=cotangent.reshape(r_w.shape), retain_graph=retain
-            )
-            grads = grads_imitation
-            if self.reward_l1_coef > 0:
-                grads_l1 = _grads_or_zeros(self.scale * self.reward_l1_coef * loss_l1, w_params)
-                grads = torch._foreach_add(grads_imitation, grads_l1)
-        else:
-            if self.reward_l1_coef > 0:  # the regulariser's share of the meta-gradient (a cheap diagnostic)
-                grads_l1 = _grads_or_zeros(self.scale * self.reward_l1_coef * loss_l1, w_params, retain_graph=True)
-            grads = _grads_or_zeros(loss, w_params)
-            grads_imitation = grads if grads_l1 is None else torch._foreach_sub(grads, grads_l1)
-        if self.gradient_balance == "normalized":
-            grads = balanced_meta_gradient(grads_imitation, grads_l1, l1_weight=self.reward_l1_coef, scale=self.scale)
-        # same value as ``loss``, gradient w.r.t. w exactly ``grads`` (balanced or not), nothing else.
-        out = {
-            "loss_meta": _linear_surrogate(loss, w_params, grads),
-            "loss_imitation": loss_imitation.detach(),
-            "loss_reward_l1": loss_l1.detach(),
-            "loss_inner_qvalue": loss_q.detach(),
-            "loss_inner_actor": loss_pi.detach(),
-            "intrinsic_reward_mean": r_w.detach().mean(),
-            "meta_grad_norm": _norm(grads),
-            "meta_grad_norm_imitation": _norm(grads_imitation),
-            "meta_grad_norm_l1": _norm(grads_l1) if grads_l1 is not None else r_w.new_zeros(()),
-        }
-        if self.joint_sac_update:
-            out.update(self._sac_losses(td, loss_q, grads_phi))
-        return TensorDict(out, batch_size=[]), td_error
+        if self.reward_l1_coef > 0:  # the regulariser's share (a cheap diagnostic), the imitation part by difference
+            grads_l1 = _grads_or_zeros(self.scale * self.reward_l1_coef * loss_l1, w_params, retain_graph=True)
+        grads = _grads_or_zeros(loss, w_params)
+        grads_imitation = grads if grads_l1 is None else torch._foreach_sub(grads, grads_l1)
+        return _MetaStep(td, loss, loss_imitation, loss_l1, loss_q, loss_pi, grads_phi, td_error,
+                         grads, grads_imitation, grads_l1)
+
+    def _jvp_meta_gradient(
+        self,
+        tensordict: TensorDictBase,
+        expert: TensorDictBase,
+        regularizer: TensorDictBase | None,
+        r_w: torch.Tensor,
+        theta: TensorDictBase,
+        phi: TensorDictBase,
+        w_params: list[torch.Tensor],
+    ) -> _MetaStep:
+        """``meta_gradient="jvp"``: the inner critic step differentiated in closed form (:meth:`_jvp_chain`), the
+        imitation part one backward through ``r_w`` alone, then the regulariser's."""
+        td = self._with_local_reward(tensordict, r_w.detach())  # the critic step is differentiated by hand: no graph
+        loss_q, grads_phi, loss_pi, loss_imitation, cotangent, td_error = self._jvp_chain(td, expert, theta, phi)
+        loss, loss_l1 = self._meta_objective(loss_imitation, r_w, regularizer)
+        retain = self.reward_l1_coef > 0 and regularizer is None  # the regulariser's backward reuses r_w's graph
+        grads_imitation = _grads_or_zeros(r_w, w_params, grad_outputs=cotangent.reshape(r_w.shape), retain_graph=retain)
+        grads, grads_l1 = grads_imitation, None
+        if self.reward_l1_coef > 0:
+            grads_l1 = _grads_or_zeros(self.scale * self.reward_l1_coef * loss_l1, w_params)
+            grads = torch._foreach_add(grads_imitation, grads_l1)
+        return _MetaStep(td, loss, loss_imitation, loss_l1, loss_q, loss_pi, grads_phi, td_error,
+                         grads, grads_imitation, grads_l1)
 
     def _jvp_chain(
         self, td: TensorDictBase, expert: TensorDictBase, theta: TensorDictBase, phi: TensorDictBase
     ) -> tuple[torch.Tensor, list[torch.Tensor], torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
         """The two inner steps and the imitation loss, the critic step differentiated in closed form.
+
+        With ``L_Q = reduce_i sum_k (Q_k(s_i, a_i) - y_i)^2`` and ``dy_i / dr_w(s_i) = 1`` (TD(0)),
+        ``dL_meta/dw = 2 lr_in sum_i rho_i (sum_k grad_phi_k Q_k(s_i, a_i) . g_k) dr_w(s_i)/dw`` with
+        ``g = dL_imitation/dphi'`` and ``rho_i`` the weight of sample ``i`` in the reduction.
 
         Returns ``L_Q``, ``grad_phi L_Q``, ``L_pi``, the imitation loss, the cotangent
         ``scale * 2 lr_in rho_i sum_k grad_phi_k Q_k(s_i, a_i) . g_k`` of ``r_w`` (shaped like
@@ -676,12 +670,12 @@ class MetaRewardLoss(LossModule):
         phi_new = phi.empty()
         for key, tensor, grad in zip(keys, phi_list, grads_phi):
             phi_new.set(key, torch.add(tensor.detach(), grad, alpha=-self.lr_inner).requires_grad_(True))
-        # Eq. 13 and 11 as before; g = dL_imitation / dphi' (a double backward through the actor step)
+        # Eq. 13 and 11 with their graphs; g = dL_imitation / dphi' (a double backward through the actor step)
         theta_new, loss_pi = self.inner_actor_step(td, theta, phi_new)
         loss_imitation = self.imitation_loss(expert, theta_new)
         g = _grads_or_zeros(loss_imitation, [phi_new.get(k) for k in keys])
         with torch.no_grad():
-            fused = sac.__dict__["_fused_qvalue"]
+            fused = sac._fused_qvalue
             tangents = phi.empty()
             for key, tangent in zip(keys, g):
                 tangents.set(key, tangent)
@@ -694,7 +688,8 @@ class MetaRewardLoss(LossModule):
     def _sac_losses(
         self, td: TensorDictBase, loss_q: torch.Tensor, grads_phi: list[torch.Tensor]
     ) -> dict[str, torch.Tensor]:
-        """The ordinary SAC losses, reusing ``L_Q(phi, w)`` and its gradient."""
+        """The ordinary SAC losses, reusing ``L_Q(phi, w)`` and its gradient (``loss_qvalue`` is a linear surrogate
+        carrying it); the actor loss sees the critics before their update, as in the published code."""
         sac = self.sac_loss
         phi_real = list(sac.qvalue_network_params.values(True, True))
         loss_qvalue = _linear_surrogate(loss_q, phi_real, grads_phi)

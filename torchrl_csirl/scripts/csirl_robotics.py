@@ -1,8 +1,9 @@
-"""``recipes/csirl_highway.py`` under its former robotics name: ``python recipes/csirl_robotics.py env.task=relocate``.
+"""``recipes/csirl_highway.py`` with ``relocate`` as its default task: ``python recipes/csirl_robotics.py env.task=relocate``.
 
 The same script (one CSIRL script takes every task; the task's family picks the schema,
 :class:`~torchrl_csirl.launch.csirl.CSIRLTaskConfig` for every task but the driving scenes); the one
-difference is the task when the command line names none: ``relocate``. Kept so that older commands run.
+difference is the task when the command line names none: ``relocate``. It accepts every command line that
+``recipes/csirl_highway.py`` accepts.
 """
 from __future__ import annotations
 

@@ -1,11 +1,12 @@
-"""``recipes/imitation_highway.py`` under its former robotics name:
+"""``recipes/imitation_highway.py`` with ``relocate`` as its default task:
 ``python recipes/imitation_robotics.py method=bc env.task=relocate``.
 
 The same script (one baselines script takes every task; the task's family picks the schema,
 :class:`~torchrl_csirl.launch.imitation.ImitationTaskConfig` for every task but the driving scenes); the
 one difference is the task when the command line names none: ``relocate``. Two rows differ from driving
 on a robotics task: ``sac`` learns from the environment's own reward and ``expert`` is the task's expert
-(docs/experts.md); the summary's ``return`` is the paper's metric there. Kept so that older commands run.
+(docs/experts.md); the summary's ``return`` is the paper's metric there. It accepts every command line
+that ``recipes/imitation_highway.py`` accepts.
 """
 from __future__ import annotations
 

@@ -2,7 +2,8 @@
 
 * :class:`StopOnSignals`: while training, the first SIGINT or SIGTERM asks the trainer to stop at
   the end of the current batch (:meth:`~torchrl_csirl.trainers.CSIRLTrainer.request_stop`, then
-  :class:`~torchrl_csirl.trainers.TrainingInterrupted`); a second one stops at once, as before.
+  :class:`~torchrl_csirl.trainers.TrainingInterrupted`); a second one goes to the handler installed before
+  (Python's for Ctrl-C: ``KeyboardInterrupt``) or, where that is not a function, exits at once.
 * :func:`ignoring_interrupts`: a collector worker's environment factory whose worker ignores SIGINT.
   Ctrl-C in a terminal reaches the whole process group; the workers must keep collecting until the
   main process, which owns their shutdown, has finished the batch.
@@ -52,7 +53,7 @@ class StopOnSignals:
         self._previous: dict[int, Any] = {}
 
     def _handle(self, signum: int, frame: Any) -> None:
-        if self.signum is not None:  # the second signal: as before
+        if self.signum is not None:  # the second signal: the handler installed before, else exit
             previous = self._previous.get(signum)
             if callable(previous):
                 previous(signum, frame)

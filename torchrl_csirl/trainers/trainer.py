@@ -259,7 +259,7 @@ class CSIRLTrainer:
         self.updates_in_round = int(counters["updates_in_round"])
         self._update_credit = float(counters["update_credit"])
         self._wall = float(counters["wall_s"])
-        # an older checkpoint kept no process time: its training loop's seconds are the best lower bound
+        # a checkpoint without process time (no elapsed_s): its training loop's seconds are the best lower bound
         self.elapsed_before = float(counters.get("elapsed_s", counters["wall_s"]))
         self._restore_timing(counters)
         missing = set(self._stateful) - set(state["states"])
@@ -271,7 +271,7 @@ class CSIRLTrainer:
 
     def _restore_timing(self, counters: dict[str, Any]) -> None:
         """Collection and update seconds of the runs before this one, so that :attr:`throughput` covers
-        the whole run; a checkpoint without them (older) makes it cover this process's part only."""
+        the whole run; a checkpoint without them makes it cover this process's part only."""
         if "collect_s" in counters and "update_s" in counters:
             self._time_collect = float(counters["collect_s"])
             self._time_update = float(counters["update_s"])

@@ -170,7 +170,7 @@ class MetaRewardUpdate:
         reward_optimizer: optimiser over the reward network.
         expert_buffer: replay buffer of expert transitions (the outer behavioural-cloning batch).
         meta_every: cadence of the meta step (1 = every update, as the paper). Defaults to ``2``
-            (:data:`~torchrl_csirl.hyperparameters.CSIRL_DEFAULTS`, as the recipes; ``1`` before issue 89).
+            (:data:`~torchrl_csirl.hyperparameters.CSIRL_DEFAULTS`, as the recipes).
     """
 
     META_KEYS = ("loss_meta", "loss_imitation", "loss_reward_l1", "intrinsic_reward_mean", "meta_grad_norm",
