@@ -15,9 +15,8 @@ replaced by each value, in order (the last ``each`` varying fastest); a checked 
 verdicts in that order.
 
 The text after a marker (to the next marker, at most :data:`REACH` characters) must hold, in order, each comparison's
-verdict, "beyond seed noise" or "no difference detected" (the first such words after the marker), and after each
-"no difference detected" the next "detectable X" within :data:`DETECTABLE_TOLERANCE` of the computed minimum detectable
-difference.
+verdict, "beyond seed noise" or "no difference detected", and after each "no difference detected" a "detectable X"
+within :data:`DETECTABLE_TOLERANCE` of the computed minimum detectable difference (:func:`verdict_errors`).
 """
 from __future__ import annotations
 
@@ -43,8 +42,9 @@ REACH = 400
 #: how far a printed detectable difference may lie from the computed one (two decimals, rounded)
 DETECTABLE_TOLERANCE = 0.006
 MARKER = re.compile(r"<!--\s*verdict(-family)?\s+(.*?)-->", re.S)
-VERDICT = re.compile(r"(not )?beyond seed noise|no difference detected", re.I)
-DETECTABLE = re.compile(r"detectable (?:of )?([−-]?\d+(?:\.\d+)?)")
+VERDICT = re.compile(r"(?:not\s+)?beyond\s+seed\s+noise|no\s+difference\s+detected", re.I)
+NUMBER = re.compile(r"[−-]?\d+(?:\.\d+)?")
+DETECTABLE = re.compile(r"detectable( [−-]?\d+(?:\.\d+)?(?:(?:,| and|, and) [−-]?\d+\.\d+)*)")
 FENCE = re.compile(r"^(```|~~~).*?^\1", re.S | re.M)
 
 #: words that are no verdict of the rule, where they would pass for one between two seed sets
@@ -145,29 +145,55 @@ def families(page: str) -> list[tuple[Marker, list[SeedComparison | None]]]:
     return [(m, results[i]) for i, m in enumerate(found)]
 
 
+def detectable_values(text: str) -> list[tuple[int, float]]:
+    """``(position, value)`` of every printed detectable difference: "detectable 0.22", "detectable 0.22, 0.20 and 0.51"."""
+    out = []
+    for match in DETECTABLE.finditer(text):
+        for number in NUMBER.finditer(match.group(1)):
+            out.append((match.start(1) + number.start(), float(number.group().replace("−", "-"))))
+    return out
+
+
+def words(match: re.Match) -> str:
+    """The verdict words matched, on one line and in lower case ("not beyond seed noise" is "no difference detected")."""
+    found = " ".join(match.group().split()).lower()
+    return BEYOND_NOISE if found == BEYOND_NOISE else NO_DIFFERENCE
+
+
 def verdict_errors(marker: Marker, comparisons: list[SeedComparison | None]) -> list[str]:
-    """What the text after a checked marker gets wrong against its comparisons (empty: nothing)."""
+    """What the text after a checked marker gets wrong against its comparisons (empty: nothing).
+
+    Each comparison, in order, takes the next verdict words ("beyond seed noise"), or, for "no difference detected",
+    the next printed detectable difference, whose verdict words are the last ones before it (several comparisons
+    may share them: "no difference detected on any of the four (detectable 0.22, 0.20, 0.51 and 0.22)").
+    """
     errors, position = [], 0
+    verdicts = list(VERDICT.finditer(marker.text))
+    detectables = detectable_values(marker.text)
     for (a, b), c in zip(marker.comparisons, comparisons):
+        name = f"{a} - {b}"
         if c is None:
-            errors.append(f"{a} - {b}: fewer than two seeds a side")
+            errors.append(f"{name}: fewer than two seeds a side")
             continue
-        found = VERDICT.search(marker.text, position)
-        if found is None:
-            errors.append(f"{a} - {b}: no verdict words after the marker (expected {c.verdict!r})")
+        numbers = f"{c.difference:+.3f}, t {c.t:.2f}, p {c.p:.3g}, Holm {c.p_holm:.3g} of {c.comparisons}"
+        if c.verdict == BEYOND_NOISE:
+            found = next((v for v in verdicts if v.start() >= position), None)
+            if found is None or words(found) != BEYOND_NOISE:
+                errors.append(f"{name}: {found and found.group()!r} where the rule says {BEYOND_NOISE!r} ({numbers})")
+                break
+            position = found.end()
+            continue
+        shown = next(((at, value) for at, value in detectables if at >= position), None)
+        if shown is None:
+            errors.append(f"{name}: no 'detectable {c.detectable:.2f}' after the marker ({NO_DIFFERENCE}: {numbers})")
             break
-        words = NO_DIFFERENCE if found.group().lower() != BEYOND_NOISE else BEYOND_NOISE
-        position = found.end()
-        if words != c.verdict:
-            errors.append(f"{a} - {b}: {found.group()!r} where the rule says {c.verdict!r} "
-                          f"({c.difference:+.3f}, p {c.p:.3g}, Holm {c.p_holm:.3g} of {c.comparisons})")
-        if c.verdict == NO_DIFFERENCE:
-            shown = DETECTABLE.search(marker.text, position)
-            if shown is None or abs(float(shown.group(1).replace("−", "-")) - c.detectable) > DETECTABLE_TOLERANCE:
-                errors.append(f"{a} - {b}: 'detectable {c.detectable:.2f}' expected after {found.group()!r}, found "
-                              f"{None if shown is None else shown.group()!r}")
-            if shown is not None:
-                position = shown.end()
+        before = [v for v in verdicts if v.start() < shown[0]]
+        if not before or words(before[-1]) == BEYOND_NOISE:
+            errors.append(f"{name}: {words(before[-1]) if before else None!r} before 'detectable {shown[1]}' where the "
+                          f"rule says {NO_DIFFERENCE!r} ({numbers})")
+        if abs(shown[1] - c.detectable) > DETECTABLE_TOLERANCE:
+            errors.append(f"{name}: detectable {shown[1]} printed, {c.detectable:.3f} computed ({numbers})")
+        position = shown[0] + 1
     return errors
 
 
