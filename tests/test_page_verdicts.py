@@ -39,12 +39,14 @@ PAGES = ("README.md", "docs/benchmark.md", *sorted(os.path.relpath(p, ROOT) for 
 BEING_REWRITTEN = ("README.md",)
 #: how far after a marker its verdict may stand
 REACH = 400
-#: how far a printed detectable difference may lie from the computed one (two decimals, rounded)
+#: how far a printed detectable difference may lie from the computed one (two decimals, rounded; a return printed
+#: in whole units may lie half a unit off)
 DETECTABLE_TOLERANCE = 0.006
 MARKER = re.compile(r"<!--\s*verdict(-family)?\s+(.*?)-->", re.S)
 VERDICT = re.compile(r"(?:not\s+)?beyond\s+seed\s+noise|no\s+difference\s+detected", re.I)
-NUMBER = re.compile(r"[−-]?\d+(?:\.\d+)?")
-DETECTABLE = re.compile(r"detectable( [−-]?\d+(?:\.\d+)?(?:(?:,| and|, and) [−-]?\d+\.\d+)*)")
+NUMBER = re.compile(r"[−-]?(?:\d{1,3}(?: \d{3})+|\d+)(?:\.\d+)?")  # "0.22", "23 472"
+DETECTABLE = re.compile(r"detectable( [−-]?(?:\d{1,3}(?: \d{3})+|\d+)(?:\.\d+)?"
+                        r"(?:(?:,| and|, and) [−-]?(?:\d{1,3}(?: \d{3})+|\d+\.\d+))*)")
 FENCE = re.compile(r"^(```|~~~).*?^\1", re.S | re.M)
 
 #: words that are no verdict of the rule, where they would pass for one between two seed sets
@@ -145,12 +147,13 @@ def families(page: str) -> list[tuple[Marker, list[SeedComparison | None]]]:
     return [(m, results[i]) for i, m in enumerate(found)]
 
 
-def detectable_values(text: str) -> list[tuple[int, float]]:
-    """``(position, value)`` of every printed detectable difference: "detectable 0.22", "detectable 0.22, 0.20 and 0.51"."""
+def detectable_values(text: str) -> list[tuple[int, float, int]]:
+    """``(position, value, decimals)`` of every printed detectable difference: "detectable 0.22", "detectable 0.22, 0.20 and 0.51"."""
     out = []
     for match in DETECTABLE.finditer(text):
         for number in NUMBER.finditer(match.group(1)):
-            out.append((match.start(1) + number.start(), float(number.group().replace("−", "-"))))
+            token = number.group().replace("−", "-").replace(" ", "")
+            out.append((match.start(1) + number.start(), float(token), len(token.partition(".")[2])))
     return out
 
 
@@ -183,7 +186,7 @@ def verdict_errors(marker: Marker, comparisons: list[SeedComparison | None]) -> 
                 break
             position = found.end()
             continue
-        shown = next(((at, value) for at, value in detectables if at >= position), None)
+        shown = next((d for d in detectables if d[0] >= position), None)
         if shown is None:
             errors.append(f"{name}: no 'detectable {c.detectable:.2f}' after the marker ({NO_DIFFERENCE}: {numbers})")
             break
@@ -191,7 +194,7 @@ def verdict_errors(marker: Marker, comparisons: list[SeedComparison | None]) -> 
         if not before or words(before[-1]) == BEYOND_NOISE:
             errors.append(f"{name}: {words(before[-1]) if before else None!r} before 'detectable {shown[1]}' where the "
                           f"rule says {NO_DIFFERENCE!r} ({numbers})")
-        if abs(shown[1] - c.detectable) > DETECTABLE_TOLERANCE:
+        if abs(shown[1] - c.detectable) > max(DETECTABLE_TOLERANCE, 0.5 * 10.0**-shown[2] + 1e-9):  # "5 585": 0.5
             errors.append(f"{name}: detectable {shown[1]} printed, {c.detectable:.3f} computed ({numbers})")
         position = shown[0] + 1
     return errors
