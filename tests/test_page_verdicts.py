@@ -45,8 +45,8 @@ DETECTABLE_TOLERANCE = 0.006
 MARKER = re.compile(r"<!--\s*verdict(-family)?\s+(.*?)-->", re.S)
 VERDICT = re.compile(r"(?:not\s+)?beyond\s+seed\s+noise|no\s+difference\s+detected", re.I)
 NUMBER = re.compile(r"[−-]?(?:\d{1,3}(?: \d{3})+|\d+)(?:\.\d+)?")  # "0.22", "23 472"
-DETECTABLE = re.compile(r"detectable( [−-]?(?:\d{1,3}(?: \d{3})+|\d+)(?:\.\d+)?"
-                        r"(?:(?:,| and|, and) [−-]?(?:\d{1,3}(?: \d{3})+|\d+\.\d+))*)")
+DETECTABLE = re.compile(r"detectable(\s+[−-]?(?:\d{1,3}(?: \d{3})+|\d+)(?:\.\d+)?"
+                        r"(?:(?:,|\s+and|,\s+and)\s+[−-]?(?:\d{1,3}(?: \d{3})+|\d+\.\d+))*)")
 FENCE = re.compile(r"^(```|~~~).*?^\1", re.S | re.M)
 
 #: words that are no verdict of the rule, where they would pass for one between two seed sets
@@ -167,8 +167,9 @@ def verdict_errors(marker: Marker, comparisons: list[SeedComparison | None]) -> 
     """What the text after a checked marker gets wrong against its comparisons (empty: nothing).
 
     Each comparison, in order, takes the next verdict words ("beyond seed noise"), or, for "no difference detected",
-    the next printed detectable difference, whose verdict words are the last ones before it (several comparisons
-    may share them: "no difference detected on any of the four (detectable 0.22, 0.20, 0.51 and 0.22)").
+    the next printed detectable difference, whose verdict words are the last ones before it. Consecutive comparisons
+    may share their words: "beyond seed noise on both mazes", "no difference detected on any of the four
+    (detectable 0.22, 0.20, 0.51 and 0.22)".
     """
     errors, position = [], 0
     verdicts = list(VERDICT.finditer(marker.text))
@@ -184,7 +185,7 @@ def verdict_errors(marker: Marker, comparisons: list[SeedComparison | None]) -> 
             if found is None or words(found) != BEYOND_NOISE:
                 errors.append(f"{name}: {found and found.group()!r} where the rule says {BEYOND_NOISE!r} ({numbers})")
                 break
-            position = found.end()
+            position = found.start()  # the next comparisons may share the words: "beyond seed noise on both"
             continue
         shown = next((d for d in detectables if d[0] >= position), None)
         if shown is None:
