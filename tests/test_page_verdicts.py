@@ -61,6 +61,7 @@ FORBIDDEN = {
     "moves no score": re.compile(r"\bmoves? no score\b", re.I),
     "level": re.compile(r"(?<![-\w])level\b", re.I),
 }
+FORBIDDEN = {name: re.compile(p.pattern.replace(" ", r"\s+"), re.I) for name, p in FORBIDDEN.items()}  # across lines
 #: "level" that is no verdict: a function's place in a module, a test's significance level
 NOT_A_VERDICT_LEVEL = re.compile(r"top-level|(?:two-sided|strictest|significance|%)\s+level|level of|level,? 0\.05", re.I)
 #: descriptions, not verdicts: a return a policy reached, the expert's or a flipped cheetah's
