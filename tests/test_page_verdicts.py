@@ -35,8 +35,6 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 #: the pages whose verdict words follow the rule
 PAGES = ("README.md", "docs/benchmark.md", *sorted(os.path.relpath(p, ROOT) for p in glob.glob(
     os.path.join(ROOT, "docs", "studies", "*.md"))), "docs/own-task.md")
-#: pages another change is rewriting: their forbidden words are expected failures until it lands
-BEING_REWRITTEN = ("README.md",)
 #: how far after a marker its verdict may stand
 REACH = 400
 #: how far a printed detectable difference may lie from the computed one (two decimals, rounded; a return printed
@@ -222,9 +220,7 @@ def test_verdict_words_are_the_rules_recomputed_from_the_records(page):
     assert not errors, "\n".join(errors)
 
 
-@pytest.mark.parametrize("page", [pytest.param(p, marks=pytest.mark.xfail(
-    reason="its verdict words are being rewritten elsewhere", strict=False)) if p in BEING_REWRITTEN else p
-    for p in PAGES])
+@pytest.mark.parametrize("page", PAGES)
 def test_no_verdict_words_outside_the_rule(page):
     with open(os.path.join(ROOT, page)) as f:
         text = prose(f.read())
