@@ -13,4 +13,7 @@ $B --methods csirl --scenarios roundabout --seeds 3 4 --output-dir runs/q-round 
 $B --methods csirl --scenarios roundabout --seeds 3 4 --output-dir runs/q-round-bf16 -- collector.total_frames=60000 optim.precision=bf16 $COMMON
 $B --methods csirl csirl-nocur --scenarios PointMaze_Medium-v3 --seeds 3 4 5 6 7 8 9 --output-dir runs/q-pm -- $PM $COMMON
 $B --methods sac gail --scenarios PointMaze_Medium-v3 --seeds 3 4 --output-dir runs/q-pm -- $PM $COMMON
+# merge, CSIRL against CSIRL-B: the spread of CSIRL's five seeds asks for six a side
+$B --methods csirl --scenarios merge --seeds 5 --output-dir runs/q-merge -- $COMMON
+$B --methods csirl-b --scenarios merge --seeds 3 4 5 --output-dir runs/q-merge -- $COMMON
 echo QUEUE DONE
