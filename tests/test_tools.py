@@ -16,7 +16,8 @@ SCRIPTS = sorted(name for name in os.listdir(TOOLS) if name.endswith(".py") and 
 def test_the_analysis_scripts_live_in_tools_and_recipes_holds_what_users_run():
     assert SCRIPTS == ["anchor_records.py", "compare_runs.py", "entropy_bonus_records.py", "health_flag_table.py",
                        "locomotion_probe.py", "matching_route_probe.py",
-                       "meta_gradient_balance.py", "off_demonstrations.py", "plot_curves.py", "point_maze_experts.py", "policy_outcomes.py", "power_table.py",
+                       "meta_gradient_balance.py", "off_demonstrations.py", "plot_curves.py", "point_maze_experts.py", "policy_outcomes.py",
+                       "power_table.py",
                        "record_runs.py",
                        "robotics_outcomes.py", "subgoal_lead_records.py", "summarize_runs.py", "termination_probe.py",
                        "warm_start_probe.py"]
