@@ -21,6 +21,7 @@ import statistics
 import sys
 from dataclasses import dataclass
 
+from torchrl_csirl.launch.provenance import read_provenance
 from torchrl_csirl.launch.verdicts import compare_seeds, detectable_difference, seeds_needed
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -63,12 +64,12 @@ COMPARISONS = (
 )
 
 
-def _score(summary: dict, metric: str, root: str) -> float:
-    value = float(summary[metric])
-    if metric == "return":
-        with open(os.path.join(root, HALFCHEETAH_EXPERT), encoding="utf-8") as f:
-            value /= float(json.load(f)["return"])
-    return value
+def _scale(metric: str, root: str) -> float:
+    """What a record's ``metric`` is divided by: the HalfCheetah expert's test return for ``return``, else 1."""
+    if metric != "return":
+        return 1.0
+    with open(os.path.join(root, HALFCHEETAH_EXPERT), encoding="utf-8") as f:
+        return float(json.load(f)["return"])
 
 
 def _summaries(globs: tuple[str, ...], root: str) -> list[str]:
@@ -77,16 +78,15 @@ def _summaries(globs: tuple[str, ...], root: str) -> list[str]:
 
 def with_provenance(globs: tuple[str, ...], root: str = ROOT) -> int:
     """How many of the records matching ``globs`` hold the ``provenance.json`` a run writes (the code it ran)."""
-    return sum(os.path.exists(os.path.join(os.path.dirname(p), "provenance.json")) for p in _summaries(globs, root))
+    return sum(read_provenance(os.path.dirname(p)) is not None for p in _summaries(globs, root))
 
 
 def seed_scores(globs: tuple[str, ...], metric: str, root: str = ROOT) -> list[float]:
     """The scores of every record matching ``globs`` (each record once, sorted by path)."""
-    paths = _summaries(globs, root)
-    scores = []
-    for path in paths:
+    scale, scores = _scale(metric, root), []
+    for path in _summaries(globs, root):
         with open(path, encoding="utf-8") as f:
-            scores.append(_score(json.load(f), metric, root))
+            scores.append(float(json.load(f)[metric]) / scale)
     return scores
 
 
