@@ -67,7 +67,7 @@ def test_configuration_errors():
     assert (cfg.env.task, cfg.collector.frames_per_batch, cfg.expert.curriculum) == ("antmaze-umaze", 1400, "expert")
     with pytest.raises(ConfigError, match="method: required"):
         load_robotics(["env.task=relocate"])
-    assert load_robotics(["method=bc", "env.task=merge"]).env == {"scenario": "merge"}  # the driving schema
+    assert load_robotics(["method=bc", "env.task=merge"]).env == {"task": "merge", "scenario": "merge"}  # the driving schema
     with pytest.raises(ConfigError, match="model.ego_relative_features=true"):
         load_robotics(["method=bc", "model.ego_relative_features=true"])
     with pytest.raises(ConfigError, match="model.lane_features=true: lanes exist in driving scenes only"):

@@ -143,7 +143,7 @@ def test_a_registered_task_names_its_expert():
     (["env.gym_id=CartPole-v1"], "env.gym_id=CartPole-v1: its action space is Discrete(2)"),
     (["env.gym_id=MountainCar-v9"], "env.gym_id=MountainCar-v9: not a registered gymnasium id"),
     (["env.module=no_such_module_here"], "env.module=no_such_module_here: cannot import it"),
-    ([f"env.gym_id={MOUNTAIN_CAR}", "env.scenario=relocate"], "env.scenario=relocate and env.gym_id="),
+    ([f"env.gym_id={MOUNTAIN_CAR}", "env.scenario=relocate"], "env.task=relocate and env.gym_id="),
 ])
 def test_bad_task_settings_are_one_line(overrides, message):
     with pytest.raises(ConfigError) as err:
@@ -235,7 +235,7 @@ def test_the_csirl_script_configures_every_task_with_its_familys_schema(override
     from torchrl_csirl.launch import csirl
 
     cfg = csirl.load_config(overrides)
-    assert ("task" in cfg.env) == (schema == "CSIRLTaskConfig")
+    assert ("gym_id" in cfg.env) == (schema == "CSIRLTaskConfig")
     assert cfg.model.ego_relative_features == (schema == "CSIRLHighwayConfig")
 
 

@@ -427,7 +427,7 @@ def test_expert_end_at_cuts_a_published_file_where_our_scene_ends(tmp_path):
 @pytest.mark.parametrize(
     "override, message",
     [
-        (["env.scenario=mars"], "env.scenario=mars: unknown task; one of .*highway-fast, hopper, intersection, merge"),
+        (["env.scenario=mars"], "env.task=mars: unknown task; one of .*highway-fast, hopper, intersection, merge"),
         (["collector.total_frames=abc"], "collector.total_frames=abc: must be an integer > 0 or null"),
         (["collector.total_frames=1.5"], "collector.total_frames=1.5: must be an integer > 0 or null"),
         (["csirl.intrinsic=maybe"], "csirl.intrinsic=maybe: must be true or false"),

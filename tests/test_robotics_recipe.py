@@ -54,9 +54,9 @@ def test_configuration_and_data_errors(tmp_path):
     with pytest.raises(ConfigError, match="model.ego_relative_features=true"):
         load_robotics(["model.ego_relative_features=true"])
     # a driving scene, named either way, is configured by the driving schema (one CSIRL script for every task)
-    assert load_robotics(["env.scenario=merge"]).env == {"scenario": "merge"}
-    assert load_robotics(["env.task=merge"]).env == {"scenario": "merge"}
-    with pytest.raises(ConfigError, match="env.scenario=mergee: unknown task \\(did you mean merge\\?\\)"):
+    assert load_robotics(["env.scenario=merge"]).env == {"task": "merge", "scenario": "merge"}
+    assert load_robotics(["env.task=merge"]).env == {"task": "merge", "scenario": "merge"}
+    with pytest.raises(ConfigError, match="env.task=mergee: unknown task \\(did you mean merge\\?\\)"):
         load_robotics(["env.scenario=mergee"])
     with pytest.raises(ConfigError, match="env.task=relocate and env.scenario=antmaze-umaze: the same setting"):
         load_robotics(["env.task=relocate", "env.scenario=antmaze-umaze"])

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import sys
 
-from torchrl_csirl.launch.config import help_requested
+from torchrl_csirl.launch.config import help_requested, parse_command_line
 from torchrl_csirl.launch.csirl import CSIRL_RECIPE, CSIRLHighwayConfig  # noqa: F401 - the schema, for the docs
 from torchrl_csirl.launch.lifecycle import run_recipe
 from torchrl_csirl.launch.run import run_script, write_summary
@@ -31,10 +31,10 @@ __all__ = ["main"]
 
 def main(argv: list[str] | None = None, *, default_task: str | None = None) -> dict[str, object]:
     """Configure, build, train, finish; ``default_task``: the task when the command line names none."""
-    argv = sys.argv[1:] if argv is None else list(argv)
-    if help_requested(argv, __doc__, CSIRL_RECIPE.help_schema(argv, default_task=default_task)):
+    command = parse_command_line(sys.argv[1:] if argv is None else argv)  # the one parse of the command line
+    if command.help and help_requested(command, __doc__, CSIRL_RECIPE.help_schema(command, default_task=default_task)):
         return {}
-    summary = run_recipe(CSIRL_RECIPE, argv, default_task=default_task)
+    summary = run_recipe(CSIRL_RECIPE, command, default_task=default_task)
     print(
         f"{summary['scenario']}: accomplish rate {summary['accomplish_rate']:.3f} "
         f"(success {summary['success_rate']:.2f}) after {summary['frames']} frames / {summary['updates']} updates; "

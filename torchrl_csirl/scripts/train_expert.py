@@ -31,10 +31,10 @@ __all__ = ["main"]
 
 
 def main(argv: list[str] | None = None) -> dict[str, object]:
-    argv = sys.argv[1:] if argv is None else list(argv)
-    if config_lib.help_requested(argv, __doc__, ExpertTrainingConfig):
+    command = config_lib.parse_command_line(sys.argv[1:] if argv is None else argv)  # the one parse
+    if config_lib.help_requested(command, __doc__, ExpertTrainingConfig):
         return {}
-    summary = run_recipe(EXPERT_RECIPE, argv)
+    summary = run_recipe(EXPERT_RECIPE, command)
     demos = f"; {summary['demos_episodes']} demonstrations in {summary['demos_path']}" if "demos_path" in summary else ""
     print(f"{summary['scenario']}: test return {summary['return']:.1f} (success {summary['success_rate']:.2f}) after "
           f"{summary['frames']} frames / {summary['updates']} updates{demos}", file=sys.stderr)
