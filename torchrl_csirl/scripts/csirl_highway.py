@@ -2,14 +2,14 @@
 
 Trains the ensemble-SAC learner with the matching reward toward curricular subgoals and the
 meta-learned intrinsic reward, from the expert demonstrations, and reports the paper's test
-accomplish rate. The task: a driving scene (``env.scenario=merge``, the default, ``roundabout``, ...),
-a robotics or locomotion task (``env.task=relocate``, ``env.scenario=hopper``), any gymnasium id with flat
+accomplish rate. The task: a driving scene (``env.task=merge``, the default, ``roundabout``, ...),
+a robotics or locomotion task (``env.task=relocate``, ``env.task=hopper``), any gymnasium id with flat
 ``Box`` spaces (``env.gym_id=MountainCarContinuous-v0 expert.path=<.npz or minari:<id>>``, with
-``env.features`` and ``env.success``), or one of your own (``env.module=<module> env.scenario=<name>``,
+``env.features`` and ``env.success``), or one of your own (``env.module=<module> env.task=<name>``,
 docs/own-task.md). The task's family picks the configuration schema: the driving scenes' (presets,
 ego-relative inputs) or every other task's (``expert.curriculum=expert``, ``model.ego_relative_features=false``,
 ``collector.frames_per_batch=1400``). ``--help`` lists every key (with a task named, that task's schema),
-e.g. ``env.scenario=roundabout seed=1 csirl.intrinsic=false``; ``preset=paper`` is the published procedure
+e.g. ``env.task=roundabout seed=1 csirl.intrinsic=false``; ``preset=paper`` is the published procedure
 on the driving scenes. See docs/recipes.md.
 
 The run directory (``logger.output_dir``/<name>) receives ``config.yaml``, ``metrics.jsonl``,

@@ -6,7 +6,7 @@ the CSIRL recipe's budget, networks, input features, demonstrations and evaluati
 outputs. Methods: ``sac`` (SAC on the true reward: the driving scenes' distance reward, another task's
 own reward), ``bc`` (behavioural cloning), ``gail``, ``dac``, ``valuedice``, ``sqil``, ``iqlearn``, and
 ``random`` and ``expert`` (reference rows, no training); CSIRL itself is ``recipes/csirl_highway.py``.
-The task is named as for CSIRL (``env.scenario``, ``env.task``, ``env.gym_id``, ``env.module``) and its
+The task is named as for CSIRL (``env.task``, ``env.gym_id``, ``env.module``) and its
 family picks the schema (:class:`~torchrl_csirl.launch.imitation.ImitationTaskConfig` for every task but
 the driving scenes). ``--help`` lists every key. See docs/benchmark.md.
 

@@ -9,7 +9,7 @@ seed ``demos.seed`` and written as demonstrations (``demos.path``, default
 ``<run dir>/demos_<episodes>.npz``; ``demos.minari_id`` also writes a local Minari dataset), the file
 every imitation script reads with ``expert.path=``.
 
-The task: ``env.gym_id=<id>`` (any gymnasium id with flat ``Box`` spaces), ``env.scenario=<name>`` (a
+The task: ``env.gym_id=<id>`` (any gymnasium id with flat ``Box`` spaces), ``env.task=<name>`` (a
 robotics task, ``ant-goal``, or with ``env.module=<module>`` a task of your own). A batch must cover an
 episode per environment: ``collector.frames_per_batch`` >= workers x the episode limit.
 
