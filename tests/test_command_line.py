@@ -59,7 +59,7 @@ def test_the_raw_command_line_is_parsed_once_per_run(monkeypatch, tmp_path, rest
     with pytest.raises(_Built):
         csirl_highway.main(argv)
     assert len(calls) == 1, f"the raw key=value list was parsed {len(calls)} times: {calls}"
-    saved = built[0]  # the run's config.yaml: the setting and its former name's mirror
+    saved = built[0]  # the run's config.yaml: the setting and its deprecated name's mirror
     assert saved.env.task == "roundabout" and saved.env.scenario == "roundabout"
 
 

@@ -28,8 +28,8 @@ TASK = "ant-goal"
 
 @dataclass
 class AntEnvConfig:
-    task: str = option(TASK, choices=(TASK,), help="the training task (chained-hop goal reaching; env.scenario: its "
-                                                   "former name)")
+    task: str = option(TASK, choices=(TASK,), help="the training task (chained-hop goal reaching; env.scenario: deprecated "
+                                                   "spelling)")
 
 
 @dataclass

@@ -87,7 +87,7 @@ class ConfigError(ValueError):
 # ---------------------------------------------------------------------------------------- shared sections
 @dataclass
 class EnvConfig:
-    task: str = option("merge", choices=driving_scenes, help="the driving scene (env.scenario: its former name)")
+    task: str = option("merge", choices=driving_scenes, help="the driving scene (env.scenario: deprecated spelling)")
 
 
 @dataclass
@@ -202,8 +202,8 @@ def preset_names(config_dir: str) -> tuple[str, ...]:
     return tuple(dict.fromkeys(["default", *found]))
 
 
-#: the keys a command line may still spell by their former names: ``former -> the setting``
-FORMER_KEYS = {"env.scenario": "env.task"}
+#: the keys a command line may still spell by their deprecated names: ``deprecated -> the setting``
+DEPRECATED_KEYS = {"env.scenario": "env.task"}
 
 
 @dataclass(frozen=True)
@@ -211,7 +211,7 @@ class CommandLine:
     """A command line parsed once (:func:`parse_command_line`): what every loader reads instead of the raw strings.
 
     Attributes:
-        values: ``{key: value}``, the values as written (the last one of a key wins), former key names mapped.
+        values: ``{key: value}``, the values as written (the last one of a key wins), deprecated key names mapped.
         tree: the same as an OmegaConf tree, the values read as YAML (``null``, ``true``, ``3``).
         help: whether ``--help`` / ``-h`` was given.
     """
@@ -261,11 +261,11 @@ def _yaml_value(key: str, value: str) -> Any:
 def parse_command_line(argv: Iterable[str] | CommandLine | None) -> CommandLine:
     """``key=value`` strings (and ``--help``) as a :class:`CommandLine`: the one parse of a run's command line.
 
-    A former key name (:data:`FORMER_KEYS`: ``env.scenario``) is mapped onto its setting (``env.task``) with a
+    A deprecated key name (:data:`DEPRECATED_KEYS`: ``env.scenario``) is mapped onto its setting (``env.task``) with a
     ``FutureWarning``. A :class:`CommandLine` is returned as it is.
 
     Raises:
-        ConfigError: an item not of the form ``key=value``, or a former name and its setting naming different values.
+        ConfigError: an item not of the form ``key=value``, or a deprecated name and its setting naming different values.
 
     Examples:
         >>> parse_command_line(["env.gym_id=Pendulum-v1", "checkpoint.resume=runs/a=b"]).values
@@ -276,7 +276,7 @@ def parse_command_line(argv: Iterable[str] | CommandLine | None) -> CommandLine:
     items = list(argv or [])
     flags = [a for a in items if a in ("--help", "-h")]
     values: dict[str, str] = {}
-    former: dict[str, tuple[str, str]] = {}  # the setting -> (its former name, the value given under it)
+    deprecated: dict[str, tuple[str, str]] = {}  # the setting -> (its deprecated name, the value given under it)
     current: dict[str, str] = {}  # the settings given under their own name -> the value
     for item in items:
         if item in flags:
@@ -284,15 +284,15 @@ def parse_command_line(argv: Iterable[str] | CommandLine | None) -> CommandLine:
         key, sep, value = item.partition("=")
         if not sep or not key:
             raise ConfigError(f"{item}: not of the form key=value (e.g. env.task=merge)")
-        if key in FORMER_KEYS:
-            warnings.warn(f"{key}= is deprecated: use {FORMER_KEYS[key]}={value}", FutureWarning, stacklevel=2)
-            former[FORMER_KEYS[key]] = (key, value)
-            key = FORMER_KEYS[key]
+        if key in DEPRECATED_KEYS:
+            warnings.warn(f"{key}= is deprecated: use {DEPRECATED_KEYS[key]}={value}", FutureWarning, stacklevel=2)
+            deprecated[DEPRECATED_KEYS[key]] = (key, value)
+            key = DEPRECATED_KEYS[key]
         else:
             current[key] = value
         values.pop(key, None)
         values[key] = value
-    for key, (name, value) in former.items():
+    for key, (name, value) in deprecated.items():
         if current.get(key, value) != value:
             raise ConfigError(f"{key}={current[key]} and {name}={value}: the same setting, give one of them")
     return CommandLine(values, _dotlist_tree(values), bool(flags))
@@ -305,7 +305,7 @@ def parse_overrides(overrides: list[str]) -> DictConfig:
 
 def override_strings(overrides: list[str] | None) -> dict[str, str]:
     """``key=value`` strings as ``{key: value}``, the values as written (the last one of a key wins), without the
-    mapping of former names (:func:`parse_command_line` is the run's parse).
+    mapping of deprecated names (:func:`parse_command_line` is the run's parse).
 
     Examples:
         >>> override_strings(["env.gym_id=Pendulum-v1", "checkpoint.resume=runs/a=b"])
@@ -315,15 +315,15 @@ def override_strings(overrides: list[str] | None) -> dict[str, str]:
 
 
 def current_names(saved: DictConfig) -> DictConfig:
-    """A saved configuration with its former key names (:data:`FORMER_KEYS`) read as their settings: a run saved
+    """A saved configuration with its deprecated key names (:data:`DEPRECATED_KEYS`) read as their settings: a run saved
     with ``env.scenario`` only resumes as ``env.task``; the mirror a loaded configuration carries is dropped.
 
     Examples:
         >>> current_names(OmegaConf.create({"env": {"scenario": "merge"}})).env
         {'task': 'merge'}
     """
-    for former, key in FORMER_KEYS.items():
-        section, _, leaf = former.rpartition(".")
+    for name, key in DEPRECATED_KEYS.items():
+        section, _, leaf = name.rpartition(".")
         parent = OmegaConf.select(saved, section)
         if parent is None or leaf not in parent:
             continue
@@ -334,11 +334,11 @@ def current_names(saved: DictConfig) -> DictConfig:
     return saved
 
 
-def with_former_names(cfg: DictConfig) -> DictConfig:
-    """``cfg`` with each former key name (``env.scenario``) holding its setting's value: read-only mirrors for the
-    code and the saved runs that read the former name (the command line and the schema know one name)."""
-    for former, key in FORMER_KEYS.items():
-        section, _, leaf = former.rpartition(".")
+def with_deprecated_names(cfg: DictConfig) -> DictConfig:
+    """``cfg`` with each deprecated key name (``env.scenario``) holding its setting's value: read-only mirrors for the
+    code and the saved runs that read the deprecated name (the command line and the schema know one name)."""
+    for name, key in DEPRECATED_KEYS.items():
+        section, _, leaf = name.rpartition(".")
         parent = OmegaConf.select(cfg, section)
         if parent is not None and key.rpartition(".")[2] in parent:
             with open_dict(parent):
@@ -470,7 +470,7 @@ def _merge_and_validate(schema: type, base: DictConfig, layers: list[DictConfig]
         except OmegaConfBaseException as err:
             raise ConfigError(_explain(schema, err, source)) from None
     validate(cfg, schema)
-    return with_former_names(cfg)
+    return with_deprecated_names(cfg)
 
 
 def _explain(schema: type, err: OmegaConfBaseException, source: str | None) -> str:
@@ -710,7 +710,7 @@ def describe(schema: type, prefix: str = "") -> list[str]:
 
     Examples:
         >>> describe(EnvConfig)
-        ['task = merge  # one of highway-fast, intersection, merge, roundabout; the driving scene (env.scenario: its former name)']
+        ['task = merge  # one of highway-fast, intersection, merge, roundabout; the driving scene (env.scenario: deprecated spelling)']
     """
     return [f"{r.key} = {r.default}  # {r.allowed}" + (f"; {r.help}" if r.help else "")
             for r in describe_rows(schema, prefix)]

@@ -52,7 +52,7 @@ def expert_task_choices() -> tuple[str, ...]:
 class ExpertEnvConfig(RoboticsEnvConfig):
     task: str = option(TASK, choices=expert_task_choices,
                        help="the task: a robotics task, ant-goal, one of your own (env.module), or env.gym_id's "
-                            "(env.scenario: its former name)")
+                            "(env.scenario: deprecated spelling)")
 
 
 @dataclass

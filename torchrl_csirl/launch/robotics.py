@@ -42,7 +42,7 @@ def task_choices() -> tuple[str, ...]:
 class RoboticsEnvConfig:
     task: str = option("relocate", choices=task_choices,
                        help="the task: a robotics task, one of your own (env.module), or env.gym_id's "
-                            "(env.scenario: its former name)")
+                            "(env.scenario: deprecated spelling)")
     gym_id: Optional[str] = option(
         None, help="any gymnasium id with flat Box spaces (e.g. MountainCarContinuous-v0): the task, by that name")
     features: Optional[str] = option(
@@ -83,7 +83,7 @@ class RoboticsSections:
 
 def _saved_env(run_dir: str | None) -> dict[str, str]:
     """A run directory's saved ``env`` section as ``{env.<key>: value as written}`` (empty: no run, or no such file);
-    a saved ``env.scenario`` (the former name) read as ``env.task``."""
+    a saved ``env.scenario`` (the deprecated name) read as ``env.task``."""
     if run_dir is None or not os.path.isfile(os.path.join(run_dir, "config.yaml")):
         return {}
     env = OmegaConf.to_container(OmegaConf.load(os.path.join(run_dir, "config.yaml"))).get("env") or {}
