@@ -251,7 +251,7 @@ def test_diagnose_refuses_a_folder_that_is_not_a_run(tmp_path):
 def test_route_opening_names_a_straight_line_target_across_the_antmazes_wall(target, subgoal, flagged):
     """AntMaze U-maze's shipped demonstrations: with the subgoal past the U's turn, the straight line to it (``final``)
     charges the route's first leg (it leads away from the goal); along the expert's path (``path``) it pays."""
-    cfg = csirl.load_config(["env.scenario=antmaze-umaze", f"csirl.matching_target={target}"])
+    cfg = csirl.load_config(["env.task=antmaze-umaze", f"csirl.matching_target={target}"])
     spec = resolve_scenario("antmaze-umaze")
     demos = load_experts(cfg.expert, spec)
     curriculum = demos.trajectory_observations(0, include_final=True)
@@ -268,7 +268,7 @@ def test_route_opening_names_a_straight_line_target_across_the_antmazes_wall(tar
 def _halfcheetah_demonstration() -> tuple[torch.Tensor, object]:
     """The HalfCheetah's shipped demonstration's observations ``[L, D]`` and the task's spec."""
     spec = resolve_scenario("halfcheetah")
-    cfg = csirl.CSIRL_RECIPE.load_config(["env.scenario=halfcheetah"])
+    cfg = csirl.CSIRL_RECIPE.load_config(["env.task=halfcheetah"])
     demos = load_experts(cfg.expert, spec)
     return demos.trajectory(0)["observation"].reshape(-1, spec.obs_dim).float(), spec
 

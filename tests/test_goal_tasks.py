@@ -45,7 +45,7 @@ def test_a_gymnasium_robotics_id_is_found_without_env_module():
             "assert 'gymnasium_robotics' not in sys.modules\n"
             f"print(prepare_task(['env.gym_id={UMAZE}'])[-1], list(registry._TASK_MODULES))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
-    assert out.strip().splitlines()[-1] == f"env.scenario={UMAZE} ['gymnasium_robotics']"
+    assert out.strip().splitlines()[-1] == f"env.task={UMAZE} ['gymnasium_robotics']"
 
 
 def test_an_unknown_id_is_one_line():
@@ -119,7 +119,7 @@ def test_spawned_collector_workers_find_the_id(tmp_path):
 
 
 def test_prepare_task_names_the_id_as_the_scenario():
-    assert prepare_task([f"env.gym_id={MEDIUM}"]) == [f"env.gym_id={MEDIUM}", f"env.scenario={MEDIUM}"]
+    assert prepare_task([f"env.gym_id={MEDIUM}"]) == [f"env.gym_id={MEDIUM}", f"env.task={MEDIUM}"]
     assert TASKS[MEDIUM].max_steps == 600
 
 

@@ -53,7 +53,7 @@ def test_the_expert_row_drives_the_task_expert():
 def test_sac_learns_from_the_task_reward_on_robotics_and_the_progress_reward_on_driving():
     robotics = load_robotics(["method=sac", "env.task=relocate"])
     assert imitation.true_reward_transforms(robotics, resolve_scenario("relocate"), torch.device("cpu")) == []
-    driving = imitation.load_config(["method=sac", "env.scenario=merge"])
+    driving = imitation.load_config(["method=sac", "env.task=merge"])
     names = [type(t).__name__ for t in imitation.true_reward_transforms(
         driving, resolve_scenario("merge"), torch.device("cpu"))]
     assert names == ["ProgressReward", "CombineRewards"]
@@ -63,11 +63,11 @@ def test_sac_learns_from_the_task_reward_on_robotics_and_the_progress_reward_on_
 
 
 def test_configuration_errors():
-    cfg = load_robotics(["method=dac", "env.scenario=antmaze-umaze"])
+    cfg = load_robotics(["method=dac", "env.task=antmaze-umaze"])
     assert (cfg.env.task, cfg.collector.frames_per_batch, cfg.expert.curriculum) == ("antmaze-umaze", 1400, "expert")
     with pytest.raises(ConfigError, match="method: required"):
         load_robotics(["env.task=relocate"])
-    assert load_robotics(["method=bc", "env.task=merge"]).env == {"scenario": "merge"}  # the driving schema
+    assert load_robotics(["method=bc", "env.task=merge"]).env == {"task": "merge", "scenario": "merge"}  # the driving schema
     with pytest.raises(ConfigError, match="model.ego_relative_features=true"):
         load_robotics(["method=bc", "model.ego_relative_features=true"])
     with pytest.raises(ConfigError, match="model.lane_features=true: lanes exist in driving scenes only"):

@@ -103,7 +103,7 @@ def test_valuedice_reads_standardised_states_where_asked_and_says_where_it_canno
     from torchrl_csirl.modules import StandardizeFeatures, find_standardization
 
     cfg = load_config([
-        "method=valuedice", "env.scenario=halfcheetah", "valuedice.normalize_states=true", "expert.num_trajectories=1", *TINY,
+        "method=valuedice", "env.task=halfcheetah", "valuedice.normalize_states=true", "expert.num_trajectories=1", *TINY,
         f"logger.output_dir={tmp_path}"])
     run = make_trainer(cfg, str(tmp_path / "run"))
     method = run.parts.method
@@ -118,7 +118,7 @@ def test_valuedice_reads_standardised_states_where_asked_and_says_where_it_canno
     obs = TensorDict({"observation": observations[:3]}, [3])
     with torch.no_grad():
         torch.testing.assert_close(method.policy.module[0](obs.clone())["loc"], load_policy(path).module[0](obs.clone())["loc"])
-    driving = load_config(["method=valuedice", "env.scenario=merge", "valuedice.normalize_states=true"])
+    driving = load_config(["method=valuedice", "env.task=merge", "valuedice.normalize_states=true"])
     with pytest.raises(ConfigError, match="valuedice.normalize_states=true: standardised states need an input map .* "
                                           "got EgoRelativeFeatures"):
         make_trainer(driving, str(tmp_path / "driving"))
@@ -142,7 +142,7 @@ def test_the_hopper_cells_of_dac_and_valuedice_enter_the_papers_single_absorbing
     cheetah = split_overrides(table_overrides("halfcheetah"), ["dac", "valuedice"], "halfcheetah")
     assert not any("absorbing" in o for o in cheetah["dac"] + cheetah["valuedice"])
     cfg = load_config([
-        "method=valuedice", "env.scenario=hopper", *hopper["valuedice"], *TINY, f"logger.output_dir={tmp_path}"])
+        "method=valuedice", "env.task=hopper", *hopper["valuedice"], *TINY, f"logger.output_dir={tmp_path}"])
     method = make_trainer(cfg, str(tmp_path / "run")).parts.method
     assert method.states["loss"].self_loops_per_termination == 10
     norm = find_standardization(method.states["loss"].nu_network)
@@ -158,7 +158,7 @@ def test_an_expert_its_demonstrations_then_csirl_and_a_baseline_on_the_hopper(tm
     from torchrl_csirl.data import load_minari_dataset
 
     monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "minari"))
-    expert = train_expert.main(["env.scenario=hopper", *TINY, "demos.episodes=2", "demos.minari_id=csirl/hopper/tiny-v0",
+    expert = train_expert.main(["env.task=hopper", *TINY, "demos.episodes=2", "demos.minari_id=csirl/hopper/tiny-v0",
                                 f"logger.output_dir={tmp_path}"])
     assert expert["scenario"] == "hopper" and expert["demos_episodes"] == 2
     assert load_minari_dataset("csirl/hopper/tiny-v0").num_trajectories == 2
@@ -196,7 +196,7 @@ def test_an_expert_run_stops_at_its_target_and_keeps_demonstrations_above_a_retu
     """eval.stop_at_return ends training at the first evaluation that reaches it (the final test and the
     demonstrations follow); demos.min_return keeps only episodes earning that much."""
     budget = [o for o in TINY if not o.startswith("collector.total_frames")]
-    summary = train_expert.main(["env.scenario=hopper", *budget, "collector.total_frames=2000", "updates_per_round=10",
+    summary = train_expert.main(["env.task=hopper", *budget, "collector.total_frames=2000", "updates_per_round=10",
                                  "eval.stop_at_return=-1000000", "demos.episodes=2", "demos.min_return=-1000000",
                                  f"logger.output_dir={tmp_path}"])
     assert summary["frames"] == 200 and summary["demos_episodes"] == 2  # the first evaluation: the first batch's 20 updates
@@ -207,7 +207,7 @@ def test_an_expert_run_stops_at_its_target_and_keeps_demonstrations_above_a_retu
     critic = sampled["critic"]  # SAC's two critics along the shipped demonstration, against its task reward
     assert critic["critics"] == 2 and list(critic["q_expert"]) == list(critic["task_return_to_go_expert"]) == ["0", "250", "500", "750"]
     with pytest.raises(ValueError, match="only 0 of 1 episodes earned at least 1000000.0 in 10 tries"):
-        train_expert.main(["env.scenario=hopper", *budget, "collector.total_frames=200", "demos.episodes=1",
+        train_expert.main(["env.task=hopper", *budget, "collector.total_frames=200", "demos.episodes=1",
                            "demos.min_return=1000000", f"logger.output_dir={tmp_path}"])
 
 
@@ -215,7 +215,7 @@ def test_an_expert_run_can_finish_with_its_best_evaluation(tmp_path):
     """eval.keep_best: the final test, policy.pt and the demonstrations use the best validation's weights
     (best_policy.pt); the checkpoint keeps the last weights, to resume from."""
     budget = [o for o in TINY if not o.startswith("collector.total_frames")]
-    summary = train_expert.main(["env.scenario=hopper", *budget, "collector.total_frames=1000", "updates_per_round=10",
+    summary = train_expert.main(["env.task=hopper", *budget, "collector.total_frames=1000", "updates_per_round=10",
                                  "eval.keep_best=true", "demos.episodes=1", f"logger.output_dir={tmp_path}"])
     run_dir = summary["run_dir"]
     rows = [json.loads(line) for line in open(f"{run_dir}/metrics.jsonl")]
@@ -312,7 +312,7 @@ def test_valuedice_exploration_noise_reaches_the_collector_not_the_evaluation(tm
     from torchrl_csirl.modules import MeanActionGaussianNoise
 
     cfg = load_config([
-        "method=valuedice", "env.scenario=hopper", "valuedice.exploration_noise=0.1", *TINY,
+        "method=valuedice", "env.task=hopper", "valuedice.exploration_noise=0.1", *TINY,
         f"logger.output_dir={tmp_path}"])
     run = make_trainer(cfg, str(tmp_path / "run"))
     try:

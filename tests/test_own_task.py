@@ -70,7 +70,7 @@ def test_a_registered_task_trains_a_baseline_by_name(tmp_path):
 
     path = str(tmp_path / "pendulum.npz")
     record_demonstrations(own_task_module.NAME, swing, episodes=3).save(path)
-    summary = imitation_robotics.main(["method=bc", "env.module=own_task_module", f"env.scenario={own_task_module.NAME}",
+    summary = imitation_robotics.main(["method=bc", "env.module=own_task_module", f"env.task={own_task_module.NAME}",
                                        f"expert.path={path}", *TINY, f"logger.output_dir={tmp_path}"])
     assert summary["scenario"] == own_task_module.NAME and summary["success_rate"] == 0.0
     assert summary["frames"] == 400 and summary["updates"] > 0
@@ -143,7 +143,7 @@ def test_a_registered_task_names_its_expert():
     (["env.gym_id=CartPole-v1"], "env.gym_id=CartPole-v1: its action space is Discrete(2)"),
     (["env.gym_id=MountainCar-v9"], "env.gym_id=MountainCar-v9: not a registered gymnasium id"),
     (["env.module=no_such_module_here"], "env.module=no_such_module_here: cannot import it"),
-    ([f"env.gym_id={MOUNTAIN_CAR}", "env.scenario=relocate"], "env.scenario=relocate and env.gym_id="),
+    ([f"env.gym_id={MOUNTAIN_CAR}", "env.task=relocate"], "env.task=relocate and env.gym_id="),
 ])
 def test_bad_task_settings_are_one_line(overrides, message):
     with pytest.raises(ConfigError) as err:
@@ -157,7 +157,7 @@ def test_demonstrations_must_exist_and_fit_the_task(tmp_path, car_demos):
         csirl_robotics.main([f"env.gym_id={MOUNTAIN_CAR}", *TINY, f"logger.output_dir={tmp_path}"])
     with pytest.raises(ExpertDataError, match="observations of size 2 and actions of size 1, but 'relocate' has 39 and 30"):
         csirl_robotics.main(["env.task=relocate", f"expert.path={car_demos}", *TINY, f"logger.output_dir={tmp_path}"])
-    assert cfg.env.scenario == MOUNTAIN_CAR and not os.listdir(tmp_path)  # no run directory left behind
+    assert cfg.env.task == MOUNTAIN_CAR and not os.listdir(tmp_path)  # no run directory left behind
 
 
 def test_a_batch_that_would_cut_episodes_is_refused(tmp_path):
@@ -228,19 +228,19 @@ def test_train_expert_trains_sac_on_a_gymnasium_id_and_writes_its_demonstrations
 
 
 @pytest.mark.parametrize("overrides, schema", [
-    ([f"env.gym_id={MOUNTAIN_CAR}"], "CSIRLTaskConfig"), (["env.scenario=relocate"], "CSIRLTaskConfig"),
-    (["env.task=hopper"], "CSIRLTaskConfig"), (["env.scenario=roundabout"], "CSIRLHighwayConfig"), ([], "CSIRLHighwayConfig"),
+    ([f"env.gym_id={MOUNTAIN_CAR}"], "CSIRLTaskConfig"), (["env.task=relocate"], "CSIRLTaskConfig"),
+    (["env.task=hopper"], "CSIRLTaskConfig"), (["env.task=roundabout"], "CSIRLHighwayConfig"), ([], "CSIRLHighwayConfig"),
 ])
 def test_the_csirl_script_configures_every_task_with_its_familys_schema(overrides, schema):
     from torchrl_csirl.launch import csirl
 
     cfg = csirl.load_config(overrides)
-    assert ("task" in cfg.env) == (schema == "CSIRLTaskConfig")
+    assert ("gym_id" in cfg.env) == (schema == "CSIRLTaskConfig")
     assert cfg.model.ego_relative_features == (schema == "CSIRLHighwayConfig")
 
 
 def test_the_console_command_trains_csirl_on_the_hopper(tmp_path):
-    """``torchrl-csirl train env.scenario=hopper`` (here as ``python -m torchrl_csirl``, the same entry point)."""
+    """``torchrl-csirl train env.task=hopper`` (here as ``python -m torchrl_csirl``, the same entry point)."""
     import subprocess
     import sys
 
@@ -248,7 +248,7 @@ def test_the_console_command_trains_csirl_on_the_hopper(tmp_path):
 
     with open(os.path.join(os.path.dirname(__file__), "..", "pyproject.toml"), "rb") as f:
         assert tomllib.load(f)["project"]["scripts"]["torchrl-csirl"] == "torchrl_csirl.scripts.cli:main"
-    command = [sys.executable, "-m", "torchrl_csirl", "train", "env.scenario=hopper", "csirl.updates_per_round=10",
+    command = [sys.executable, "-m", "torchrl_csirl", "train", "env.task=hopper", "csirl.updates_per_round=10",
                "csirl.num_qvalue_nets=2", "replay_buffer.batch_size=32", *TINY, f"logger.output_dir={tmp_path}"]
     unshipped = subprocess.run(command, capture_output=True, text=True, timeout=300)  # TINY asks for 3 trajectories
     assert unshipped.returncode == 2 and unshipped.stderr.strip().splitlines()[-1].startswith(

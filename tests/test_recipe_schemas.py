@@ -71,7 +71,7 @@ def test_every_task_has_the_published_procedure_as_a_preset():
     assert paper.collector.frames_per_batch == default.collector.frames_per_batch  # the task's batch
     assert csirl.total_frames(paper, curriculum_length=280) == 280 * (20000 + 1280)
     # the command line goes over the preset
-    assert load(["env.scenario=halfcheetah", "preset=paper", "csirl.meta_every=3"]).csirl.meta_every == 3
+    assert load(["env.task=halfcheetah", "preset=paper", "csirl.meta_every=3"]).csirl.meta_every == 3
     with pytest.raises(config.ConfigError, match="preset=fast: must be one of default, paper"):
         load(["env.task=antmaze-umaze", "preset=fast"])
 
@@ -84,19 +84,19 @@ def test_a_scenarios_own_defaults_go_under_the_preset_and_the_command_line(tmp_p
     (key, value), *_ = scenes["intersection"].items()
     section, leaf = key.split(".")
     # the scene's value, where the schema's default differs from it
-    assert config.flatten_config(csirl.load_config(["env.scenario=intersection"]))[key] == value
-    assert config.flatten_config(csirl.load_config(["env.scenario=merge"]))[key] != value
+    assert config.flatten_config(csirl.load_config(["env.task=intersection"]))[key] == value
+    assert config.flatten_config(csirl.load_config(["env.task=merge"]))[key] != value
     # a named preset and the command line go over it
-    assert csirl.load_config(["env.scenario=intersection", "preset=paper"]).model.lane_features is False
+    assert csirl.load_config(["env.task=intersection", "preset=paper"]).model.lane_features is False
     flipped = not value if isinstance(value, bool) else None
     if flipped is not None:
-        cli = csirl.load_config(["env.scenario=intersection", f"{key}={str(flipped).lower()}"])
+        cli = csirl.load_config(["env.task=intersection", f"{key}={str(flipped).lower()}"])
         assert getattr(getattr(cli, section), leaf) is flipped
     # an unknown key in a scene file is one line naming it
     (tmp_path / "scene").mkdir()
     (tmp_path / "scene" / "merge.yaml").write_text("model:\n  lane_featurs: true\n")
     with pytest.raises(config.ConfigError, match="model.lane_featurs: unknown configuration key"):
-        config.load_config(csirl.CSIRLHighwayConfig, ["env.scenario=merge"], str(tmp_path))
+        config.load_config(csirl.CSIRLHighwayConfig, ["env.task=merge"], str(tmp_path))
 
 
 def test_a_tasks_own_defaults_apply_to_that_task_alone_and_go_under_the_command_line():
@@ -112,4 +112,4 @@ def test_a_tasks_own_defaults_apply_to_that_task_alone_and_go_under_the_command_
         assert recipe.load_config([f"{spelling}=halfcheetah"]).replay_buffer.expert_fraction == 0.0
     assert recipe.load_config(["env.task=halfcheetah", "replay_buffer.expert_fraction=0.25"]).replay_buffer.expert_fraction == 0.25
     assert recipe.load_config(["env.task=hopper"]).replay_buffer.expert_fraction == 0.25
-    assert recipe.load_config(["env.scenario=merge"]).replay_buffer.expert_fraction == 0.25
+    assert recipe.load_config(["env.task=merge"]).replay_buffer.expert_fraction == 0.25

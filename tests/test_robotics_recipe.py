@@ -44,7 +44,7 @@ def test_relocate_end_to_end_from_the_shipped_dapg_data(tmp_path):
 
 
 def test_antmaze_end_to_end_from_the_shipped_ant_data(tmp_path):
-    summary = csirl_robotics.main(["env.scenario=antmaze-umaze", *TINY, f"logger.output_dir={tmp_path}"])
+    summary = csirl_robotics.main(["env.task=antmaze-umaze", *TINY, f"logger.output_dir={tmp_path}"])
     _check_run(summary, "antmaze-umaze")
     first = load_expert_demonstrations("antmaze-umaze", 1)
     assert summary["curriculum_length"] == int(first.lengths[0]) + 1  # the first trajectory and its last state
@@ -54,16 +54,17 @@ def test_configuration_and_data_errors(tmp_path):
     with pytest.raises(ConfigError, match="model.ego_relative_features=true"):
         load_robotics(["model.ego_relative_features=true"])
     # a driving scene, named either way, is configured by the driving schema (one CSIRL script for every task)
-    assert load_robotics(["env.scenario=merge"]).env == {"scenario": "merge"}
-    assert load_robotics(["env.task=merge"]).env == {"scenario": "merge"}
-    with pytest.raises(ConfigError, match="env.scenario=mergee: unknown task \\(did you mean merge\\?\\)"):
-        load_robotics(["env.scenario=mergee"])
+    assert load_robotics(["env.task=merge"]).env == {"task": "merge", "scenario": "merge"}
+    with pytest.warns(FutureWarning, match="env.scenario"):
+        assert load_robotics(["env.scenario=merge"]).env == {"task": "merge", "scenario": "merge"}
+    with pytest.raises(ConfigError, match="env.task=mergee: unknown task \\(did you mean merge\\?\\)"):
+        load_robotics(["env.task=mergee"])
     with pytest.raises(ConfigError, match="env.task=relocate and env.scenario=antmaze-umaze: the same setting"):
         load_robotics(["env.task=relocate", "env.scenario=antmaze-umaze"])
-    assert load_robotics(["env.scenario=relocate"]).env.task == "relocate"
+    assert load_robotics(["env.task=relocate"]).env.task == "relocate"
     # a dataset of another task: one error naming both dimensions
     relocate_data = os.path.join(os.path.dirname(builders.__file__), "..", "..", "torchrl_csirl", "data", "experts",
                                  "relocate", "expert_25.npz")
-    cfg = load_robotics(["env.scenario=antmaze-umaze", f"expert.path={os.path.abspath(relocate_data)}"])
+    cfg = load_robotics(["env.task=antmaze-umaze", f"expert.path={os.path.abspath(relocate_data)}"])
     with pytest.raises(ExpertDataError, match="observations of size 39 and actions of size 30, but 'antmaze-umaze' has 29 and 8"):
         builders.load_experts(cfg.expert, resolve_scenario("antmaze-umaze"))

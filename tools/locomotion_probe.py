@@ -99,15 +99,15 @@ def run_method(cfg) -> str:
 def run_demonstrations(cfg):
     """The run's first demonstration: its ``expert`` settings, or the task's shipped one (an expert's run)."""
     if "expert" not in cfg:
-        return load_expert_demonstrations(cfg.env.scenario, 1).trajectory(0)
-    return load_experts(cfg.expert, resolve_scenario(cfg.env.scenario)).trajectory(0)
+        return load_expert_demonstrations(cfg.env.task, 1).trajectory(0)
+    return load_experts(cfg.expert, resolve_scenario(cfg.env.task)).trajectory(0)
 
 
 def trained_reward(cfg, expert) -> tuple[str, torch.Tensor] | None:
     """The reward the run's critics learn from, along a demonstration: CSIRL's matching reward (toward the
     curriculum's last state; ``r_w`` left out), SAC's task reward; None for a learned one (the baselines)."""
     if run_method(cfg) == "csirl":  # CSIRL or CSIRL-B
-        spec = resolve_scenario(cfg.env.scenario)
+        spec = resolve_scenario(cfg.env.task)
         matching = make_matching(cfg, spec, expert["observation"], len(expert) - 1)
         return "matching", matching(expert.clone())["next", "matching_reward"].reshape(-1)
     if run_method(cfg) == "sac":
@@ -140,7 +140,7 @@ def plot_critic(path: str, title: str, q_expert: torch.Tensor, q_policy: torch.T
 def critic_probe(run_dir: str, cfg, rollout, plot: str | None = None) -> dict:
     """What the critics believe along the expert's first demonstration (against the discounted return to go of
     the reward they learn from, where it is known) and along the policy's episode; ``plot``: draw it there."""
-    critics = load_critics(run_dir, cfg.env.scenario)
+    critics = load_critics(run_dir, cfg.env.task)
     gamma = float((cfg.get(run_method(cfg)) or {}).get("gamma", 0.99))  # the method's own section
     expert = run_demonstrations(cfg)
     with torch.no_grad():
@@ -176,7 +176,7 @@ def policy_episodes(run_dir: str, task: str, episodes: int, seed: int, stochasti
 def probe(run_dir: str, episodes: int = 1, seed: int | None = None, stochastic: bool = False,
           critic: bool = False, plot: str | None = None) -> dict:
     cfg = OmegaConf.load(os.path.join(run_dir, "config.yaml"))
-    task = cfg.env.scenario
+    task = cfg.env.task
     spec = resolve_scenario(task)
     if "x" not in spec.observation_layout:
         raise SystemExit(f"error: {task} has no torso x (a locomotion task: hopper, halfcheetah)")

@@ -52,7 +52,7 @@ def probe(task: str, shares: list[float], rules: list[str], overrides: list[str]
     :func:`route_figures`, and the share of the demonstrations whose return from the start is negative."""
     rows = []
     for rule in rules:
-        cfg = load_config_for("csirl")([f"env.scenario={task}", f"csirl.matching_target={rule}", *overrides])
+        cfg = load_config_for("csirl")([f"env.task={task}", f"csirl.matching_target={rule}", *overrides])
         spec = resolve_scenario(cfg.env.scenario)
         demos = load_experts(cfg.expert, spec)
         if demos.num_trajectories < 2:

@@ -1,7 +1,7 @@
 """How much of the reward network's meta-gradient comes from imitation, how much from the L1 term.
 
 ``python tools/meta_gradient_balance.py [key=value ...]`` (the recipe's configuration keys, e.g.
-``env.scenario=roundabout csirl.reward_l1_coef=1e-5``; ``checkpoint.resume=<run dir>`` loads a
+``env.task=roundabout csirl.reward_l1_coef=1e-5``; ``checkpoint.resume=<run dir>`` loads a
 trained run's configuration and its actor, critics and reward network instead of fresh ones).
 
 CSIRL's meta-objective is ``scale * (BC(theta') + reward_l1_coef * mean |r_w|)``. The imitation

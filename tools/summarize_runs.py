@@ -36,7 +36,8 @@ from torchrl_csirl.launch.recipes import load_config_for
 from torchrl_csirl.launch.summaries import find_summaries, mean_std
 
 #: configuration keys that do not change what a run learns (or are shown elsewhere in the key)
-NOT_A_VARIANT = ("seed", "device", "preset", "env.scenario", "csirl.intrinsic", "collector.main_threads", "logger.", "checkpoint.")
+NOT_A_VARIANT = ("seed", "device", "preset", "env.scenario", "env.task", "csirl.intrinsic", "collector.main_threads", "logger.",
+                 "checkpoint.")
 
 #: a run's code where it has no ``provenance.json``
 UNKNOWN = "provenance: unknown"
@@ -66,7 +67,7 @@ def _preset_defaults(method: str, preset: str, scenario: str | None = None) -> d
     """
     overrides = [f"preset={preset}"]
     try:
-        return flatten_config(load_config_for(method)([*overrides, f"env.scenario={scenario}"] if scenario else overrides))
+        return flatten_config(load_config_for(method)([*overrides, f"env.task={scenario}"] if scenario else overrides))
     except ConfigError:
         if scenario is None:
             raise

@@ -32,7 +32,7 @@ from torchrl_csirl.modules import load_policy, save_policy
 
 def warm_started_policy(task: str, updates: int, seed: int, overrides: list[str], out_dir: str) -> str:
     """CSIRL's actor after its warm start and before anything else, saved as ``out_dir/policy.pt`` (its path)."""
-    cfg = load_config_for("csirl")([f"env.scenario={task}", f"seed={seed}",
+    cfg = load_config_for("csirl")([f"env.task={task}", f"seed={seed}",
                                     f"csirl.actor_pretrain_updates={updates}", *overrides])
     torch.manual_seed(cfg.seed)
     spec = resolve_scenario(cfg.env.scenario)

@@ -230,7 +230,7 @@ def make_cell(method: str, scenario: str, seed: int, output_dir: str, overrides:
     if os.path.isfile(os.path.join(run_dir, "summary.json")):
         return None
     recipe = f"torchrl_csirl.scripts.{recipe_of(method, scenario)}"
-    task = f"env.gym_id={scenario}" if is_gymnasium_id(scenario) else f"env.scenario={scenario}"
+    task = f"env.gym_id={scenario}" if is_gymnasium_id(scenario) else f"env.task={scenario}"
     args = [task, f"seed={seed}", "logger.progress_bar=false", *overrides]
     if method in CSIRL_METHODS:
         args += CSIRL_METHODS[method]

@@ -41,7 +41,7 @@ Examples:
     >>> "torchrl_csirl.launch.csirl:CSIRLTaskConfig" in recipe_schemas()
     True
     >>> from torchrl_csirl.launch import load_config_for
-    >>> load_config_for("csirl")(["seed=3", "env.scenario=roundabout"]).env.scenario
+    >>> load_config_for("csirl")(["seed=3", "env.task=roundabout"]).env.task
     'roundabout'
 """
 from torchrl_csirl.launch.config import ConfigError, load_config, load_run_config, option

@@ -28,7 +28,8 @@ TASK = "ant-goal"
 
 @dataclass
 class AntEnvConfig:
-    scenario: str = option(TASK, choices=(TASK,), help="the training task (chained-hop goal reaching)")
+    task: str = option(TASK, choices=(TASK,), help="the training task (chained-hop goal reaching; env.scenario: deprecated "
+                                                   "spelling)")
 
 
 @dataclass

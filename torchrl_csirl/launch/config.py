@@ -17,8 +17,8 @@ Examples:
     ... class Demo:
     ...     seed: int = option(0, minimum=0, help="random seed")
     ...     env: EnvConfig = field(default_factory=EnvConfig)
-    >>> cfg = load_config(Demo, ["seed=3", "env.scenario=roundabout"])
-    >>> cfg.seed, cfg.env.scenario
+    >>> cfg = load_config(Demo, ["seed=3", "env.task=roundabout"])
+    >>> cfg.seed, cfg.env.task
     (3, 'roundabout')
     >>> load_config(Demo, ["seed=abc"])
     Traceback (most recent call last):
@@ -32,10 +32,12 @@ import difflib
 import os
 import types
 import typing
+import warnings
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any, Optional, Union
 
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig, OmegaConf, open_dict
 from omegaconf.errors import OmegaConfBaseException
 
 from torchrl_csirl._options import option
@@ -44,6 +46,7 @@ from torchrl_csirl.hyperparameters import CSIRLOptimHyperparameters
 __all__ = [
     "CheckpointConfig",
     "CollectorConfig",
+    "CommandLine",
     "ConfigError",
     "EnvConfig",
     "EvalConfig",
@@ -60,6 +63,7 @@ __all__ = [
     "load_config",
     "load_run_config",
     "option",
+    "parse_command_line",
     "preset_names",
     "validate",
 ]
@@ -67,7 +71,7 @@ __all__ = [
 
 
 def driving_scenes() -> tuple[str, ...]:
-    """The driving scenes, read from the task registry when asked (``env.scenario``'s choices)."""
+    """The driving scenes, read from the task registry when asked (``env.task``'s choices)."""
     from torchrl_csirl.envs import task_names
 
     return task_names(family="driving")
@@ -83,7 +87,7 @@ class ConfigError(ValueError):
 # ---------------------------------------------------------------------------------------- shared sections
 @dataclass
 class EnvConfig:
-    scenario: str = option("merge", choices=driving_scenes, help="the driving scenario")
+    task: str = option("merge", choices=driving_scenes, help="the driving scene (env.scenario: deprecated spelling)")
 
 
 @dataclass
@@ -198,26 +202,148 @@ def preset_names(config_dir: str) -> tuple[str, ...]:
     return tuple(dict.fromkeys(["default", *found]))
 
 
-def parse_overrides(overrides: list[str]) -> DictConfig:
-    """``key=value`` strings as an OmegaConf tree (values parsed as YAML: ``null``, ``true``, ``3``)."""
-    for item in overrides:
-        if "=" not in item or item.startswith("="):
-            raise ConfigError(f"{item}: not of the form key=value (e.g. env.scenario=merge)")
+#: the keys a command line may still spell by their deprecated names: ``deprecated -> the setting``
+DEPRECATED_KEYS = {"env.scenario": "env.task"}
+
+
+@dataclass(frozen=True)
+class CommandLine:
+    """A command line parsed once (:func:`parse_command_line`): what every loader reads instead of the raw strings.
+
+    Attributes:
+        values: ``{key: value}``, the values as written (the last one of a key wins), deprecated key names mapped.
+        tree: the same as an OmegaConf tree, the values read as YAML (``null``, ``true``, ``3``).
+        help: whether ``--help`` / ``-h`` was given.
+    """
+
+    values: Mapping[str, str]
+    tree: DictConfig
+    help: bool = False
+
+    def get(self, key: str) -> str | None:
+        """``key``'s value as written, None when absent or ``null``."""
+        value = self.values.get(key)
+        return None if value in (None, "null") else value
+
+    def strings(self) -> list[str]:
+        """The ``key=value`` strings (one per key)."""
+        return [f"{k}={v}" for k, v in self.values.items()]
+
+    def with_values(self, values: Mapping[str, str], first: bool = False) -> CommandLine:
+        """This command line with ``values`` added (``first``: only where the line does not set the key)."""
+        added = {k: v for k, v in values.items() if not (first and k in self.values)}
+        if not added:
+            return self
+        tree = self.tree.copy()
+        for key, value in added.items():
+            OmegaConf.update(tree, key, _yaml_value(key, value), force_add=True)
+        return CommandLine({**self.values, **added}, tree, self.help)
+
+    def without(self, key: str) -> CommandLine:
+        """This command line without ``key``."""
+        if key not in self.values:
+            return self
+        values = {k: v for k, v in self.values.items() if k != key}
+        return CommandLine(values, _dotlist_tree(values), self.help)
+
+
+def _dotlist_tree(values: Mapping[str, str]) -> DictConfig:
     try:
-        return OmegaConf.from_dotlist(list(overrides))
+        return OmegaConf.from_dotlist([f"{k}={v}" for k, v in values.items()])
     except OmegaConfBaseException as err:
         raise ConfigError(f"bad override: {_first_line(err)}") from None
 
 
+def _yaml_value(key: str, value: str) -> Any:
+    return OmegaConf.select(_dotlist_tree({key: value}), key)
+
+
+def parse_command_line(argv: Iterable[str] | CommandLine | None) -> CommandLine:
+    """``key=value`` strings (and ``--help``) as a :class:`CommandLine`: the one parse of a run's command line.
+
+    A deprecated key name (:data:`DEPRECATED_KEYS`: ``env.scenario``) is mapped onto its setting (``env.task``) with a
+    ``FutureWarning``. A :class:`CommandLine` is returned as it is.
+
+    Raises:
+        ConfigError: an item not of the form ``key=value``, or a deprecated name and its setting naming different values.
+
+    Examples:
+        >>> parse_command_line(["env.gym_id=Pendulum-v1", "checkpoint.resume=runs/a=b"]).values
+        {'env.gym_id': 'Pendulum-v1', 'checkpoint.resume': 'runs/a=b'}
+    """
+    if isinstance(argv, CommandLine):
+        return argv
+    items = list(argv or [])
+    flags = [a for a in items if a in ("--help", "-h")]
+    values: dict[str, str] = {}
+    deprecated: dict[str, tuple[str, str]] = {}  # the setting -> (its deprecated name, the value given under it)
+    current: dict[str, str] = {}  # the settings given under their own name -> the value
+    for item in items:
+        if item in flags:
+            continue
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise ConfigError(f"{item}: not of the form key=value (e.g. env.task=merge)")
+        if key in DEPRECATED_KEYS:
+            warnings.warn(f"{key}= is deprecated: use {DEPRECATED_KEYS[key]}={value}", FutureWarning, stacklevel=2)
+            deprecated[DEPRECATED_KEYS[key]] = (key, value)
+            key = DEPRECATED_KEYS[key]
+        else:
+            current[key] = value
+        values.pop(key, None)
+        values[key] = value
+    for key, (name, value) in deprecated.items():
+        if current.get(key, value) != value:
+            raise ConfigError(f"{key}={current[key]} and {name}={value}: the same setting, give one of them")
+    return CommandLine(values, _dotlist_tree(values), bool(flags))
+
+
+def parse_overrides(overrides: list[str]) -> DictConfig:
+    """``key=value`` strings as an OmegaConf tree (:func:`parse_command_line`'s ``tree``)."""
+    return parse_command_line(overrides).tree
+
+
 def override_strings(overrides: list[str] | None) -> dict[str, str]:
-    """``key=value`` strings as ``{key: value}``, the values as written (the last one of a key wins): what a script
-    reads of its command line before the configuration is built (the task to register, the run to resume).
+    """``key=value`` strings as ``{key: value}``, the values as written (the last one of a key wins), without the
+    mapping of deprecated names (:func:`parse_command_line` is the run's parse).
 
     Examples:
         >>> override_strings(["env.gym_id=Pendulum-v1", "checkpoint.resume=runs/a=b"])
         {'env.gym_id': 'Pendulum-v1', 'checkpoint.resume': 'runs/a=b'}
     """
     return {key: value for key, _, value in (item.partition("=") for item in overrides or [])}
+
+
+def current_names(saved: DictConfig) -> DictConfig:
+    """A saved configuration with its deprecated key names (:data:`DEPRECATED_KEYS`) read as their settings: a run saved
+    with ``env.scenario`` only resumes as ``env.task``; the mirror a loaded configuration carries is dropped.
+
+    Examples:
+        >>> current_names(OmegaConf.create({"env": {"scenario": "merge"}})).env
+        {'task': 'merge'}
+    """
+    for name, key in DEPRECATED_KEYS.items():
+        section, _, leaf = name.rpartition(".")
+        parent = OmegaConf.select(saved, section)
+        if parent is None or leaf not in parent:
+            continue
+        value = parent[leaf]
+        if OmegaConf.select(saved, key) is None:
+            OmegaConf.update(saved, key, value, force_add=True)
+        del parent[leaf]
+    return saved
+
+
+def with_deprecated_names(cfg: DictConfig) -> DictConfig:
+    """``cfg`` with each deprecated key name (``env.scenario``) holding its setting's value: read-only mirrors for the
+    code and the saved runs that read the deprecated name (the command line and the schema know one name)."""
+    for name, key in DEPRECATED_KEYS.items():
+        section, _, leaf = name.rpartition(".")
+        parent = OmegaConf.select(cfg, section)
+        if parent is not None and key.rpartition(".")[2] in parent:
+            with open_dict(parent):
+                parent[leaf] = OmegaConf.select(cfg, key)
+    return cfg
 
 
 def scene_defaults_path(config_dir: str, scenario: str) -> str:
@@ -232,28 +358,28 @@ def scene_defaults(config_dir: str) -> dict[str, dict[str, object]]:
     return {name: flatten_config(OmegaConf.load(scene_defaults_path(config_dir, name))) for name in names}
 
 
-def load_config(schema: type, overrides: list[str] | None = None, config_dir: str | None = None) -> DictConfig:
-    """Schema defaults, the scenario's defaults, the ``preset``, then ``overrides``.
+def load_config(schema: type, overrides: list[str] | CommandLine | None = None, config_dir: str | None = None) -> DictConfig:
+    """Schema defaults, the task's defaults, the ``preset``, then ``overrides``.
 
-    The scenario's defaults (``<config_dir>/scene/<env.scenario>.yaml``, or ``env.task``'s, where the scene has
-    such a file) are the default preset of that scene; a named preset (``preset=paper``) goes over them.
+    The task's defaults (``<config_dir>/scene/<env.task>.yaml``, where the task has such a file) are the default
+    preset of that task; a named preset (``preset=paper``) goes over them.
 
     Args:
         schema: the recipe's top-level dataclass.
-        overrides: ``key=value`` strings (the command line).
-        config_dir: folder holding ``preset/<name>.yaml`` and ``scene/<scenario>.yaml`` (None: no
+        overrides: the command line (:func:`parse_command_line`'s, or its ``key=value`` strings).
+        config_dir: folder holding ``preset/<name>.yaml`` and ``scene/<task>.yaml`` (None: no
             presets besides ``default``, no scene defaults).
 
     Raises:
         ConfigError: one line naming the bad key or value.
     """
-    cli = parse_overrides(list(overrides or []))
+    cli = parse_command_line(overrides).tree
     check_known_keys(schema, cli)
     base = OmegaConf.structured(schema)
     layers = []
-    scenario = OmegaConf.select(cli, "env.scenario", default=OmegaConf.select(cli, "env.task", default=None))
+    scenario = OmegaConf.select(cli, "env.task", default=None)
     if scenario is None:
-        scenario = OmegaConf.select(base, "env.scenario", default=None)
+        scenario = OmegaConf.select(base, "env.task", default=None)
     scene_file = scene_defaults_path(config_dir, scenario) if config_dir and isinstance(scenario, str) else None
     if scene_file and os.path.isfile(scene_file):
         layers.append(OmegaConf.load(scene_file))
@@ -298,7 +424,7 @@ def pin_missing_settings(saved: DictConfig) -> DictConfig:
     return saved
 
 
-def load_run_config(schema: type, run_dir: str, overrides: list[str] | None = None) -> DictConfig:
+def load_run_config(schema: type, run_dir: str, overrides: list[str] | CommandLine | None = None) -> DictConfig:
     """A run's saved ``config.yaml`` over the schema, updated by ``overrides`` (resume).
 
     ``checkpoint.resume`` of the saved file is dropped, the :data:`RESUME_FIXED_KEYS` cannot change, and a key the
@@ -307,10 +433,10 @@ def load_run_config(schema: type, run_dir: str, overrides: list[str] | None = No
     path = os.path.join(run_dir, "config.yaml")
     if not os.path.isfile(path):
         raise ConfigError(f"checkpoint.resume={run_dir}: no config.yaml there")
-    saved = pin_missing_settings(OmegaConf.load(path))
+    saved = pin_missing_settings(current_names(OmegaConf.load(path)))
     if "checkpoint" in saved and "resume" in saved.checkpoint:
         saved.checkpoint.resume = None
-    cli = parse_overrides(list(overrides or []))
+    cli = parse_command_line(overrides).tree
     check_known_keys(schema, cli)
     for key in RESUME_FIXED_KEYS:
         new, old = OmegaConf.select(cli, key), OmegaConf.select(saved, key)
@@ -344,7 +470,7 @@ def _merge_and_validate(schema: type, base: DictConfig, layers: list[DictConfig]
         except OmegaConfBaseException as err:
             raise ConfigError(_explain(schema, err, source)) from None
     validate(cfg, schema)
-    return cfg
+    return with_deprecated_names(cfg)
 
 
 def _explain(schema: type, err: OmegaConfBaseException, source: str | None) -> str:
@@ -465,8 +591,8 @@ def flatten_config(cfg: DictConfig) -> dict[str, Any]:
     """``{"dotted.key": value}`` for every leaf of ``cfg``.
 
     Examples:
-        >>> flatten_config(OmegaConf.create({"env": {"scenario": "merge"}, "seed": 0}))
-        {'env.scenario': 'merge', 'seed': 0}
+        >>> flatten_config(OmegaConf.create({"env": {"task": "merge"}, "seed": 0}))
+        {'env.task': 'merge', 'seed': 0}
     """
     out: dict[str, Any] = {}
 
@@ -536,7 +662,7 @@ def attribute_docs(cls: type) -> dict[str, str]:
     return {k: v.rstrip(".") for k, v in docs.items()}
 
 
-def help_requested(argv: list[str], doc: str, schema: type) -> bool:
+def help_requested(argv: list[str] | CommandLine, doc: str, schema: type) -> bool:
     """With ``--help`` / ``-h`` on the command line, print ``doc`` and every key of ``schema``
     (:func:`describe`) and return ``True``; a recipe's ``main`` then returns without running.
 
@@ -544,7 +670,7 @@ def help_requested(argv: list[str], doc: str, schema: type) -> bool:
         >>> help_requested(["seed=1"], "doc", EnvConfig)
         False
     """
-    if "--help" not in argv and "-h" not in argv:
+    if not (argv.help if isinstance(argv, CommandLine) else "--help" in argv or "-h" in argv):
         return False
     print(doc + "\nKeys (key, default, what it accepts, meaning):\n  " + "\n  ".join(describe(schema)))
     return True
@@ -565,7 +691,7 @@ def describe_rows(schema: type, prefix: str = "") -> list[ConfigKey]:
 
     Examples:
         >>> describe_rows(EnvConfig)[0].key, describe_rows(EnvConfig)[0].default
-        ('scenario', 'merge')
+        ('task', 'merge')
     """
     rows = []
     hints = _hints(schema)
@@ -584,7 +710,7 @@ def describe(schema: type, prefix: str = "") -> list[str]:
 
     Examples:
         >>> describe(EnvConfig)
-        ['scenario = merge  # one of highway-fast, intersection, merge, roundabout; the driving scenario']
+        ['task = merge  # one of highway-fast, intersection, merge, roundabout; the driving scene (env.scenario: deprecated spelling)']
     """
     return [f"{r.key} = {r.default}  # {r.allowed}" + (f"; {r.help}" if r.help else "")
             for r in describe_rows(schema, prefix)]

@@ -9,10 +9,10 @@ the meta-gradient loss, the subgoal curriculum and the matching reward, then han
 :class:`CSIRLHighwayConfig`, any other task by :class:`CSIRLTaskConfig` (its family decides).
 
 Examples:
-    >>> cfg = load_config(["env.scenario=roundabout", "csirl.intrinsic=false"])
-    >>> cfg.env.scenario, method_name(cfg)
+    >>> cfg = load_config(["env.task=roundabout", "csirl.intrinsic=false"])
+    >>> cfg.env.task, method_name(cfg)
     ('roundabout', 'csirl-b')
-    >>> cfg = load_config(["env.scenario=hopper"])
+    >>> cfg = load_config(["env.task=hopper"])
     >>> cfg.env.task, cfg.model.ego_relative_features, cfg.collector.frames_per_batch
     ('hopper', False, 1400)
 """
@@ -284,7 +284,7 @@ def make_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume_fra
     :class:`CSIRLParts`)."""
     torch.manual_seed(cfg.seed)
     device = resolve_device(cfg.device)
-    spec = resolve_scenario(cfg.env.scenario)  # a driving scenario or a robotics task
+    spec = resolve_scenario(cfg.env.task)  # a driving scenario or a robotics task
     demos = load_experts(cfg.expert, spec)
     curriculum_obs = demos.trajectory_observations(0, include_final=True).to(device)
     modules = make_loss_modules(cfg, spec, device, demos)

@@ -50,10 +50,9 @@ def expert_task_choices() -> tuple[str, ...]:
 
 @dataclass
 class ExpertEnvConfig(RoboticsEnvConfig):
-    scenario: str = option(TASK, choices=expert_task_choices,
-                           help="the task: a robotics task, ant-goal, one of your own (env.module), or env.gym_id's")
-    task: Optional[str] = option(None, choices=expert_task_choices,
-                                 help="the same as env.scenario (set either; null: env.scenario decides)")
+    task: str = option(TASK, choices=expert_task_choices,
+                       help="the task: a robotics task, ant-goal, one of your own (env.module), or env.gym_id's "
+                            "(env.scenario: deprecated spelling)")
 
 
 @dataclass
@@ -87,11 +86,11 @@ class ExpertTrainingConfig:
 
 
 def make_sac_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume_frames: int | None = None) -> Run:
-    """SAC on the environment's own reward (``cfg.env.scenario``), with the shared hooks (evaluation,
+    """SAC on the environment's own reward (``cfg.env.task``), with the shared hooks (evaluation,
     checkpoints, logging): the run of ``train_expert.py`` and ``train_ant_expert.py``."""
     torch.manual_seed(cfg.seed)
     device = resolve_device(cfg.device)
-    spec = resolve_scenario(cfg.env.scenario)
+    spec = resolve_scenario(cfg.env.task)
     hp = SACHyperparameters(**OmegaConf.to_container(cfg.sac))
     features = make_input_features(spec, ego_relative=False)  # the task's hidden entries dropped (locomotion's x)
     actor = make_actor(spec.obs_dim, spec.action_dim, input_features=features)

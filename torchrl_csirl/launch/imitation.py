@@ -25,8 +25,8 @@ the shared defaults: the same demonstrations (``expert.*``), the same frame budg
 the same input features (``model.ego_relative_features``) and the same evaluation (``eval.*``).
 
 Examples:
-    >>> cfg = load_config(["method=bc", "env.scenario=roundabout"])
-    >>> cfg.method, cfg.env.scenario, cfg.collector.total_frames
+    >>> cfg = load_config(["method=bc", "env.task=roundabout"])
+    >>> cfg.method, cfg.env.task, cfg.collector.total_frames
     ('bc', 'roundabout', 60000)
     >>> load_config(["method=gibberish"])  # doctest: +ELLIPSIS
     Traceback (most recent call last):
@@ -57,6 +57,7 @@ from torchrl_csirl.launch.config import (
     DEVICES,
     CheckpointConfig,
     CollectorConfig,
+    CommandLine,
     ConfigError,
     EnvConfig,
     EvalConfig,
@@ -66,6 +67,7 @@ from torchrl_csirl.launch.config import (
     ModelConfig,
     UpdateRatioConfig,
     option,
+    parse_command_line,
 )
 from torchrl_csirl.launch.csirl import CSIRL_RECIPE
 from torchrl_csirl.launch.experts import load_experts
@@ -172,15 +174,15 @@ class ImitationTaskConfig(RoboticsSections, ImitationHighwayConfig):
 ImitationRoboticsConfig = ImitationTaskConfig
 
 
-def check_method(overrides: list[str], resuming: bool = False) -> None:
+def check_method(command: CommandLine | list[str], resuming: bool = False) -> None:
     """One clear line for a missing method (a resumed run keeps its own), or for a CSIRL method."""
-    given = [o.split("=", 1)[1] for o in overrides if o.startswith("method=")]
-    if not given:
+    given = parse_command_line(command).values.get("method")
+    if given is None:
         if resuming:
             return
         raise ConfigError(f"method: required (method=<name>), one of {', '.join(METHODS)}")
-    if given[-1] in CSIRL_METHODS:
-        raise ConfigError(f"method={given[-1]}: CSIRL is trained by recipes/csirl_highway.py (torchrl-csirl train)")
+    if given in CSIRL_METHODS:
+        raise ConfigError(f"method={given}: CSIRL is trained by recipes/csirl_highway.py (torchrl-csirl train)")
 
 
 def check_named_method(cfg: DictConfig) -> None:
@@ -292,7 +294,7 @@ def make_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume_fra
     """
     torch.manual_seed(cfg.seed)
     device = resolve_device(cfg.device)
-    spec = resolve_scenario(cfg.env.scenario)  # a driving scenario or a robotics task
+    spec = resolve_scenario(cfg.env.task)  # a driving scenario or a robotics task
     demos = load_experts(cfg.expert, spec)
     try:  # e.g. a negative learning rate of a section read from a hyperparameter dataclass
         method = METHOD_BUILDERS[cfg.method](cfg, spec, device, method_input_features(cfg, spec, demos))
@@ -333,7 +335,7 @@ def reference_policy(method: str, env: Any, spec: ScenarioSpec) -> Any:
 def evaluate_reference(cfg: DictConfig, run_dir: str) -> dict[str, Any]:
     """A reference row: its policy on the ``eval.final_episodes`` test episodes, logged; the summary."""
     torch.manual_seed(cfg.seed)
-    spec = resolve_scenario(cfg.env.scenario)
+    spec = resolve_scenario(cfg.env.task)
     demos = load_experts(cfg.expert, spec)
     env = make_eval_env(spec.name)
     logger = make_logger(cfg, run_dir)

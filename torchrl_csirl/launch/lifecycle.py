@@ -14,7 +14,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from torchrl_csirl.launch.assembly import Run
 from torchrl_csirl.launch.collection import use_main_threads
-from torchrl_csirl.launch.config import flatten_config
+from torchrl_csirl.launch.config import CommandLine, flatten_config
 from torchrl_csirl.launch.provenance import record_resume_provenance, write_provenance
 from torchrl_csirl.launch.run import (
     default_run_name,
@@ -37,7 +37,7 @@ def start_run(cfg: DictConfig, method: str, build: Callable[[DictConfig, str], A
     If ``build`` fails (e.g. a bad expert file) the new directory, which holds no run, is removed.
     """
     run_dir = make_run_dir(cfg.logger.output_dir, cfg.logger.exp_name,
-                           default_run_name(cfg.env.scenario, method, cfg.seed), cfg.logger.overwrite)
+                           default_run_name(cfg.env.task, method, cfg.seed), cfg.logger.overwrite)
     OmegaConf.save(cfg, os.path.join(run_dir, "config.yaml"))
     write_provenance(run_dir)
     try:
@@ -190,13 +190,15 @@ def timed_summary(produce: Callable[[], dict[str, Any]]) -> dict[str, Any]:
     return summary
 
 
-def run_recipe(recipe: Recipe, argv: list[str], *, default_task: str | None = None) -> dict[str, Any]:
-    """A whole run from a command line: the recipe's configuration (new, or resumed with ``checkpoint.resume=``),
+def run_recipe(recipe: Recipe, argv: list[str] | CommandLine, *, default_task: str | None = None) -> dict[str, Any]:
+    """A whole run from a command line (``key=value`` strings, or parsed once:
+    :func:`~torchrl_csirl.launch.config.parse_command_line`): the recipe's configuration (:meth:`Recipe.configure`:
+    new, or resumed with ``checkpoint.resume=``),
     its trainer, training and finish (or, for a configuration that trains nothing, its evaluation), timed
     (:func:`timed_summary`)."""
 
     def produce() -> dict[str, Any]:
-        cfg = recipe.requested_config(argv, default_task=default_task)
+        cfg = recipe.configure(argv, default_task=default_task)
         evaluate = recipe.untrained(cfg)
         if evaluate is not None:
             return start_run(cfg, recipe.method_of(cfg), evaluate)

@@ -3,17 +3,18 @@
 A recipe names the methods it trains, its configuration schema (one for the driving scenes, one for
 every other task: the task's :attr:`~torchrl_csirl.envs.TaskSpec.family` picks it), its presets, the
 checks a loaded configuration must pass, its trainer and its finish. Loading is the same for every
-recipe (:meth:`Recipe.load_config`, :meth:`Recipe.load_run_config`, :meth:`Recipe.requested_config`):
-the task named on the command line is registered first (``env.module``, ``env.gym_id``,
-:func:`~torchrl_csirl.launch.robotics.prepare_task`), its family chooses the schema, then the
-checks run. The run-level tools (``tools/summarize_runs.py``, the sweep, ``torchrl-csirl train``)
+recipe (:meth:`Recipe.configure`): the command line parsed once
+(:func:`~torchrl_csirl.launch.config.parse_command_line`), the task it names registered
+(``env.module``, ``env.gym_id``, :func:`~torchrl_csirl.launch.robotics.name_task`), its family choosing the
+schema, one merge (new: defaults, the task's, the preset, the line; resumed: the saved run's, the line), then the
+validation and the checks. The run-level tools (``tools/summarize_runs.py``, the sweep, ``torchrl-csirl train``)
 look a recipe up by method name (:func:`recipe_for`).
 
 Examples:
     >>> recipe_for("csirl").name, recipe_for("gail").name
     ('csirl', 'imitation')
     >>> cfg = recipe_for("csirl").load_config(["env.gym_id=MountainCarContinuous-v0"])
-    >>> cfg.env.scenario, type(cfg.expert.curriculum).__name__
+    >>> cfg.env.task, type(cfg.expert.curriculum).__name__
     ('MountainCarContinuous-v0', 'str')
     >>> recipe_for("gibberish")  # doctest: +ELLIPSIS
     Traceback (most recent call last):
@@ -30,8 +31,8 @@ from typing import Any
 from omegaconf import DictConfig
 
 from torchrl_csirl.launch import config as config_lib
-from torchrl_csirl.launch.config import ConfigError, override_strings
-from torchrl_csirl.launch.robotics import check_task_sections, prepare_task, requested_task, schema_family
+from torchrl_csirl.launch.config import CommandLine, ConfigError, parse_command_line
+from torchrl_csirl.launch.robotics import check_task_sections, name_task, schema_family
 from torchrl_csirl.launch.run import resolve_resume
 
 __all__ = ["RECIPE_MODULES", "Recipe", "known_methods", "load_config_for", "recipe_for", "recipe_schemas", "registered_recipes",
@@ -57,7 +58,8 @@ class Recipe:
         task_config_dir: the folder of ``task_schema``'s per-task defaults (``scene/<task>.yaml``; None: none).
         checks: ``check(cfg)`` for each configuration loaded (several keys at once, the device, ...);
             each raises :class:`~torchrl_csirl.launch.config.ConfigError`.
-        command_check: ``check(overrides, resuming)`` on the command line before loading (e.g. a method named).
+        command_check: ``check(command, resuming)`` on the parsed command line
+            (:class:`~torchrl_csirl.launch.config.CommandLine`) before loading (e.g. a method named).
         method_overrides: ``method -> key=value strings`` that select a method of this recipe.
         trainer: ``trainer(cfg, run_dir, frames_done=, resume_frames=) -> Run``.
         finish: ``finish(run) -> summary`` (final evaluation, policy, plots).
@@ -74,7 +76,7 @@ class Recipe:
     config_dir: str | None = None
     task_config_dir: str | None = None
     checks: Sequence[Callable[[DictConfig], Any]] = ()
-    command_check: Callable[[list[str], bool], None] | None = None
+    command_check: Callable[[CommandLine, bool], None] | None = None
     method_overrides: Callable[[str], list[str]] = field(default=lambda method: [])
     trainer: Callable[..., Any] | None = None
     finish: Callable[[Any], dict[str, Any]] | None = None
@@ -90,80 +92,63 @@ class Recipe:
     def _config_dir(self, schema: type) -> str | None:
         return self.config_dir if schema is self.schema else self.task_config_dir
 
-    def _checked(self, cfg: DictConfig, overrides: list[str]) -> DictConfig:
-        check_task_sections(cfg, overrides)
-        for check in self.checks:
-            check(cfg)
-        return cfg
+    def configure(self, argv: list[str] | CommandLine | None = None, *, default_task: str | None = None,
+                  run_dir: str | None = None) -> DictConfig:
+        """The configuration a command line asks for: argv parsed once, the task, its schema, one merge, the
+        validation and the recipe's checks.
 
-    def load_config(self, overrides: list[str] | None = None, *, default_task: str | None = None) -> DictConfig:
-        """Defaults, the preset, ``key=value`` overrides, for the task they name (its schema), checked.
+        A new run: the schema's defaults, the task's (``scene/<task>.yaml``), the preset, the command line. With
+        ``checkpoint.resume=`` (or ``run_dir``): the run's saved ``config.yaml`` updated by the rest of the line
+        (e.g. a larger ``collector.total_frames``), ``checkpoint.resume`` kept.
 
         Args:
-            overrides: ``key=value`` strings (the command line).
-            default_task: the task when the command line names none (None: the schema's default).
+            argv: the command line (``key=value`` strings, or :func:`~torchrl_csirl.launch.config.parse_command_line`'s).
+            default_task: a new run's task when the command line names none (None: the schema's default).
+            run_dir: a run directory to resume (instead of ``checkpoint.resume``).
 
         Raises:
             ConfigError: one line naming the bad key or value.
         """
-        overrides = list(overrides or [])
+        command = parse_command_line(argv)
+        resume = command.get("checkpoint.resume")
+        if run_dir is None and resume is not None:
+            run_dir = resolve_resume(resume)[0]
+        command = command.without("checkpoint.resume")
         if self.command_check is not None:
-            self.command_check(overrides, False)
-        overrides = prepare_task(overrides)
-        if default_task is not None and requested_task(overrides) is None:
-            overrides = [f"env.scenario={default_task}", *overrides]
-        schema = self.schema_for(requested_task(overrides))
-        if schema is self.schema and self.task_schema is not None:
-            overrides = scene_overrides(overrides)
-        return self._checked(config_lib.load_config(schema, overrides, self._config_dir(schema)), overrides)
-
-    def load_run_config(self, run_dir: str, overrides: list[str] | None = None) -> DictConfig:
-        """The configuration saved in ``run_dir/config.yaml``, updated by ``overrides`` (resume), checked."""
-        overrides = list(overrides or [])
-        if self.command_check is not None:
-            self.command_check(overrides, True)
-        overrides = prepare_task(overrides, run_dir)
-        schema = self.schema_for(requested_task(overrides, run_dir))
-        if schema is self.schema and self.task_schema is not None:
-            overrides = scene_overrides(overrides)
-        return self._checked(config_lib.load_run_config(schema, run_dir, overrides), overrides)
-
-    def requested_config(self, argv: list[str], *, default_task: str | None = None) -> DictConfig:
-        """The configuration a command line asks for: a new run's (:meth:`load_config`), or with
-        ``checkpoint.resume=`` the saved run's updated by the rest of the line (:meth:`load_run_config`,
-        e.g. a larger ``collector.total_frames``), ``checkpoint.resume`` kept."""
-        resume = override_strings(argv).get("checkpoint.resume")
-        if resume is None or resume == "null":
-            return self.load_config(argv, default_task=default_task)
-        cfg = self.load_run_config(resolve_resume(resume)[0], [a for a in argv if not a.startswith("checkpoint.resume=")])
-        cfg.checkpoint.resume = resume
+            self.command_check(command, run_dir is not None)
+        command, task = name_task(command, run_dir, default_task)
+        schema = self.schema_for(task)
+        if run_dir is None:
+            cfg = config_lib.load_config(schema, command, self._config_dir(schema))
+        else:
+            cfg = config_lib.load_run_config(schema, run_dir, command)
+            cfg.checkpoint.resume = resume
+        check_task_sections(cfg)
+        for check in self.checks:
+            check(cfg)
         return cfg
 
-    def help_schema(self, argv: list[str], *, default_task: str | None = None) -> type:
+    def load_config(self, overrides: list[str] | CommandLine | None = None, *,
+                    default_task: str | None = None) -> DictConfig:
+        """A new run's configuration (:meth:`configure` without ``checkpoint.resume``)."""
+        return self.configure(parse_command_line(overrides).without("checkpoint.resume"), default_task=default_task)
+
+    def load_run_config(self, run_dir: str, overrides: list[str] | CommandLine | None = None) -> DictConfig:
+        """The configuration saved in ``run_dir/config.yaml``, updated by ``overrides`` (resume), checked."""
+        return self.configure(overrides, run_dir=run_dir)
+
+    def requested_config(self, argv: list[str] | CommandLine, *, default_task: str | None = None) -> DictConfig:
+        """:meth:`configure` (the name the run-level tools call)."""
+        return self.configure(argv, default_task=default_task)
+
+    def help_schema(self, argv: list[str] | CommandLine, *, default_task: str | None = None) -> type:
         """The schema ``--help`` describes: the one of the task the command line names."""
         try:
-            overrides = prepare_task([a for a in argv if "=" in a])
+            command = parse_command_line(argv) if isinstance(argv, CommandLine) else parse_command_line(
+                [a for a in argv if "=" in a])
+            return self.schema_for(name_task(command, None, default_task)[1])
         except ConfigError:
             return self.schema
-        return self.schema_for(requested_task(overrides) or default_task)
-
-
-def scene_overrides(overrides: list[str]) -> list[str]:
-    """A driving scene named as ``env.task`` (the other tasks' spelling) given as ``env.scenario``, the driving
-    schema's one key for it.
-
-    Raises:
-        ConfigError: ``env.task`` and ``env.scenario`` naming different scenes.
-
-    Examples:
-        >>> scene_overrides(["env.task=merge", "seed=1"])
-        ['env.scenario=merge', 'seed=1']
-    """
-    given = override_strings(overrides)
-    task, scenario = given.get("env.task"), given.get("env.scenario")
-    if task is not None and scenario is not None and task != scenario:
-        raise ConfigError(f"env.task={task} and env.scenario={scenario}: the same setting, give one of them")
-    return [f"env.scenario={o.partition('=')[2]}" if o.startswith("env.task=") else o for o in overrides]
 
 
 def recipe_schemas() -> list[str]:

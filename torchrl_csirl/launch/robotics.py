@@ -18,10 +18,18 @@ from omegaconf import DictConfig, OmegaConf
 from torchrl_csirl.envs import import_task_module, make_gymnasium_task, resolve_scenario, task_names
 from torchrl_csirl.envs.robotics import ANT_GOAL_SPEC
 from torchrl_csirl.launch import config as config_lib  # noqa: F401 - doctests
-from torchrl_csirl.launch.config import CollectorConfig, ConfigError, ExpertConfig, ModelConfig, option, override_strings
+from torchrl_csirl.launch.config import (
+    CollectorConfig,
+    CommandLine,
+    ConfigError,
+    ExpertConfig,
+    ModelConfig,
+    option,
+    parse_command_line,
+)
 
 __all__ = ["RoboticsCollectorConfig", "RoboticsEnvConfig", "RoboticsExpertConfig", "RoboticsModelConfig",
-           "RoboticsSections", "check_task_sections", "prepare_task", "requested_task", "resolve_task", "schema_family",
+           "RoboticsSections", "check_task_sections", "name_task", "prepare_task", "requested_task", "schema_family",
            "task_choices"]
 
 
@@ -32,10 +40,9 @@ def task_choices() -> tuple[str, ...]:
 
 @dataclass
 class RoboticsEnvConfig:
-    scenario: str = option("relocate", choices=task_choices,
-                           help="the task: a robotics task, one of your own (env.module), or env.gym_id's")
-    task: Optional[str] = option(None, choices=task_choices,
-                                 help="the same as env.scenario (set either; null: env.scenario decides)")
+    task: str = option("relocate", choices=task_choices,
+                       help="the task: a robotics task, one of your own (env.module), or env.gym_id's "
+                            "(env.scenario: deprecated spelling)")
     gym_id: Optional[str] = option(
         None, help="any gymnasium id with flat Box spaces (e.g. MountainCarContinuous-v0): the task, by that name")
     features: Optional[str] = option(
@@ -74,65 +81,80 @@ class RoboticsSections:
     collector: RoboticsCollectorConfig = field(default_factory=RoboticsCollectorConfig)
 
 
-def _saved_env(run_dir: str | None) -> dict:
-    """A run directory's saved ``env`` section (empty: no run, or no such file)."""
+def _saved_env(run_dir: str | None) -> dict[str, str]:
+    """A run directory's saved ``env`` section as ``{env.<key>: value as written}`` (empty: no run, or no such file);
+    a saved ``env.scenario`` (the deprecated name) read as ``env.task``."""
     if run_dir is None or not os.path.isfile(os.path.join(run_dir, "config.yaml")):
         return {}
-    return OmegaConf.to_container(OmegaConf.load(os.path.join(run_dir, "config.yaml"))).get("env") or {}
+    env = OmegaConf.to_container(OmegaConf.load(os.path.join(run_dir, "config.yaml"))).get("env") or {}
+    if env.get("task") is None and "scenario" in env:
+        env["task"] = env["scenario"]
+    return {f"env.{k}": ("null" if v is None else str(v)) for k, v in env.items() if k != "scenario"}
 
 
-def prepare_task(overrides: list[str] | None, run_dir: str | None = None) -> list[str]:
-    """Registers the task the configuration names before it is checked; returns the overrides.
+def name_task(command: CommandLine, run_dir: str | None = None,
+              default_task: str | None = None) -> tuple[CommandLine, str | None]:
+    """The task of a parsed command line, registered before the configuration is loaded: (the command line with
+    ``env.task`` set where it follows from the line, the task's name; None: the schema's default).
 
     ``env.module`` is imported (its :func:`~torchrl_csirl.envs.register_task` calls run);
     ``env.gym_id`` becomes a task (:func:`~torchrl_csirl.envs.make_gymnasium_task`) with
-    ``env.features`` and ``env.success``, and ``env.scenario`` is set to it. Resuming (``run_dir``),
-    the run's saved ``env`` section is read first.
+    ``env.features`` and ``env.success``, and ``env.task`` is set to it. Resuming (``run_dir``),
+    the run's saved ``env`` section is read under the command line; ``default_task``: a new run's task when the
+    line names none.
 
     Raises:
         ConfigError: one line: a module that does not import, an id that is not a flat-Box gymnasium
-            environment, bad feature indices, or ``env.scenario`` naming another task.
-
-    Examples:
-        >>> prepare_task(["env.gym_id=MountainCarContinuous-v0", "env.features=0"])
-        ['env.gym_id=MountainCarContinuous-v0', 'env.features=0', 'env.scenario=MountainCarContinuous-v0']
+            environment, bad feature indices, or ``env.task`` naming another task than ``env.gym_id``.
     """
-    overrides = list(overrides or [])
-    given = {**{f"env.{k}": ("null" if v is None else str(v)) for k, v in _saved_env(run_dir).items()},
-             **override_strings(overrides)}
+    given = {**_saved_env(run_dir), **command.values}
     module = given.get("env.module", "null")
+    gym_id = given.get("env.gym_id", "null")
     try:
         if module != "null":
             import_task_module(module)
-        gym_id = given.get("env.gym_id", "null")
-        if gym_id == "null":
-            return overrides
-        features = given.get("env.features", "null")
-        success = given.get("env.success", "null")
-        make_gymnasium_task(gym_id, features=None if features == "null" else features,
-                            success=None if success == "null" else success)
+        if gym_id != "null":
+            features, success = given.get("env.features", "null"), given.get("env.success", "null")
+            make_gymnasium_task(gym_id, features=None if features == "null" else features,
+                                success=None if success == "null" else success)
     except ValueError as err:
         raise ConfigError(str(err)) from None
-    named = override_strings(overrides)
-    for key in ("env.scenario", "env.task"):
-        if named.get(key, gym_id) != gym_id:
-            raise ConfigError(f"{key}={named[key]} and env.gym_id={gym_id}: the task is the gymnasium id; give one of them")
-    if run_dir is None and "env.scenario" not in named:
-        overrides.append(f"env.scenario={gym_id}")
-    return overrides
+    if gym_id != "null":
+        named = command.get("env.task")
+        if named is not None and named != gym_id:
+            raise ConfigError(f"env.task={named} and env.gym_id={gym_id}: the task is the gymnasium id; give one of them")
+        if run_dir is None:
+            command = command.with_values({"env.task": gym_id})
+        return command, gym_id
+    task = given.get("env.task", "null")
+    if task != "null":
+        return command, task
+    if default_task is not None and run_dir is None:
+        return command.with_values({"env.task": default_task}), default_task
+    return command, None
 
 
-def requested_task(overrides: list[str] | None, run_dir: str | None = None) -> str | None:
-    """The task a command line names (``env.gym_id``, ``env.task`` or ``env.scenario``, over a resumed
-    run's saved ``env`` section); None when it names none.
+def prepare_task(overrides: list[str] | None, run_dir: str | None = None) -> list[str]:
+    """:func:`name_task` on ``key=value`` strings: registers the task they name; returns them (one per key, with
+    ``env.task`` set to an ``env.gym_id``).
+
+    Examples:
+        >>> prepare_task(["env.gym_id=MountainCarContinuous-v0", "env.features=0"])
+        ['env.gym_id=MountainCarContinuous-v0', 'env.features=0', 'env.task=MountainCarContinuous-v0']
+    """
+    return name_task(parse_command_line(overrides), run_dir)[0].strings()
+
+
+def requested_task(overrides: list[str] | CommandLine | None, run_dir: str | None = None) -> str | None:
+    """The task a command line names (``env.gym_id`` or ``env.task``, over a resumed run's saved ``env`` section);
+    None when it names none.
 
     Examples:
         >>> requested_task(["seed=1", "env.task=relocate"]), requested_task(["seed=1"])
         ('relocate', None)
     """
-    given = {**{f"env.{k}": ("null" if v is None else str(v)) for k, v in _saved_env(run_dir).items()},
-             **override_strings(overrides)}
-    for key in ("env.gym_id", "env.task", "env.scenario"):
+    given = {**_saved_env(run_dir), **parse_command_line(overrides).values}
+    for key in ("env.gym_id", "env.task"):
         if given.get(key, "null") != "null":
             return given[key]
     return None
@@ -151,7 +173,7 @@ def schema_family(task: str) -> str:
         >>> schema_family("mergee")  # doctest: +ELLIPSIS
         Traceback (most recent call last):
         ...
-        torchrl_csirl.launch.config.ConfigError: env.scenario=mergee: unknown task (did you mean merge?); one of ...
+        torchrl_csirl.launch.config.ConfigError: env.task=mergee: unknown task (did you mean merge?); one of ...
     """
     try:
         family = resolve_scenario(task).family
@@ -159,36 +181,14 @@ def schema_family(task: str) -> str:
         names = task_names()
         close = difflib.get_close_matches(task, names, n=1)
         hint = f" (did you mean {close[0]}?)" if close else ""
-        raise ConfigError(f"env.scenario={task}: unknown task{hint}; one of {', '.join(names)}, or env.gym_id=<a gymnasium "
+        raise ConfigError(f"env.task={task}: unknown task{hint}; one of {', '.join(names)}, or env.gym_id=<a gymnasium "
                           "id>, or env.module=<a module that registers yours>") from None
     return "driving" if family == "driving" else "task"
 
 
-def resolve_task(cfg: DictConfig, overrides: list[str] | None) -> None:
-    """``env.task`` and ``env.scenario`` name the same thing: one value for both, or a ConfigError.
-
-    Examples:
-        >>> from torchrl_csirl.launch.csirl import CSIRLRoboticsConfig
-        >>> cfg = config_lib.load_config(CSIRLRoboticsConfig, ["env.task=antmaze-umaze"])
-        >>> resolve_task(cfg, ["env.task=antmaze-umaze"])
-        >>> cfg.env.scenario, cfg.env.task
-        ('antmaze-umaze', 'antmaze-umaze')
-    """
-    given = override_strings(overrides)
-    task, scenario = given.get("env.task"), given.get("env.scenario")
-    if task is not None and scenario is not None and task != scenario:
-        raise ConfigError(f"env.task={task} and env.scenario={scenario}: the same setting, give one of them")
-    if cfg.env.task is not None and task is not None:
-        cfg.env.scenario = cfg.env.task
-    cfg.env.task = cfg.env.scenario
-
-
-def check_task_sections(cfg: DictConfig, overrides: list[str] | None = None) -> DictConfig:
-    """The checks of a non-driving schema (a no-op on a driving one): ``env.task`` resolved, no driving inputs."""
-    if "task" not in cfg.env:
-        return cfg
-    resolve_task(cfg, overrides)
-    if "model" not in cfg:
+def check_task_sections(cfg: DictConfig) -> DictConfig:
+    """The checks of a non-driving schema (a no-op on a driving one): no driving inputs."""
+    if "gym_id" not in cfg.env or "model" not in cfg:
         return cfg
     if cfg.model.ego_relative_features:
         raise ConfigError("model.ego_relative_features=true: the other-vehicle offsets exist in driving scenes only")

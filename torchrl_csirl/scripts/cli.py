@@ -15,8 +15,8 @@ Each command is the script of the same name (``python -m torchrl_csirl.scripts.<
 method); ``<command> --help`` lists what it accepts.
 
 Examples:
-    >>> split_method(["method=csirl-b", "env.scenario=hopper"])
-    ('csirl-b', ['env.scenario=hopper'])
+    >>> split_method(["method=csirl-b", "env.task=hopper"])
+    ('csirl-b', ['env.task=hopper'])
     >>> split_method(["seed=1"])
     ('csirl', ['seed=1'])
 """

@@ -35,7 +35,7 @@ def _action_dim(cfg) -> int | None:
     from torchrl_csirl.envs import resolve_scenario
 
     try:
-        return resolve_scenario(cfg.env.scenario).action_dim
+        return resolve_scenario(cfg.env.task).action_dim
     except ValueError:
         return None
 
@@ -92,7 +92,7 @@ def diagnose(run_dir: str, episodes: int = 5) -> dict[str, object]:
         action_dim = _action_dim(cfg)
         if action_dim is not None:
             checks.append(policy_entropy(rows, action_dim))
-        report = HealthReport(run_dir, cfg.env.scenario, str(cfg.get("method")), rows=rows, checks=checks)
+        report = HealthReport(run_dir, cfg.env.task, str(cfg.get("method")), rows=rows, checks=checks)
         write_health_report(report, run_dir)
         return report.as_dict() | {"lines": report.lines()}
     if not os.path.isfile(os.path.join(run_dir, "checkpoints", "last", "state.pt")):

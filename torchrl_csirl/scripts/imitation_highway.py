@@ -6,7 +6,7 @@ the CSIRL recipe's budget, networks, input features, demonstrations and evaluati
 outputs. Methods: ``sac`` (SAC on the true reward: the driving scenes' distance reward, another task's
 own reward), ``bc`` (behavioural cloning), ``gail``, ``dac``, ``valuedice``, ``sqil``, ``iqlearn``, and
 ``random`` and ``expert`` (reference rows, no training); CSIRL itself is ``recipes/csirl_highway.py``.
-The task is named as for CSIRL (``env.scenario``, ``env.task``, ``env.gym_id``, ``env.module``) and its
+The task is named as for CSIRL (``env.task``, ``env.gym_id``, ``env.module``) and its
 family picks the schema (:class:`~torchrl_csirl.launch.imitation.ImitationTaskConfig` for every task but
 the driving scenes). ``--help`` lists every key. See docs/benchmark.md.
 
@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import sys
 
-from torchrl_csirl.launch.config import help_requested
+from torchrl_csirl.launch.config import help_requested, parse_command_line
 from torchrl_csirl.launch.imitation import IMITATION_RECIPE, ImitationHighwayConfig  # noqa: F401 - the schema, for the docs
 from torchrl_csirl.launch.lifecycle import run_recipe
 from torchrl_csirl.launch.run import run_script, write_summary
@@ -33,10 +33,10 @@ __all__ = ["main"]
 
 def main(argv: list[str] | None = None, *, default_task: str | None = None) -> dict[str, object]:
     """Train (or evaluate) one baseline; ``default_task``: the task when the command line names none."""
-    argv = sys.argv[1:] if argv is None else list(argv)
-    if help_requested(argv, __doc__, IMITATION_RECIPE.help_schema(argv, default_task=default_task)):
+    command = parse_command_line(sys.argv[1:] if argv is None else argv)  # the one parse of the command line
+    if command.help and help_requested(command, __doc__, IMITATION_RECIPE.help_schema(command, default_task=default_task)):
         return {}
-    summary = run_recipe(IMITATION_RECIPE, argv, default_task=default_task)
+    summary = run_recipe(IMITATION_RECIPE, command, default_task=default_task)
     print(f"{summary['scenario']} / {summary['method']}: accomplish rate {summary['accomplish_rate']:.3f} "
           f"(success {summary['success_rate']:.2f}) after {summary['frames']} frames / {summary['updates']} updates",
           file=sys.stderr)

@@ -36,10 +36,10 @@ __all__ = ["main"]
 
 
 def main(argv: list[str] | None = None) -> dict[str, object]:
-    argv = sys.argv[1:] if argv is None else list(argv)
-    if config_lib.help_requested(argv, __doc__, AntExpertConfig):
+    command = config_lib.parse_command_line(sys.argv[1:] if argv is None else argv)  # the one parse
+    if config_lib.help_requested(command, __doc__, AntExpertConfig):
         return {}
-    summary = run_recipe(ANT_EXPERT_RECIPE, argv)
+    summary = run_recipe(ANT_EXPERT_RECIPE, command)
     maze = summary.get("antmaze_success_rate")
     print(f"ant-goal: 4-goal chain success {summary['hop_success_rate']:.2f}"
           + (f", AntMaze with waypoints {maze:.2f}" if maze is not None else "")

@@ -9,7 +9,7 @@ seed ``demos.seed`` and written as demonstrations (``demos.path``, default
 ``<run dir>/demos_<episodes>.npz``; ``demos.minari_id`` also writes a local Minari dataset), the file
 every imitation script reads with ``expert.path=``.
 
-The task: ``env.gym_id=<id>`` (any gymnasium id with flat ``Box`` spaces), ``env.scenario=<name>`` (a
+The task: ``env.gym_id=<id>`` (any gymnasium id with flat ``Box`` spaces), ``env.task=<name>`` (a
 robotics task, ``ant-goal``, or with ``env.module=<module>`` a task of your own). A batch must cover an
 episode per environment: ``collector.frames_per_batch`` >= workers x the episode limit.
 
@@ -31,10 +31,10 @@ __all__ = ["main"]
 
 
 def main(argv: list[str] | None = None) -> dict[str, object]:
-    argv = sys.argv[1:] if argv is None else list(argv)
-    if config_lib.help_requested(argv, __doc__, ExpertTrainingConfig):
+    command = config_lib.parse_command_line(sys.argv[1:] if argv is None else argv)  # the one parse
+    if config_lib.help_requested(command, __doc__, ExpertTrainingConfig):
         return {}
-    summary = run_recipe(EXPERT_RECIPE, argv)
+    summary = run_recipe(EXPERT_RECIPE, command)
     demos = f"; {summary['demos_episodes']} demonstrations in {summary['demos_path']}" if "demos_path" in summary else ""
     print(f"{summary['scenario']}: test return {summary['return']:.1f} (success {summary['success_rate']:.2f}) after "
           f"{summary['frames']} frames / {summary['updates']} updates{demos}", file=sys.stderr)

@@ -54,7 +54,7 @@ def read_run(run_dir: str) -> tuple[object, str, int]:
         policy = load_policy(run_dir)
     except ValueError as err:
         raise ConfigError(str(err)) from None
-    task = policy.metadata.get("scenario") or cfg.env.scenario
+    task = policy.metadata.get("scenario") or cfg.env.task
     seed = int(OmegaConf.select(cfg, "eval.seed", default=1_000_000))
     return policy, task, seed
 
