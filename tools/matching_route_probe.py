@@ -53,7 +53,7 @@ def probe(task: str, shares: list[float], rules: list[str], overrides: list[str]
     rows = []
     for rule in rules:
         cfg = load_config_for("csirl")([f"env.task={task}", f"csirl.matching_target={rule}", *overrides])
-        spec = resolve_scenario(cfg.env.scenario)
+        spec = resolve_scenario(cfg.env.task)
         demos = load_experts(cfg.expert, spec)
         if demos.num_trajectories < 2:
             raise SystemExit(f"error: {task}: {demos.num_trajectories} demonstration; the probe walks the others")

@@ -71,7 +71,7 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     # a trained run: its own configuration (networks, scenario), updated by the command line
     cfg = CSIRL_RECIPE.requested_config(overrides)
     torch.manual_seed(cfg.seed)
-    spec = SCENARIOS[cfg.env.scenario]
+    spec = SCENARIOS[cfg.env.task]
     demos = load_experts(cfg.expert, spec)
     modules = make_loss_modules(cfg, spec, demos=demos)
     if cfg.checkpoint.resume is not None:

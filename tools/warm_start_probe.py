@@ -35,7 +35,7 @@ def warm_started_policy(task: str, updates: int, seed: int, overrides: list[str]
     cfg = load_config_for("csirl")([f"env.task={task}", f"seed={seed}",
                                     f"csirl.actor_pretrain_updates={updates}", *overrides])
     torch.manual_seed(cfg.seed)
-    spec = resolve_scenario(cfg.env.scenario)
+    spec = resolve_scenario(cfg.env.task)
     demos = load_experts(cfg.expert, spec)
     modules = make_loss_modules(cfg, spec, "cpu", demos)
     warm_start_actor(cfg, modules, demos.as_replay_buffer(batch_size=cfg.expert.batch_size))

@@ -298,22 +298,6 @@ def parse_command_line(argv: Iterable[str] | CommandLine | None) -> CommandLine:
     return CommandLine(values, _dotlist_tree(values), bool(flags))
 
 
-def parse_overrides(overrides: list[str]) -> DictConfig:
-    """``key=value`` strings as an OmegaConf tree (:func:`parse_command_line`'s ``tree``)."""
-    return parse_command_line(overrides).tree
-
-
-def override_strings(overrides: list[str] | None) -> dict[str, str]:
-    """``key=value`` strings as ``{key: value}``, the values as written (the last one of a key wins), without the
-    mapping of deprecated names (:func:`parse_command_line` is the run's parse).
-
-    Examples:
-        >>> override_strings(["env.gym_id=Pendulum-v1", "checkpoint.resume=runs/a=b"])
-        {'env.gym_id': 'Pendulum-v1', 'checkpoint.resume': 'runs/a=b'}
-    """
-    return {key: value for key, _, value in (item.partition("=") for item in overrides or [])}
-
-
 def current_names(saved: DictConfig) -> DictConfig:
     """A saved configuration with its deprecated key names (:data:`DEPRECATED_KEYS`) read as their settings: a run saved
     with ``env.scenario`` only resumes as ``env.task``; the mirror a loaded configuration carries is dropped.

@@ -144,8 +144,7 @@ class Recipe:
     def help_schema(self, argv: list[str] | CommandLine, *, default_task: str | None = None) -> type:
         """The schema ``--help`` describes: the one of the task the command line names."""
         try:
-            command = parse_command_line(argv) if isinstance(argv, CommandLine) else parse_command_line(
-                [a for a in argv if "=" in a])
+            command = parse_command_line(argv if isinstance(argv, CommandLine) else [a for a in argv if "=" in a])
             return self.schema_for(name_task(command, None, default_task)[1])
         except ConfigError:
             return self.schema
