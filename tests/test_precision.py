@@ -60,6 +60,15 @@ def test_fp32_is_no_context_and_the_settings_resolve(monkeypatch):
         LearnerPrecision.from_setting("half")
 
 
+def test_the_default_is_auto_and_resolves_by_the_hardware(monkeypatch):
+    cfg = csirl.load_config([])
+    assert cfg.optim.precision == "auto"
+    monkeypatch.setattr(precision_lib, "_cpu_flags", lambda: {"avx2"})
+    assert csirl.learner_precision(cfg).name == "fp32"
+    monkeypatch.setattr(precision_lib, "_cpu_flags", lambda: {"avx2", "avx512_bf16"})
+    assert csirl.learner_precision(cfg).name == "bf16"
+
+
 def test_bf16_without_native_support_is_refused_in_one_line(monkeypatch):
     monkeypatch.setattr(precision_lib, "_cpu_flags", lambda: {"avx2", "avx512f"})
     with pytest.raises(PrecisionUnsupported) as err:

@@ -87,7 +87,9 @@ def test_recipe_artefacts(full_run):
     assert os.path.isfile(os.path.join(run_dir, "checkpoints", "last", "state.pt"))
     assert os.path.isdir(os.path.join(run_dir, "wandb"))  # offline W&B run
     with open(os.path.join(run_dir, "summary.json")) as f:
-        assert json.load(f)["accomplish_rate"] == full_run["accomplish_rate"]
+        summary = json.load(f)
+    assert summary["accomplish_rate"] == full_run["accomplish_rate"]
+    assert summary["precision"] == csirl.learner_precision(csirl.load_config([])).name  # what auto resolved to
 
 
 def test_final_evaluation_is_filmed_and_logged_to_wandb(full_run):

@@ -142,9 +142,10 @@ class CSIRLOptimHyperparameters:
     tau: float = option(0.005, above=0.0, below=1.0, help="Polyak factor of the target critics")
     max_grad_norm: Optional[float] = option(None, above=0.0, help="clip the gradient norm (null: no clipping)")
     precision: str = option(
-        "fp32", choices=_precisions,
-        help="the learner's matmuls: fp32, bf16 (bfloat16 hidden layers, float32 weights, outputs and losses; "
-             "needs native bf16) or auto (bf16 where native); docs/performance.md#bfloat16")
+        "auto", choices=_precisions,
+        help="the learner's matmuls: auto (bf16 where the hardware has native bfloat16, else fp32), fp32, or bf16 "
+             "(bfloat16 hidden layers, float32 weights, outputs and losses; needs native bf16); "
+             "docs/performance.md#bfloat16")
 
 
 #: the defaults of the ``csirl`` section and of the building blocks' CSIRL keywords

@@ -348,7 +348,8 @@ def curriculum_plots(run: Run[CSIRLParts]) -> list[str]:
 def finish(run: Run[CSIRLParts]) -> dict[str, object]:
     """Final evaluation, checkpoint, policy, plots and the summary."""
     summary = final_summary(run, method_name(run.cfg), title=f"CSIRL on {run.spec.name}")
-    summary.update(final_subgoal=run.parts.curriculum.subgoal, curriculum_length=run.parts.curriculum.length)
+    summary.update(final_subgoal=run.parts.curriculum.subgoal, curriculum_length=run.parts.curriculum.length,
+                   precision=learner_precision(run.cfg).name)  # what optim.precision=auto resolved to
     summary["plots"] += curriculum_plots(run)
     if run.cfg.eval.health_episodes:
         summary.update(write_health(run, run.cfg.eval.health_episodes, test=summary))
