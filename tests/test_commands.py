@@ -140,10 +140,10 @@ def test_plot_curves_draws_each_group_at_the_frames_all_its_seeds_evaluated(tmp_
     result = curves.main([*args, "--reference", "bc, test=0.64", "--output", str(out)])
     assert out.stat().st_size > 10_000 and json.loads(capsys.readouterr().out.splitlines()[-1]) == result
     for name, dirs in groups.items():
-        curves = [eval_curve(d) for d in dirs]
-        frames, _ = curves.common_frames(curves)
-        assert frames == sorted(set(curves[0][0]) & set(curves[1][0]) & set(curves[2][0]))
-        last = [dict(zip(*c))[frames[-1]] for c in curves]
+        seeds = [eval_curve(d) for d in dirs]
+        frames, _ = curves.common_frames(seeds)
+        assert frames == sorted(set(seeds[0][0]) & set(seeds[1][0]) & set(seeds[2][0]))
+        last = [dict(zip(*c))[frames[-1]] for c in seeds]
         assert result["last"][name] == {"runs": 3, "frames": frames[-1], "mean": pytest.approx(sum(last) / 3)}
     assert 0.0 not in curves.common_frames([eval_curve(d) for d in groups["antmaze-warmstart"]])[0]
     with pytest.raises(SystemExit, match="no 'no_such_key'"):
