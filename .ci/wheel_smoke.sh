@@ -35,3 +35,7 @@ PY
 "$work/venv/bin/torchrl-csirl" train env.gym_id=MountainCarContinuous-v0 env.features=0 \
   expert.path=car.npz expert.num_trajectories=3 csirl.matching_target=path "${tiny[@]}" | tail -1 \
   | "$work/venv/bin/python" -c "$check"
+# the commands that read finished runs, from the wheel: the two runs above summarised, then recorded
+"$work/venv/bin/torchrl-csirl" summarize "$work/runs" | tail -1 \
+  | "$work/venv/bin/python" -c 'import json, sys; s = json.loads(sys.stdin.read()); assert len(s) == 2, s; print("wheel: summarize", *s)'
+"$work/venv/bin/torchrl-csirl" record "$work"/runs/* --into "$work/records" >/dev/null

@@ -57,7 +57,7 @@ for method in sac bc sqil gail dac iqlearn valuedice; do  # every trained baseli
     eval.final_episodes=1 logger.progress_bar=false logger.backend=csv "logger.output_dir=$RUNS" \
     "logger.exp_name=$method"
 done
-step termination_probe "$PY" tools/termination_probe.py "$RUNS/dac" --samples 64
+step termination_probe "$PY" docs/studies/scripts/termination_probe.py "$RUNS/dac" --samples 64
 step ant "$PY" recipes/train_ant_expert.py collector.total_frames=800 collector.frames_per_batch=400 \
   collector.num_workers=1 collector.init_random_frames=200 replay_buffer.warmup_frames=200 sac.batch_size=32 \
   updates_per_round=100 eval.episodes=1 eval.final_episodes=1 expert_eval.episodes=1 "device=$DEVICE" \

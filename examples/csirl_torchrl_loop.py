@@ -220,7 +220,7 @@ def main(argv: list[str] | None = None) -> dict[str, object]:
 def run_summary(result: dict[str, object], expert_metadata: dict) -> dict[str, object]:
     """The example's result with the fields of a recipe run's ``summary.json`` that the tables compare
     (``scenario``, ``method``, ``normalized_accomplish_rate``: the test accomplish rate over the demonstrations'),
-    so that ``tools/compare_runs.py`` sets it beside the recipe's runs."""
+    so that ``torchrl-csirl compare`` sets it beside the recipe's runs."""
     expert = expert_accomplish_rate(expert_metadata)
     normalized = round(float(normalized_accomplish_rate(result["accomplish_rate"], expert)), 4) if expert else None
     return {"scenario": SCENE, "method": "csirl-torchrl-loop" + ("-extras" if result["extras"] else ""), **result,

@@ -7,7 +7,6 @@ import math
 import os
 
 import locomotion_probe
-import off_demonstrations
 import pytest
 import termination_probe
 import torch
@@ -19,7 +18,7 @@ from torchrl_csirl.envs.expert import make_expert
 from torchrl_csirl.launch.csirl import CSIRL_RECIPE
 from torchrl_csirl.modules import DropFeatures, load_policy, make_actor, make_input_features, save_policy
 from torchrl_csirl.modules.features import feature_map_from_config
-from torchrl_csirl.scripts import csirl_robotics, imitation_robotics, train_expert
+from torchrl_csirl.scripts import csirl_robotics, imitation_robotics, off_demos, train_expert
 
 TINY = [
     "collector.total_frames=400", "collector.frames_per_batch=200", "collector.cut_episodes=true",
@@ -175,11 +174,11 @@ def test_an_expert_its_demonstrations_then_csirl_and_a_baseline_on_the_hopper(tm
     bc = imitation_robotics.main(["method=bc", "env.task=hopper", f"expert.path={demos}", "expert.num_trajectories=2",
                                   *TINY, f"logger.output_dir={tmp_path}"])
     assert bc["updates"] > 0 and bc["success_rate"] == 0.0
-    off = off_demonstrations.check_run(bc["run_dir"], episodes=1)  # tools/: the baseline's states against the demos
+    off = off_demos.check_run(bc["run_dir"], episodes=1)  # the baseline's states against the demos
     assert off["name"] == "states_off_the_demonstrations" and off["figures"]["entries"] == 11  # all but the torso's x
     assert off["first_crash_per_episode"] == [None]  # the Hopper reports no `crashed`
     assert off["figures"]["largest_gap_sd"] >= 0 and len(off["figures"]["farthest_features"]) == 3
-    assert off_demonstrations.check_run(bc["run_dir"], holdout=True)["ok"] is True  # a demonstration against the other
+    assert off_demos.check_run(bc["run_dir"], holdout=True)["ok"] is True  # a demonstration against the other
     dac = imitation_robotics.main(["method=dac", "env.task=hopper", f"expert.path={demos}", "expert.num_trajectories=2",
                                    *TINY, f"logger.output_dir={tmp_path}"])
     ends = termination_probe.main([dac["run_dir"], "--samples", "64"])  # the locomotion run's own configuration
@@ -200,7 +199,7 @@ def test_an_expert_run_stops_at_its_target_and_keeps_demonstrations_above_a_retu
                                  "eval.stop_at_return=-1000000", "demos.episodes=2", "demos.min_return=-1000000",
                                  f"logger.output_dir={tmp_path}"])
     assert summary["frames"] == 200 and summary["demos_episodes"] == 2  # the first evaluation: the first batch's 20 updates
-    probed = locomotion_probe.probe(summary["run_dir"])["episodes"][0]  # tools/: where the policy goes
+    probed = locomotion_probe.probe(summary["run_dir"])["episodes"][0]  # the probe: where the policy goes
     assert probed["seed"] == 1_000_000 and len(probed["x_every_100"]) >= 2 and probed["length"] <= 1000
     sampled = locomotion_probe.probe(summary["run_dir"], stochastic=True, critic=True)  # the behaviour, the critics
     assert sampled["actions"] == "sampled" and sampled["episodes"][0] != probed, (sampled, probed)

@@ -1,4 +1,4 @@
-"""tools/power_table.py: the seeds, detectable differences and seeds needed of the comparisons the pages rest on,
+"""docs/studies/scripts/power_table.py: the seeds, detectable differences and seeds needed of the comparisons the pages rest on,
 recomputed from the records, are the table docs/studies/power.md shows."""
 from __future__ import annotations
 
@@ -10,7 +10,8 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def _power_table_module():
-    spec = importlib.util.spec_from_file_location("power_table", os.path.join(ROOT, "tools", "power_table.py"))
+    spec = importlib.util.spec_from_file_location("power_table", os.path.join(ROOT, "docs", "studies", "scripts",
+                                                                              "power_table.py"))
     module = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = module  # its dataclasses look their module up
     spec.loader.exec_module(module)

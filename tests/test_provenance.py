@@ -1,4 +1,4 @@
-"""Provenance in every record (issue 110): a run's ``provenance.json``, its record, and ``tools/compare_runs.py``'s
+"""Provenance in every record (issue 110): a run's ``provenance.json``, its record, and ``torchrl-csirl compare``'s
 configuration and code differences, with ``--one-change`` refusing a confounded pair, on two real tiny runs that
 differ in two keys."""
 from __future__ import annotations
@@ -40,7 +40,7 @@ def two_runs(tmp_path_factory) -> tuple[str, str]:
 
 
 def test_a_run_writes_its_provenance_and_its_record_keeps_it(two_runs, tmp_path):
-    import record_runs
+    from torchrl_csirl.scripts import record
 
     run_dir = two_runs[0]
     prov = provenance.read_provenance(run_dir)
@@ -54,13 +54,13 @@ def test_a_run_writes_its_provenance_and_its_record_keeps_it(two_runs, tmp_path)
             "mujoco"} <= set(versions)
     assert versions["torch"] and versions["torchrl"] and versions["highway-env"]
     assert prov["machine"]["torch_threads"] >= 1 and prov["machine"]["cpu"]
-    target = record_runs.record_run(run_dir, str(tmp_path / "docs"))
+    target = record.record_run(run_dir, str(tmp_path / "docs"))
     assert provenance.read_provenance(target) == prov
-    import summarize_runs  # the group's code column: the commit, or 'provenance: unknown' for an older record
+    from torchrl_csirl.scripts import summarize  # the group's code column: the commit, or 'provenance: unknown' for an older record
 
-    assert summarize_runs.code_of(target).startswith((prov["code"]["commit"] or "not a checkout")[:10])
+    assert summarize.code_of(target).startswith((prov["code"]["commit"] or "not a checkout")[:10])
     os.remove(os.path.join(target, provenance.PROVENANCE_FILE))
-    assert summarize_runs.code_of(target) == "provenance: unknown"
+    assert summarize.code_of(target) == "provenance: unknown"
 
 
 def test_provenance_is_cheap_and_never_fails(monkeypatch, tmp_path):
@@ -100,10 +100,10 @@ def _copy(run_dir: str, to: str, edit=None) -> str:
 
 
 def test_compare_runs_prints_every_difference_and_refuses_a_confounded_one_change(two_runs, tmp_path, capsys):
-    import compare_runs
+    from torchrl_csirl.scripts import compare
 
     first, second = two_runs
-    result = compare_runs.main([first, "--against", second, "--metrics", "accomplish_rate"])
+    result = compare.main([first, "--against", second, "--metrics", "accomplish_rate"])
     err = capsys.readouterr().err
     changed = result["differences"]["configuration"]
     assert set(changed) == {"replay_buffer.batch_size", "csirl.gamma"}, changed
@@ -114,10 +114,10 @@ def test_compare_runs_prints_every_difference_and_refuses_a_confounded_one_chang
     assert result["rows"][0]["test"] is None  # one seed a side: no test, no verdict
 
     with pytest.raises(SystemExit) as stop:
-        compare_runs.main([first, "--against", second, "--one-change", "csirl.gamma"])
+        compare.main([first, "--against", second, "--one-change", "csirl.gamma"])
     assert stop.value.code == 2
     (line,) = capsys.readouterr().err.strip().splitlines()
-    assert line == "compare_runs.py: --one-change csirl.gamma refused: replay_buffer.batch_size differs between the sides"
+    assert line == "torchrl-csirl compare: --one-change csirl.gamma refused: replay_buffer.batch_size differs between the sides"
 
     def one_key(run_dir: str) -> None:  # the first run as if it had changed csirl.gamma alone, at the same code
         cfg = OmegaConf.load(os.path.join(run_dir, "config.yaml"))
@@ -125,7 +125,7 @@ def test_compare_runs_prints_every_difference_and_refuses_a_confounded_one_chang
         OmegaConf.save(cfg, os.path.join(run_dir, "config.yaml"))
 
     only_gamma = _copy(first, str(tmp_path / "merge-g-s0"), one_key)
-    assert compare_runs.main([first, "--against", only_gamma, "--one-change", "csirl.gamma"])["one_change"] == "csirl.gamma"
+    assert compare.main([first, "--against", only_gamma, "--one-change", "csirl.gamma"])["one_change"] == "csirl.gamma"
     capsys.readouterr()
 
     def other_commit(run_dir: str) -> None:
@@ -136,16 +136,16 @@ def test_compare_runs_prints_every_difference_and_refuses_a_confounded_one_chang
 
     elsewhere = _copy(only_gamma, str(tmp_path / "merge-c-s0"), other_commit)
     with pytest.raises(SystemExit):
-        compare_runs.main([first, "--against", elsewhere, "--one-change", "csirl.gamma"])
+        compare.main([first, "--against", elsewhere, "--one-change", "csirl.gamma"])
     assert capsys.readouterr().err.strip().endswith("code.commit differs between the sides")
 
     unknown = _copy(second, str(tmp_path / "merge-u-s0"), lambda d: os.remove(os.path.join(d, provenance.PROVENANCE_FILE)))
     with pytest.raises(SystemExit) as stop:
-        compare_runs.main([first, "--against", unknown, "--one-change", "csirl.gamma"])
+        compare.main([first, "--against", unknown, "--one-change", "csirl.gamma"])
     (line,) = capsys.readouterr().err.strip().splitlines()
     assert stop.value.code == 2
     assert "provenance unknown for 1 run: cannot show a one-change comparison" in line
     # a key set aside by name is no change; the command line's output says so
-    kept = compare_runs.main([first, "--against", second, "--one-change", "csirl.gamma", "--ignore", "replay_buffer."])
+    kept = compare.main([first, "--against", second, "--one-change", "csirl.gamma", "--ignore", "replay_buffer."])
     assert set(kept["differences"]["configuration"]) == {"csirl.gamma"}
     assert "set aside (--ignore): replay_buffer." in capsys.readouterr().err

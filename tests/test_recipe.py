@@ -21,7 +21,7 @@ from torchrl_csirl.trainers import (
 )
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-RECIPES, TOOLS = os.path.join(ROOT, "recipes"), os.path.join(ROOT, "tools")
+RECIPES = os.path.join(ROOT, "recipes")
 RECIPE = os.path.join(RECIPES, "csirl_highway.py")
 
 # a tiny budget: 100-frame batches, rounds of 20 updates, 2 evaluation episodes
@@ -577,7 +577,7 @@ def test_worker_processes_act_with_the_weights_the_main_process_trains():
 
 
 def test_summarize_runs_groups_seeds_by_configuration_variant(tmp_path, capsys):
-    import summarize_runs
+    from torchrl_csirl.scripts import summarize
 
     for name, overrides, rate in [("a", [], 0.5), ("b", [], 0.7),
                                   ("c", ["model.ego_relative_features=false", "collector.main_threads=1"], 0.9)]:
@@ -588,8 +588,8 @@ def test_summarize_runs_groups_seeds_by_configuration_variant(tmp_path, capsys):
         (run_dir / "summary.json").write_text(json.dumps(
             {"scenario": "merge", "method": "csirl", "preset": "default", "seed": ord(name), "accomplish_rate": rate,
              "final_subgoal": ord(name) - 90, "curriculum_length": 45}))
-    assert summarize_runs.variant(str(tmp_path / "c"), "default") == "model.ego_relative_features=false"
-    stats = summarize_runs.main([str(tmp_path)])
+    assert summarize.variant(str(tmp_path / "c"), "default") == "model.ego_relative_features=false"
+    stats = summarize.main([str(tmp_path)])
     assert set(stats) == {"merge/csirl/default", "merge/csirl/default model.ego_relative_features=false"}
     assert stats["merge/csirl/default"]["accomplish_rate"]["mean"] == pytest.approx(0.6)
     assert stats["merge/csirl/default"]["seeds"] == [ord("a"), ord("b")]
@@ -599,7 +599,7 @@ def test_summarize_runs_groups_seeds_by_configuration_variant(tmp_path, capsys):
 
 def test_summarize_runs_variant_is_against_the_scenes_own_defaults(tmp_path):
     """A run of a scene's defaults is no variant; a run older than an option had the recipe's default."""
-    import summarize_runs
+    from torchrl_csirl.scripts import summarize
 
     def save(name: str, cfg) -> str:
         (tmp_path / name).mkdir()
@@ -608,15 +608,15 @@ def test_summarize_runs_variant_is_against_the_scenes_own_defaults(tmp_path):
 
     scene = csirl.load_config(["env.task=intersection"])  # model.lane_features=true there
     assert scene.model.lane_features
-    assert summarize_runs.variant(save("scene", scene), "default") == ""
+    assert summarize.variant(save("scene", scene), "default") == ""
     off = csirl.load_config(["env.task=intersection", "model.lane_features=false"])
-    assert summarize_runs.variant(save("off", off), "default") == "model.lane_features=false"
+    assert summarize.variant(save("off", off), "default") == "model.lane_features=false"
     old = OmegaConf.to_container(scene)
     del old["model"]["lane_features"]  # recorded before the option existed: it ran without
-    assert summarize_runs.variant(save("old", OmegaConf.create(old)), "default") == "model.lane_features=false"
+    assert summarize.variant(save("old", OmegaConf.create(old)), "default") == "model.lane_features=false"
 
 def test_meta_gradient_balance_reports_both_parts(capsys):
-    """tools/meta_gradient_balance.py: with the published L1 weight the regulariser's part dominates."""
+    """docs/studies/scripts/meta_gradient_balance.py: with the published L1 weight the regulariser's part dominates."""
     import meta_gradient_balance
 
     out = meta_gradient_balance.main(["--frames", "60", "--steps", "2", "replay_buffer.batch_size=32"])
@@ -640,39 +640,38 @@ def test_meta_gradient_balance_of_a_trained_run(full_run):
 
 
 def test_policy_outcomes_reports_outcomes_and_speeds_and_splits_merge_by_the_traffic_ahead(tmp_path, capsys):
-    import policy_outcomes
-
     from torchrl_csirl.envs import SCENARIOS, make_env
     from torchrl_csirl.modules import make_actor, save_policy
+    from torchrl_csirl.scripts import driving_outcomes
 
     def saved(scenario):
         spec = SCENARIOS[scenario]
         return str(save_policy(make_actor(spec.obs_dim, spec.action_dim), tmp_path / f"{scenario}.pt",
                                obs_dim=spec.obs_dim, action_dim=spec.action_dim, scenario=scenario, frames=0))
 
-    stats = policy_outcomes.main([saved("merge"), "--episodes", "4"])
+    stats = driving_outcomes.main([saved("merge"), "--episodes", "4"])
     assert json.loads(capsys.readouterr().out.strip().splitlines()[-1])["all"] == stats["all"]
     assert sum(stats[g]["episodes"] for g in ("free", "blocked") if g in stats) == stats["all"]["episodes"] == 4
     for group in stats.values():
-        assert sum(group[o] for o in policy_outcomes.OUTCOMES) == group["episodes"]
+        assert sum(group[o] for o in driving_outcomes.OUTCOMES) == group["episodes"]
     assert 0.0 <= stats["all"]["accomplish_rate"] <= 1.0
     assert stats["all"]["offroad_accomplish_rate"] is None or 0.0 <= stats["all"]["offroad_accomplish_rate"] <= 1.0
     # merge starts the ego at 30 m/s: the speeds read back from the observation are in that range
     assert 15.0 < stats["all"]["mean_speed"] <= stats["all"]["max_speed"] < 60.0
-    roundabout = policy_outcomes.main([saved("roundabout"), "--episodes", "2"])
+    roundabout = driving_outcomes.main([saved("roundabout"), "--episodes", "2"])
     assert set(roundabout) == {"all"} and roundabout["all"]["episodes"] == 2
     assert sum(roundabout["all"]["offroad_lanes"].values()) == roundabout["all"]["offroad"]
     # the ego's place on the road: its lane and the offset from that lane's centre line
     env = make_env("roundabout", seed=0)
     try:
         env.reset()
-        at = policy_outcomes.road_position(env)
+        at = driving_outcomes.road_position(env)
     finally:
         env.close()
     assert at["lane"].count("/") == 2 and abs(at["lateral"]) <= at["half_width"] == 2.0
     other = save_policy(make_actor(35, 2), tmp_path / "other.pt", obs_dim=35, action_dim=2, scenario="relocate", frames=0)
     with pytest.raises(SystemExit):
-        policy_outcomes.main([str(other)])
+        driving_outcomes.main([str(other)])
 
 
 def test_a_wrong_type_on_the_command_line_is_one_line_and_exit_2(tmp_path):

@@ -1,11 +1,10 @@
-"""tools/robotics_outcomes.py: how a robotics policy's test episodes end (real AntMaze and Relocate envs)."""
+"""``torchrl-csirl outcomes``: how a robotics policy's test episodes end (real AntMaze and Relocate envs)."""
 from __future__ import annotations
 
 import json
 
 import numpy as np
 import pytest
-import robotics_outcomes
 import torch
 from tensordict import TensorDict
 
@@ -13,6 +12,7 @@ from torchrl_csirl._compat import gym_env_of
 from torchrl_csirl.envs import make_env
 from torchrl_csirl.envs.robotics import ROBOTICS_TASKS
 from torchrl_csirl.modules import make_actor, save_policy
+from torchrl_csirl.scripts import robotics_outcomes
 
 
 def _saved(tmp_path, task: str) -> str:
@@ -75,3 +75,14 @@ def test_warm_start_probe_clones_the_actor_as_a_run_does_and_rolls_its_test_epis
         p.numel() for p in make_actor(spec.obs_dim, spec.action_dim).parameters())
     with pytest.raises(SystemExit):
         warm_start_probe.main(["--updates", "0"])
+
+
+def test_outcomes_reads_a_policy_by_its_tasks_family_and_refuses_another_task(tmp_path, capsys):
+    from torchrl_csirl.scripts import outcomes
+
+    hand = outcomes.main([_saved(tmp_path, "relocate"), "--episodes", "1"])
+    assert json.loads(capsys.readouterr().out.strip().splitlines()[-1])["task"] == "relocate" and hand["episodes"] == 1
+    hopper = save_policy(make_actor(11, 3), tmp_path / "hopper.pt", obs_dim=11, action_dim=3, scenario="hopper", frames=0)
+    with pytest.raises(SystemExit):
+        outcomes.main([str(hopper)])
+    assert "a policy for 'hopper', not one of the driving scenarios and robotics tasks" in capsys.readouterr().err

@@ -85,11 +85,11 @@ _THRESHOLDS = (
         "demonstration), stops flagging (its record rewritten by diagnose); kept under the PointMaze runs with one "
         "demonstration, whose rises are 3-17 % of the demonstration's pay"),
     Threshold("WARM_START_KEPT_SHARE", 0.5, ("warm_start_kept",), "6bcca8c", (f"antmaze-warmstart/{_ANTMAZE}-s0",),
-              "the one warm-started run recorded then (0.00 after the first round); tools/warm_start_probe.py's "
+              "the one warm-started run recorded then (0.00 after the first round); docs/studies/scripts/warm_start_probe.py's "
               "cloned actors (8, 10, 17 of 50) have no record"),
     Threshold("VALUE_RATIO_LIMIT", 3.0, ("critic_calibration_expert", "critic_calibration_policy"), "7c03465", (),
               _BEFORE_ANY_RECORD + "; the exemption of under-valuation on the expert's states (f6d458d), set on the "
-                                   "records tools/entropy_bonus_records.py re-read, is undone: it could "
+                                   "records docs/studies/scripts/entropy_bonus_records.py re-read, is undone: it could "
                                    "not flag"),
     Threshold("OFF_PATH_SHARE", 0.2, ("where_episodes_end",), "7c03465", (), _BEFORE_ANY_RECORD),
     Threshold("SHORT_PROGRESS", 0.5, ("where_episodes_end",), "7c03465", (), _BEFORE_ANY_RECORD),
@@ -116,7 +116,7 @@ _THRESHOLDS = (
         f"antmaze-bc-path-qvalue-scale/{_ANTMAZE}-s1", f"antmaze-warmstart-bc/{_ANTMAZE}-s2",
         f"antmaze-bc-path-critic-warmup/{_ANTMAZE}-s0", f"antmaze-noexp/{_ANTMAZE}-s2"),
         "14 runs of 5 probe episodes (re-measured 01228fa, 97f92ba): only the HalfCheetah's records hold the figures "
-        "(the AntMaze runs' come from tools/off_demonstrations.py, not recorded); BC seed 0 on PointMaze U-maze, "
+        "(the AntMaze runs' come from torchrl-csirl off-demos, not recorded); BC seed 0 on PointMaze U-maze, "
         "Medium, merge, Hopper and Relocate and the held-out demonstrations of six tasks have no record"),
     Threshold("_MAX_STATES", 4000, ("states_off_the_demonstrations",), "97f92ba", (),
               "how many of an episode's states are paired (a measuring setting, not a flag threshold)"),

@@ -7,7 +7,7 @@ recipe (:meth:`Recipe.configure`): the command line parsed once
 (:func:`~torchrl_csirl.launch.config.parse_command_line`), the task it names registered
 (``env.module``, ``env.gym_id``, :func:`~torchrl_csirl.launch.robotics.name_task`), its family choosing the
 schema, one merge (new: defaults, the task's, the preset, the line; resumed: the saved run's, the line), then the
-validation and the checks. The run-level tools (``tools/summarize_runs.py``, the sweep, ``torchrl-csirl train``)
+validation and the checks. The run-level commands (``torchrl-csirl summarize``, the sweep, ``torchrl-csirl train``)
 look a recipe up by method name (:func:`recipe_for`).
 
 Examples:

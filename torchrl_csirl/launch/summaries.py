@@ -1,5 +1,5 @@
 """Run summaries across seeds: find a sweep's ``summary.json`` files and their mean / std. Shared by
-``recipes/benchmark.py`` (its report) and ``tools/summarize_runs.py``; the tests between two seed sets and their
+``recipes/benchmark.py`` (its report) and ``torchrl-csirl summarize``; the tests between two seed sets and their
 verdict words are :mod:`torchrl_csirl.launch.verdicts`'.
 
 Examples:

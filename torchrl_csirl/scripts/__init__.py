@@ -7,7 +7,10 @@ Each is what ``recipes/<name>.py`` in a checkout runs (the recipes are thin call
 * ``benchmark``: the methods x tasks x seeds sweep on Ray, and its report (tables, t-tests, curves);
 * ``watch``: videos of a trained agent; ``generate_experts``: expert demonstrations;
 * ``train_ant_expert``: the AntMaze expert's goal-reaching ant; ``train_expert``: SAC on any task's
-  own reward, then demonstrations of it.
+  own reward, then demonstrations of it;
+* ``cli``: ``torchrl-csirl <command>``, which also runs the commands that read finished runs, their records or a
+  saved policy: ``summarize``, ``compare``, ``curves``, ``record``, ``health_table`` (``health-table``),
+  ``outcomes`` (``driving_outcomes``, ``robotics_outcomes``), ``off_demos`` (``off-demos``) and ``diagnose``.
 
 Every training script takes ``key=value`` overrides of its typed schema (``--help`` lists them,
 docs/configuration.md is generated from them), writes a run directory and ends with a JSON line.

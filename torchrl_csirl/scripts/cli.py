@@ -9,10 +9,18 @@ Usage::
     torchrl-csirl expert ant [key=value ...]              # the AntMaze expert's walking ant
     torchrl-csirl expert demos --scenario <task> [...]    # demonstrations of a shipped scripted expert
     torchrl-csirl diagnose <run dir>                      # why a run failed: its health report
+    torchrl-csirl off-demos <run dir> [...]               # are a run's states the demonstrations'? (any method)
+    torchrl-csirl outcomes <run dir or policy.pt>         # how a policy's test episodes end
+    torchrl-csirl summarize <runs>                        # mean ± std over seeds, per scenario and configuration
+    torchrl-csirl compare <runs> --against <runs>         # two seed sets: Welch's test, the verdict, what differs
+    torchrl-csirl curves --group LABEL <runs> ... --output PNG  # evaluation curves of groups of runs
+    torchrl-csirl record <runs> --into docs/runs/<group>  # finished runs' records, kept in the repository
+    torchrl-csirl health-table <records>                  # how often each health check flags failed / good runs
 
 Each command is the script of the same name (``python -m torchrl_csirl.scripts.<name>``, ``recipes/<name>.py``):
 ``train`` is ``csirl_highway`` (``method=csirl``, the default, or ``csirl-b``) or ``imitation_highway`` (any other
-method); ``<command> --help`` lists what it accepts.
+method); a hyphenated command is the module with an underscore (``health-table``: ``health_table``);
+``<command> --help`` lists what it accepts.
 
 Examples:
     >>> split_method(["method=csirl-b", "env.task=hopper"])
@@ -38,12 +46,20 @@ COMMANDS = {
     "expert": "an expert for a task: SAC on its own reward (expert), the AntMaze walker (expert ant), "
               "a scripted expert's demonstrations (expert demos)",
     "diagnose": "why a run failed: its health report (health.json, health.png) from its metrics and checkpoint",
+    "off-demos": "are a run's states the demonstrations'? the health check on any method's run",
+    "outcomes": "how a saved policy's test episodes end (driving: crash, off-road...; AntMaze, Relocate)",
+    "summarize": "runs' mean ± std over seeds, per scenario, method, preset and configuration variant",
+    "compare": "two sets of runs: Welch's test, the verdict, every difference of configuration and code",
+    "curves": "evaluation curves of groups of runs in one figure, mean ± std over seeds",
+    "record": "finished runs' records (summary, config, provenance, curves, rounds) into docs/runs/<group>",
+    "health-table": "how often each health check flags failed and succeeded runs, from their records",
 }
 
 
 def usage() -> str:
     """The one-screen help: each command and what it does."""
-    rows = "\n".join(f"  {name:<10} {text}" for name, text in COMMANDS.items())
+    width = max(map(len, COMMANDS))
+    rows = "\n".join(f"  {name:<{width}} {text}" for name, text in COMMANDS.items())
     return f"usage: torchrl-csirl <command> [arguments]\n\ncommands:\n{rows}\n\n<command> --help: what it accepts"
 
 
@@ -109,8 +125,25 @@ def _diagnose(argv: list[str]) -> None:
     run_script(partial(_script("diagnose").main, argv))
 
 
-_RUNNERS: dict[str, Callable[[list[str]], None]] = {"train": _train, "benchmark": _benchmark, "watch": _watch,
-                                                    "expert": _expert, "diagnose": _diagnose}
+def _exit_status(main: Callable[[list[str]], Any], argv: list[str]) -> None:
+    status = main(argv)
+    if isinstance(status, int) and not isinstance(status, bool) and status:
+        sys.exit(status)
+
+
+def _analysis(argv: list[str], name: str) -> None:
+    """A command reading runs or records (``record``, ``compare``, ...): errors in one line, as the others'."""
+    from torchrl_csirl.launch.run import run_script
+
+    run_script(partial(_exit_status, _script(name.replace("-", "_")).main, argv))
+
+
+#: the commands that read finished runs, their records or a saved policy
+ANALYSIS = ("off-demos", "outcomes", "summarize", "compare", "curves", "record", "health-table")
+
+_RUNNERS: dict[str, Callable[[list[str]], None]] = {
+    "train": _train, "benchmark": _benchmark, "watch": _watch, "expert": _expert, "diagnose": _diagnose,
+    **{name: partial(_analysis, name=name) for name in ANALYSIS}}
 
 
 def main(argv: list[str] | None = None) -> None:

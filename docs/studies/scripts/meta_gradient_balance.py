@@ -1,6 +1,6 @@
 """How much of the reward network's meta-gradient comes from imitation, how much from the L1 term.
 
-``python tools/meta_gradient_balance.py [key=value ...]`` (the recipe's configuration keys, e.g.
+``python docs/studies/scripts/meta_gradient_balance.py [key=value ...]`` (the recipe's configuration keys, e.g.
 ``env.task=roundabout csirl.reward_l1_coef=1e-5``; ``checkpoint.resume=<run dir>`` loads a
 trained run's configuration and its actor, critics and reward network instead of fresh ones).
 

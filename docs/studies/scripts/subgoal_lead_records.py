@@ -1,8 +1,8 @@
 """Where recorded runs' curricula stood against their policies: the subgoal ahead of where the episodes end.
 
-``python tools/subgoal_lead_records.py <record dir> [<record dir> ...]``
+``python docs/studies/scripts/subgoal_lead_records.py <record dir> [<record dir> ...]``
 
-A record's ``health.json`` (``tools/record_runs.py`` keeps it) holds the last subgoal's share of the curriculum
+A record's ``health.json`` (``torchrl-csirl record`` keeps it) holds the last subgoal's share of the curriculum
 trajectory (``subgoal_progress``) and where the policy's probe episodes end along the demonstration
 (``where_episodes_end``, median). Reports written before ``where_episodes_end`` read the subgoal do not say when the
 curriculum moved on without the policy (:func:`torchrl_csirl.diagnostics.curriculum_moved_on`); this reads it from

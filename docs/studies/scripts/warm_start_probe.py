@@ -1,12 +1,12 @@
 """What CSIRL's actor warm start gives before any reinforcement update: a robotics task's test episodes.
 
-``python tools/warm_start_probe.py [--task antmaze-umaze] [--updates 30000] [--seed 0] [--episodes 50] [--out DIR]
+``python docs/studies/scripts/warm_start_probe.py [--task antmaze-umaze] [--updates 30000] [--seed 0] [--episodes 50] [--out DIR]
 [key=value ...]``
 
 Builds CSIRL's learner exactly as a run does (the CSIRL recipe's configuration with ``seed``, the task and the
 overrides; ``torch.manual_seed(seed)``; the demonstrations, the loss modules, the expert buffer), runs its
 warm start (``csirl.actor_pretrain_updates`` behavioural-cloning updates of the actor) and nothing else, saves the
-actor as ``DIR/policy.pt`` and rolls it over the recipe's 50 test episodes as ``tools/robotics_outcomes.py``
+actor as ``DIR/policy.pt`` and rolls it over the recipe's 50 test episodes as ``torchrl-csirl outcomes``
 does. It tells "the warm start does not imitate" from "the reinforcement updates undo it": a run's first evaluation
 comes only after a round of SAC updates (docs/studies/outside-driving.md, AntMaze U-maze).
 
@@ -21,13 +21,13 @@ import sys
 import tempfile
 
 import torch
-from robotics_outcomes import OUTCOMES, classify_episodes, print_table, summarize
 
 from torchrl_csirl.envs import resolve_scenario
 from torchrl_csirl.launch.builders import load_experts
 from torchrl_csirl.launch.csirl import make_loss_modules, warm_start_actor
 from torchrl_csirl.launch.recipes import load_config_for
 from torchrl_csirl.modules import load_policy, save_policy
+from torchrl_csirl.scripts.robotics_outcomes import OUTCOMES, classify_episodes, print_table, summarize
 
 
 def warm_started_policy(task: str, updates: int, seed: int, overrides: list[str], out_dir: str) -> str:

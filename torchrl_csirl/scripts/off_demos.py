@@ -1,6 +1,6 @@
 """Are a run's states the demonstrations'? The health check ``states_off_the_demonstrations`` on any run.
 
-``python tools/off_demonstrations.py <run dir> [<run dir> ...] [--episodes 5] [--holdout]``
+``torchrl-csirl off-demos <run dir> [<run dir> ...] [--episodes 5] [--holdout]``
 
 For each run (any method: its ``policy.pt``, else the actor of its last checkpoint) it rolls the deterministic policy
 for ``--episodes`` episodes seeded from the run's ``eval.seed`` (the test's first episodes) and sets its states against
@@ -10,8 +10,13 @@ deviations, read per episode, the worst one reported). With ``--holdout`` it set
 (at most all but one) against the others instead of a policy: the figure an expert gets. One line per run, then the
 figures as a JSON line per run (with ``first_crash_per_episode``: where the environment reports ``crashed``, each
 episode's first such step, counted from 1; AntMaze's is a flipped ant). CSIRL's health report makes the same check at
-the end of every run; this tool makes it for the baselines too, and calibrates its threshold
+the end of every run; this command makes it for the baselines too, and calibrates its threshold
 (docs/own-task.md#a-cheetah-on-its-back).
+
+Examples:
+    >>> main(["runs/merge-bc-s0", "--episodes", "0"])  # refused in one line on stderr, exit status 2
+    Traceback (most recent call last):
+    SystemExit: 2
 """
 from __future__ import annotations
 
@@ -23,14 +28,13 @@ import sys
 import torch
 from omegaconf import OmegaConf
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from locomotion_probe import policy_episodes  # noqa: E402
-from policy_cli import first_crash_step  # noqa: E402
+from torchrl_csirl.diagnostics import check_line, flat_observations, states_off_the_demonstrations
+from torchrl_csirl.envs import resolve_scenario
+from torchrl_csirl.launch.builders import load_experts
+from torchrl_csirl.launch.robotics import prepare_task
+from torchrl_csirl.scripts._policy_rollouts import first_crash_step, policy_episodes
 
-from torchrl_csirl.diagnostics import check_line, flat_observations, states_off_the_demonstrations  # noqa: E402
-from torchrl_csirl.envs import resolve_scenario  # noqa: E402
-from torchrl_csirl.launch.builders import load_experts  # noqa: E402
-from torchrl_csirl.launch.robotics import prepare_task  # noqa: E402
+__all__ = ["check_run", "main", "policy_states"]
 
 
 def policy_states(run_dir: str, cfg, episodes: int) -> tuple[list[torch.Tensor], list[int | None]]:
@@ -60,12 +64,17 @@ def check_run(run_dir: str, episodes: int = 5, holdout: bool = False) -> dict:
     return {"run": run_dir, "holdout": holdout, **check.as_dict(), "first_crash_per_episode": crashes}
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def main(argv: list[str] | None = None) -> list[dict]:
+    """Checks each run (``argv``: the command line, ``None`` for ``sys.argv[1:]``); returns the checks.
+
+    Raises:
+        SystemExit: one line naming the runs that could not be read (after the others' lines).
+    """
+    parser = argparse.ArgumentParser(prog="torchrl-csirl off-demos", description=__doc__.splitlines()[0])
     parser.add_argument("runs", nargs="+")
     parser.add_argument("--episodes", type=int, default=5)
     parser.add_argument("--holdout", action="store_true", help="the last five demonstrations against the others")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     if args.episodes < 1:
         parser.error("--episodes must be at least 1")
     results, failed = [], []
@@ -81,6 +90,7 @@ def main() -> None:
         print(json.dumps(result, default=float))
     if failed:
         raise SystemExit(f"error: {len(failed)} run(s) not read: {', '.join(failed)}")
+    return results
 
 
 if __name__ == "__main__":

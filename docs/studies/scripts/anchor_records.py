@@ -8,7 +8,7 @@ pair. A Markdown table goes to stderr; the last line printed is JSON.
 
 Usage::
 
-    python tools/anchor_records.py docs/runs/antmaze-warmstart-bc/* docs/runs/antmaze-bc-path/*
+    python docs/studies/scripts/anchor_records.py docs/runs/antmaze-warmstart-bc/* docs/runs/antmaze-bc-path/*
 
 Examples:
     >>> spearman([1.0, 2.0, 3.0, 4.0], [0.4, 0.3, 0.2, 0.1])
@@ -22,7 +22,7 @@ import os
 import sys
 from statistics import mean
 
-from record_runs import read_rounds
+from torchrl_csirl.scripts.record import read_rounds
 
 
 def _ranks(values: list[float]) -> list[float]:

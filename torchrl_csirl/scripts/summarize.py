@@ -10,11 +10,10 @@ the run's ``config.yaml``; seeds, logging, checkpointing and thread counts do no
 
 Usage::
 
-    python tools/summarize_runs.py runs/                     # every run under runs/
-    python tools/summarize_runs.py runs/merge-s0 runs/merge-s1 runs/merge-s2
+    torchrl-csirl summarize runs/                     # every run under runs/
+    torchrl-csirl summarize runs/merge-s0 runs/merge-s1 runs/merge-s2
 
 Examples:
-    >>> from summarize_runs import summarize  # doctest: +SKIP
     >>> summarize([{"scenario": "merge", "method": "csirl", "preset": "default",
     ...             "accomplish_rate": 0.9, "seed": 0}])["merge/csirl/default"]["accomplish_rate"]["mean"]
     0.9
@@ -34,6 +33,8 @@ from torchrl_csirl.launch.config import ConfigError, flatten_config, format_over
 from torchrl_csirl.launch.provenance import processes, read_provenance
 from torchrl_csirl.launch.recipes import load_config_for
 from torchrl_csirl.launch.summaries import find_summaries, mean_std
+
+__all__ = ["code_of", "main", "markdown_table", "summarize", "variant"]
 
 #: configuration keys that do not change what a run learns (or are shown elsewhere in the key)
 NOT_A_VARIANT = ("seed", "device", "preset", "env.scenario", "env.task", "csirl.intrinsic", "collector.main_threads", "logger.",
@@ -178,7 +179,8 @@ def markdown_table(stats: dict[str, dict]) -> str:
 
 
 def main(argv: list[str] | None = None) -> dict[str, dict]:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    """Summarises the runs (``argv``: the command line, ``None`` for ``sys.argv[1:]``); returns the JSON line's object."""
+    parser = argparse.ArgumentParser(prog="torchrl-csirl summarize", description=__doc__.split("\n")[0])
     parser.add_argument("paths", nargs="+", help="run directories, or folders holding run directories")
     args = parser.parse_args(argv)
     summaries = []

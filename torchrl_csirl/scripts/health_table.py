@@ -1,8 +1,8 @@
 """How often each health check flags failed runs and succeeded runs, from recorded reports.
 
-``python tools/health_flag_table.py <record dir> [<record dir> ...] [--bar 0.6] [--held-out] [--runs]``
+``torchrl-csirl health-table <record dir> [<record dir> ...] [--bar 0.6] [--held-out] [--runs]``
 
-A record (``docs/runs/<group>/<cell>``, ``tools/record_runs.py`` keeps it) holds the run's ``health.json`` and its
+A record (``docs/runs/<group>/<cell>``, ``torchrl-csirl record`` keeps it) holds the run's ``health.json`` and its
 ``summary.json``. A run *succeeded* when its final test's score reaches ``--bar`` (default :data:`BAR`):
 
 * the test return over the expert's where the task has an expert record (locomotion: ``<group>/<task>-expert-s*``
@@ -27,6 +27,8 @@ import sys
 from typing import Any
 
 from torchrl_csirl.diagnostics import HEALTH_FILE, calibration_runs
+
+__all__ = ["flag_counts", "flag_table", "main", "read_record", "run_score", "runs_table"]
 
 #: the score from which a run counts as succeeded (see the module's docstring)
 BAR = 0.6
@@ -136,7 +138,7 @@ def _in_calibration(record: str, calibration: set[str]) -> bool:
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     """Reads each record; prints the tables (stderr) and the JSON line; returns what the JSON line holds."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="torchrl-csirl health-table", description=__doc__.splitlines()[0])
     parser.add_argument("records", nargs="+", help="record directories (docs/runs/<group>/<cell>)")
     parser.add_argument("--bar", type=float, default=BAR, help=f"the score from which a run succeeded (default {BAR})")
     parser.add_argument("--held-out", action="store_true", help="leave out the runs that set a threshold")

@@ -1,6 +1,6 @@
 """Where does a locomotion policy go? The torso's x over deterministic test episodes, the return, and whether it flipped.
 
-``python tools/locomotion_probe.py <run dir> [--episodes 1] [--seed S] [--stochastic] [--critic [--plot PNG]]``
+``python docs/studies/scripts/locomotion_probe.py <run dir> [--episodes 1] [--seed S] [--stochastic] [--critic [--plot PNG]]``
 
 Reads a run on ``hopper`` or ``halfcheetah``: its ``policy.pt`` (a finished run) or, before the end, the actor of
 its last checkpoint. For each episode (seeds ``S, S + 1, ...``; default the run's ``eval.seed``, its test
@@ -24,38 +24,14 @@ import os
 
 import torch
 from omegaconf import OmegaConf
-from policy_cli import roll_test_episodes
-from torchrl.envs.utils import ExplorationType
 
 from torchrl_csirl.data.shipped import load_expert_demonstrations
 from torchrl_csirl.diagnostics import discounted_returns
 from torchrl_csirl.envs import resolve_scenario
 from torchrl_csirl.launch.builders import load_experts
 from torchrl_csirl.launch.csirl import make_matching
-from torchrl_csirl.modules import load_policy, make_actor, make_input_features, make_qvalue
-
-ACTOR_PREFIXES = ("actor_network_params.", "actor_network.")
-
-
-def load_actor(run_dir: str, task: str) -> torch.nn.Module:
-    """The run's policy: ``policy.pt``, else the actor in its last checkpoint's ``loss`` state."""
-    if os.path.isfile(os.path.join(run_dir, "policy.pt")):
-        return load_policy(run_dir)
-    path = os.path.join(run_dir, "checkpoints", "last", "state.pt")
-    if not os.path.isfile(path):
-        raise SystemExit(f"error: {run_dir}: neither policy.pt nor checkpoints/last/state.pt")
-    state = torch.load(path, weights_only=False, map_location="cpu")["states"].get("loss", {})
-    for prefix in ACTOR_PREFIXES:
-        weights = {k[len(prefix):]: v for k, v in state.items() if k.startswith(prefix)}
-        if weights:
-            break
-    else:
-        raise SystemExit(f"error: {path}: no actor in its loss state; probe the finished run (policy.pt)")
-    spec = resolve_scenario(task)
-    actor = make_actor(spec.obs_dim, spec.action_dim, input_features=make_input_features(spec, ego_relative=False))
-    actor.load_state_dict(weights)
-    return actor
-
+from torchrl_csirl.modules import make_input_features, make_qvalue
+from torchrl_csirl.scripts._policy_rollouts import policy_episodes
 
 CRITIC_PREFIX = "qvalue_network_params.module."
 #: the expert states at which the critic probe reports Q
@@ -162,15 +138,6 @@ def critic_probe(run_dir: str, cfg, rollout, plot: str | None = None) -> dict:
         title = f"{os.path.basename(run_dir)}: the last checkpoint's {len(critics)} critics (gamma {gamma})"
         report["plot"] = plot_critic(plot, title, q_experts, q_policies, known)
     return report
-
-
-def policy_episodes(run_dir: str, task: str, episodes: int, seed: int, stochastic: bool = False):
-    """The run's policy (:func:`load_actor`) over ``episodes`` episodes, each on its own seed (``seed + i``, as
-    the test's), yielded one rollout at a time; its mean action unless ``stochastic``."""
-    mode = ExplorationType.RANDOM if stochastic else ExplorationType.DETERMINISTIC
-    episodes_rolled = roll_test_episodes(load_actor(run_dir, task), task, episodes, seed,
-                                         resolve_scenario(task).max_steps, exploration=mode)
-    yield from (rollout for _, rollout, _ in episodes_rolled)
 
 
 def probe(run_dir: str, episodes: int = 1, seed: int | None = None, stochastic: bool = False,

@@ -1,11 +1,11 @@
 """PointMaze's expert (the waypoint controller): its success rate, and the shipped demonstrations.
 
-``python tools/point_maze_experts.py [--episodes 50] [--seed 1000] [--ids PointMaze_UMaze-v3 PointMaze_Medium-v3]``
+``python docs/studies/scripts/point_maze_experts.py [--episodes 50] [--seed 1000] [--ids PointMaze_UMaze-v3 PointMaze_Medium-v3]``
 rolls the expert (:mod:`torchrl_csirl.envs.robotics.point_maze_expert`) for ``--episodes`` seeded episodes
 (seeds ``--seed, --seed + 1, ...``) of each gymnasium task and prints one JSON line: per id, the success rate
 (the ball within 0.45 m of the goal, ``info["success"]``) and the mean and longest episode length.
 
-``--module <name>`` imports a module first for the ids it registers (``tools/fixed_goal_mazes.py``'s fixed-goal
+``--module <name>`` imports a module first for the ids it registers (``examples/fixed_goal_mazes.py``'s fixed-goal
 mazes). ``--ship`` instead writes the shipped files, ``torchrl_csirl/data/experts/<id>/expert_25.npz`` (or under
 ``--out-dir``): the first 25 successful episodes from seed 0.
 """
@@ -48,7 +48,7 @@ def ship(gym_id: str, out_dir: str, module: str | None = None) -> str:
     """Writes ``<out_dir>/<gym_id>/expert_25.npz``: the first 25 successful episodes from seed 0."""
     demos = record(gym_id, SHIPPED_TRAJECTORIES, seed=0)
     demos = demos.with_metadata(curriculum="expert", num_trajectories=SHIPPED_TRAJECTORIES,
-                                command=f"python tools/point_maze_experts.py --ship --ids {gym_id}"
+                                command=f"python docs/studies/scripts/point_maze_experts.py --ship --ids {gym_id}"
                                         + (f" --module {module}" if module else ""))
     os.makedirs(os.path.join(out_dir, gym_id), exist_ok=True)
     return demos.save(os.path.join(out_dir, gym_id, f"expert_{SHIPPED_TRAJECTORIES}.npz"))

@@ -1,5 +1,6 @@
-"""tools/: the analysis and probe scripts run as scripts from their own folder (their imports of the
-run layer (``torchrl_csirl.launch``) resolve from any working directory)."""
+"""``torchrl-csirl``'s commands (``torchrl_csirl/scripts/cli.py``): each answers ``--help``, the usage lists them;
+the commands that read runs and records (``compare``, ``curves``, ``health-table``) on the recorded runs; and the
+study pages' scripts (``docs/studies/scripts``), which run as scripts from any working directory."""
 from __future__ import annotations
 
 import os
@@ -8,26 +9,57 @@ import sys
 
 import pytest
 
+from torchrl_csirl.scripts import cli
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-TOOLS = os.path.join(ROOT, "tools")
-SCRIPTS = sorted(name for name in os.listdir(TOOLS) if name.endswith(".py") and name != "policy_cli.py")
+STUDY_SCRIPTS = os.path.join(ROOT, "docs", "studies", "scripts")
+SCRIPTS = sorted(name for name in os.listdir(STUDY_SCRIPTS) if name.endswith(".py"))
 
 
-def test_the_analysis_scripts_live_in_tools_and_recipes_holds_what_users_run():
-    assert SCRIPTS == ["anchor_records.py", "compare_runs.py", "entropy_bonus_records.py", "health_flag_table.py",
-                       "locomotion_probe.py", "matching_route_probe.py",
-                       "meta_gradient_balance.py", "off_demonstrations.py", "plot_curves.py", "point_maze_experts.py", "policy_outcomes.py",
-                       "power_table.py",
-                       "record_runs.py",
-                       "robotics_outcomes.py", "subgoal_lead_records.py", "summarize_runs.py", "termination_probe.py",
-                       "warm_start_probe.py"]
-    assert not set(SCRIPTS) & set(os.listdir(os.path.join(ROOT, "recipes")))
+@pytest.mark.parametrize("command", list(cli.COMMANDS))
+def test_every_command_answers_help(command, capsys):
+    try:
+        cli.main([command, "--help"])
+    except SystemExit as exit:
+        assert exit.code in (0, None)
+    out = capsys.readouterr().out
+    assert out.strip()
+    if command in cli.ANALYSIS or command == "diagnose":
+        assert out.startswith(f"usage: torchrl-csirl {command}")
+
+
+def test_the_usage_lists_every_command_and_an_unknown_one_is_one_line(capsys):
+    cli.main([])
+    usage = capsys.readouterr().out
+    assert all(f"\n  {name} " in usage for name in cli.COMMANDS)
+    assert set(cli.COMMANDS) == set(cli._RUNNERS)
+    with pytest.raises(SystemExit) as exit:
+        cli.main(["no-such-command"])
+    assert exit.value.code == 2
+    assert capsys.readouterr().err.startswith("error: torchrl-csirl no-such-command: unknown command; one of train")
+
+
+def test_a_commands_error_is_one_line_and_exit_status_2(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exit:
+        cli.main(["summarize", str(tmp_path / "missing")])
+    assert exit.value.code == 2 and capsys.readouterr().err.count("\n") == 1
+    with pytest.raises(SystemExit) as exit:  # a run that cannot be recorded: its line, exit status 1
+        cli.main(["record", str(tmp_path), "--into", str(tmp_path / "records")])
+    assert exit.value.code == 1 and "has no summary.json" in capsys.readouterr().err
+
+
+def test_the_study_scripts_are_no_command_of_the_package():
+    assert SCRIPTS == ["anchor_records.py", "entropy_bonus_records.py", "locomotion_probe.py", "matching_route_probe.py",
+                       "meta_gradient_balance.py", "point_maze_experts.py", "power_table.py", "subgoal_lead_records.py",
+                       "termination_probe.py", "warm_start_probe.py"]
+    package = os.listdir(os.path.join(ROOT, "torchrl_csirl", "scripts"))
+    assert not set(SCRIPTS) & set(package) and not set(SCRIPTS) & set(os.listdir(os.path.join(ROOT, "recipes")))
 
 
 @pytest.mark.parametrize("script", SCRIPTS)
-def test_a_tool_runs_from_another_directory(script, tmp_path):
+def test_a_study_script_runs_from_another_directory(script, tmp_path):
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([ROOT, os.environ.get("PYTHONPATH", "")])}
-    proc = subprocess.run([sys.executable, os.path.join(TOOLS, script), "--help"], cwd=tmp_path, env=env,
+    proc = subprocess.run([sys.executable, os.path.join(STUDY_SCRIPTS, script), "--help"], cwd=tmp_path, env=env,
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.startswith(f"usage: {script}")
@@ -38,15 +70,14 @@ def test_compare_runs_sets_two_seed_sets_side_by_side_with_welchs_test(capsys):
     verdict and, for records made before provenance existed, ``provenance: unknown``."""
     import json
 
-    import compare_runs
-
     from torchrl_csirl.launch.summaries import find_summaries
     from torchrl_csirl.launch.verdicts import compare_seeds
+    from torchrl_csirl.scripts import compare
 
     runs = os.path.join(ROOT, "docs", "runs")
     first = [os.path.join(runs, "csirl", f"merge-csirl-s{s}") for s in range(3)]
     second = [os.path.join(runs, "csirl-b", f"merge-b-s{s}") for s in range(3)]
-    result = compare_runs.main([*first, "--against", *second, "--labels", "csirl", "csirl-b",
+    result = compare.main([*first, "--against", *second, "--labels", "csirl", "csirl-b",
                                 "--metrics", "normalized_accomplish_rate"])
     last, table = capsys.readouterr()
     row = result["rows"][0]
@@ -61,17 +92,17 @@ def test_compare_runs_sets_two_seed_sets_side_by_side_with_welchs_test(capsys):
 
 def test_compare_runs_across_scenarios_sets_a_task_against_its_variant():
     """``--across-scenarios``: the merge runs against the roundabout ones as two groups (a task against its variant)."""
-    import compare_runs
+    from torchrl_csirl.scripts import compare
 
     runs = os.path.join(ROOT, "docs", "runs", "csirl")
     first = [os.path.join(runs, f"merge-csirl-s{s}") for s in range(3)]
     second = [os.path.join(runs, f"roundabout-csirl-s{s}") for s in range(3)]
-    assert compare_runs.compare([], [], by_scenario=False) == []
-    per_task = compare_runs.main([*first, "--against", *second, "--metrics", "success_rate", "--across-scenarios"])
+    assert compare.compare([], [], by_scenario=False) == []
+    per_task = compare.main([*first, "--against", *second, "--metrics", "success_rate", "--across-scenarios"])
     (row,) = per_task["rows"]
     assert row["scenario"] == "merge / roundabout" and row["n"] == [3, 3]
     with pytest.raises(SystemExit):  # without it the two sides share no scenario
-        compare_runs.main([*first, "--against", *second, "--metrics", "success_rate"])
+        compare.main([*first, "--against", *second, "--metrics", "success_rate"])
 
 
 def test_anchor_records_reads_how_firmly_the_cloning_term_held_per_round(capsys):
@@ -98,28 +129,27 @@ def test_plot_curves_draws_each_group_at_the_frames_all_its_seeds_evaluated(tmp_
     starts at the first round; each group's last point is its seeds' mean there."""
     import json
 
-    import plot_curves
-
     from torchrl_csirl.benchmark.results import eval_curve
+    from torchrl_csirl.scripts import curves
 
     runs = os.path.join(ROOT, "docs", "runs")
     groups = {name: [os.path.join(runs, name, f"antmaze-umaze-csirl-s{s}") for s in range(3)]
               for name in ("antmaze-warmstart", "antmaze-bc-path")}
     out = tmp_path / "curves.png"
     args = [arg for name, dirs in groups.items() for arg in ("--group", name, *dirs)]
-    result = plot_curves.main([*args, "--reference", "bc, test=0.64", "--output", str(out)])
+    result = curves.main([*args, "--reference", "bc, test=0.64", "--output", str(out)])
     assert out.stat().st_size > 10_000 and json.loads(capsys.readouterr().out.splitlines()[-1]) == result
     for name, dirs in groups.items():
-        curves = [eval_curve(d) for d in dirs]
-        frames, _ = plot_curves.common_frames(curves)
-        assert frames == sorted(set(curves[0][0]) & set(curves[1][0]) & set(curves[2][0]))
-        last = [dict(zip(*c))[frames[-1]] for c in curves]
+        seeds = [eval_curve(d) for d in dirs]
+        frames, _ = curves.common_frames(seeds)
+        assert frames == sorted(set(seeds[0][0]) & set(seeds[1][0]) & set(seeds[2][0]))
+        last = [dict(zip(*c))[frames[-1]] for c in seeds]
         assert result["last"][name] == {"runs": 3, "frames": frames[-1], "mean": pytest.approx(sum(last) / 3)}
-    assert 0.0 not in plot_curves.common_frames([eval_curve(d) for d in groups["antmaze-warmstart"]])[0]
+    assert 0.0 not in curves.common_frames([eval_curve(d) for d in groups["antmaze-warmstart"]])[0]
     with pytest.raises(SystemExit, match="no 'no_such_key'"):
-        plot_curves.main([*args, "--metric", "no_such_key", "--output", str(out)])
+        curves.main([*args, "--metric", "no_such_key", "--output", str(out)])
     with pytest.raises(SystemExit):  # a reference without its level
-        plot_curves.main([*args, "--reference", "bc", "--output", str(out)])
+        curves.main([*args, "--reference", "bc", "--output", str(out)])
 
 
 def test_matching_route_probe_scores_the_demonstrations_route_per_rule(capsys):
@@ -173,12 +203,12 @@ def test_health_flag_table_counts_flags_on_failed_and_succeeded_records(capsys):
     PointMaze U-maze with one demonstration (success 0.52): the flipped cheetah and the maze are failures; only they
     flag states_off_the_demonstrations and demonstrations_share_a_goal. With --held-out every one is left out: each
     set a threshold."""
-    import health_flag_table
+    from torchrl_csirl.scripts import health_table
 
     cheetahs = [os.path.join(ROOT, "docs", "runs", "mujoco", f"halfcheetah-csirl-s{seed}") for seed in range(3)]
     maze = os.path.join(ROOT, "docs", "runs", "pointmaze-onedemo", "PointMaze_UMaze-v3-csirl-s0")
-    result = health_flag_table.main([*cheetahs, maze, ROOT, "--runs"])  # ROOT: no record, skipped
-    assert result["records"] == 4 and result["succeeded"] == 2 and result["bar"] == health_flag_table.BAR
+    result = health_table.main([*cheetahs, maze, ROOT, "--runs"])  # ROOT: no record, skipped
+    assert result["records"] == 4 and result["succeeded"] == 2 and result["bar"] == health_table.BAR
     scores = {os.path.basename(r["record"]): (round(r["score"], 2), r["metric"]) for r in result["rows"]}
     assert scores["halfcheetah-csirl-s2"] == (0.27, "return over the expert's")
     assert scores["PointMaze_UMaze-v3-csirl-s0"] == (0.52, "success rate")
@@ -189,6 +219,6 @@ def test_health_flag_table_counts_flags_on_failed_and_succeeded_records(capsys):
     assert (goal["failed_flagged"], goal["succeeded_flagged"]) == (1, 0)
     table = capsys.readouterr().err
     assert "| `states_off_the_demonstrations` | 1 of 1 (100%) | 0 of 2 (0%) | 1 |" in table
-    held_out = health_flag_table.main([*cheetahs, maze, "--held-out"])
+    held_out = health_table.main([*cheetahs, maze, "--held-out"])
     assert held_out["records"] == 0 and len(held_out["left_out"]) == 4
-    assert health_flag_table.main([maze, "--bar", "0.5"])["succeeded"] == 1  # the bar decides
+    assert health_table.main([maze, "--bar", "0.5"])["succeeded"] == 1  # the bar decides

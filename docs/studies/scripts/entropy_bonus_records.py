@@ -1,10 +1,10 @@
 """Re-reads the critic checks of recorded runs whose health reports predate SAC's entropy bonus in the returns.
 
-``python tools/entropy_bonus_records.py <record dir> [<record dir> ...]``
+``python docs/studies/scripts/entropy_bonus_records.py <record dir> [<record dir> ...]``
 
 A soft critic estimates the learner's reward plus ``-alpha log pi`` at every next state; health reports written
 before the report counted that bonus compared the critics with the reward's return alone. A record (``rounds.csv``,
-``config.yaml``, ``health.json``: ``tools/record_runs.py`` keeps them) holds no networks to probe again, but its last
+``config.yaml``, ``health.json``: ``torchrl-csirl record`` keeps them) holds no networks to probe again, but its last
 round holds alpha and the policy's entropy ``H = -E[log pi]``: the bonus is about ``alpha H`` a step, and over the
 discounted horizon of the measured states (95 % of it or more left) about ``alpha H gamma / (1 - gamma)``. Each
 record's two checks are then read again, approximately (the means only), with that bonus added to the recorded
@@ -21,9 +21,9 @@ import sys
 
 import torch
 import yaml
-from record_runs import read_rounds
 
 from torchrl_csirl.diagnostics import critic_calibration
+from torchrl_csirl.scripts.record import read_rounds
 
 
 def horizon_bonus(alpha: float, entropy: float, gamma: float) -> float:

@@ -1,6 +1,6 @@
-"""How a driving policy's test episodes end, and how fast it drives: any scenario.
+"""How a driving policy's test episodes end, and how fast it drives: any scenario (``torchrl-csirl outcomes``).
 
-``python tools/policy_outcomes.py <run dir or policy.pt> [--episodes 50] [--seed 1000000]``
+``torchrl-csirl outcomes <run dir or policy.pt> [--episodes 50] [--seed 1000000]``
 
 Rolls out the saved deterministic policy on the recipe's test episodes (seeds
 ``seed .. seed + episodes - 1``, as the final evaluation does) and reports, per group of
@@ -14,6 +14,11 @@ the episodes are also split by the traffic ahead at reset:
 two main-road vehicles ahead of the ego slow to 20 m/s; when they share a lane the other one is
 **free**, when they do not both lanes are **blocked** and finishing means squeezing past them (the
 expert nudges, docs/experts.md). The last line is JSON.
+
+Examples:
+    >>> summarize_group([{"outcome": "crash", "accomplish_rate": 0.5, "mean_speed": 25.0, "max_speed": 30.0,
+    ...                   "final_speed": 28.0, "steps": 40}])["crash_step"]
+    40.0
 """
 from __future__ import annotations
 
@@ -23,10 +28,12 @@ import sys
 from collections import Counter, defaultdict
 
 import torch
-from policy_cli import format_cell, load_test_policy, mean_or_none, roll_test_episodes
 from torchrl.envs import EnvBase
 
 from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, accomplish_rate_from_rollout, gym_env_of, success_from_rollout
+from torchrl_csirl.scripts._policy_rollouts import format_cell, load_test_policy, mean_or_none, roll_test_episodes
+
+__all__ = ["OUTCOMES", "classify_episodes", "main", "report", "summarize"]
 
 OUTCOMES = ("success", "crash", "offroad", "timeout")
 
@@ -136,12 +143,19 @@ def print_table(stats: dict[str, dict]) -> None:
               f"{_lanes(s['offroad_lanes'])} |", file=sys.stderr)
 
 
-def main(argv: list[str] | None = None) -> dict[str, dict]:
-    args, policy, scenario = load_test_policy(__doc__.splitlines()[0], argv, SCENARIOS, "driving scenarios")
+def report(args, policy, scenario: str) -> dict[str, dict]:
+    """Rolls ``policy`` on ``scenario``'s test episodes (``args.episodes`` from ``args.seed``), prints the table
+    (stderr) and the JSON line; returns the groups' statistics."""
     stats = summarize(classify_episodes(policy, scenario, args.episodes, args.seed))
     print_table(stats)
     print(json.dumps({"policy": os.path.abspath(args.policy), "scenario": scenario, **stats}))
     return stats
+
+
+def main(argv: list[str] | None = None) -> dict[str, dict]:
+    """``torchrl-csirl outcomes`` for a driving policy alone (``argv``: the command line); returns :func:`report`'s."""
+    return report(*load_test_policy(__doc__.splitlines()[0], argv, SCENARIOS, "driving scenarios",
+                                    prog="torchrl-csirl outcomes"))
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """How many seeds each of the project's rested-on comparisons has, what it can detect, and what it would need.
 
-``python tools/power_table.py [--delta 0.05] [--root .]``
+``python docs/studies/scripts/power_table.py [--delta 0.05] [--root .]``
 
 For each comparison of :data:`COMPARISONS` (two seed sets of recorded runs, ``docs/runs/<group>/<cell>``), the
 table gives the seeds a side, the difference of means, the smallest difference Welch's test could detect at that
@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from torchrl_csirl.launch.provenance import read_provenance
 from torchrl_csirl.launch.verdicts import compare_seeds, detectable_difference, seeds_needed
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
 #: the difference of interest, a share of the expert's score
 DELTA = 0.05
 #: the HalfCheetah expert's record (its test return normalises the HalfCheetah's scores)

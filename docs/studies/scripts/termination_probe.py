@@ -1,6 +1,6 @@
 """Does a trained baseline prefer ending the episode? Its critic on terminating vs continuing transitions.
 
-``python tools/termination_probe.py <run dir> [key=value ...] [--samples 4096] [--seed 0]``
+``python docs/studies/scripts/termination_probe.py <run dir> [key=value ...] [--samples 4096] [--seed 0]``
 
 Reads a run of ``recipes/imitation_highway.py`` or ``recipes/imitation_robotics.py`` (a robotics
 or locomotion task: its last checkpoint, with the replay buffer)

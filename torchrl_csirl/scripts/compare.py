@@ -19,12 +19,11 @@ differences (to stderr) and, last, one JSON line.
 
 Usage::
 
-    python tools/compare_runs.py docs/runs/csirl/merge-csirl-s* --against docs/runs/precision/merge-csirl-bf16-s*
-    python tools/compare_runs.py docs/runs/csirl --against docs/runs/precision --labels fp32 bf16
-    python tools/compare_runs.py runs/a-s* --against runs/b-s* --one-change csirl.fixed_alpha
+    torchrl-csirl compare docs/runs/csirl/merge-csirl-s* --against docs/runs/precision/merge-csirl-bf16-s*
+    torchrl-csirl compare docs/runs/csirl --against docs/runs/precision --labels fp32 bf16
+    torchrl-csirl compare runs/a-s* --against runs/b-s* --one-change csirl.fixed_alpha
 
 Examples:
-    >>> from compare_runs import compare  # doctest: +SKIP
     >>> rows = compare([{"scenario": "merge", "method": "csirl", "normalized_accomplish_rate": v} for v in (0.9, 0.92)],
     ...                [{"scenario": "merge", "method": "bc", "normalized_accomplish_rate": v} for v in (0.8, 0.9)])
     >>> rows[0]["scenario"], rows[0]["methods"], rows[0]["metric"], rows[0]["n"], rows[0]["test"]["verdict"]
@@ -46,6 +45,9 @@ from torchrl_csirl.launch.provenance import code_fields, machine_fields, read_pr
 from torchrl_csirl.launch.summaries import find_summaries, mean_std
 from torchrl_csirl.launch.verdicts import compare_family, compare_seeds, describe
 
+__all__ = ["compare", "differences", "main", "markdown", "one_change_refusal", "run_fields", "what_differs"]
+
+PROG = "torchrl-csirl compare"
 #: what is compared by default: the paper's metric, normalised, and the run's cost
 METRICS = ("normalized_accomplish_rate", "success_rate", "crash_rate", "total_wall_s")
 #: configuration keys that are no change between runs: the seed (runs of one side differ in it) and where a run
@@ -254,7 +256,12 @@ def _load(paths: list[str]) -> tuple[list[dict], list[str]]:
 
 
 def main(argv: list[str] | None = None) -> dict:
-    parser = argparse.ArgumentParser(prog="compare_runs.py", description=__doc__.split("\n")[0])
+    """Compares the two sides (``argv``: the command line, ``None`` for ``sys.argv[1:]``); returns the JSON line's object.
+
+    Raises:
+        SystemExit: status 2, one line on stderr, for a refused ``--one-change`` or sides that share no scenario.
+    """
+    parser = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n")[0])
     parser.add_argument("runs", nargs="+", help="run directories (or folders of runs): the first side")
     parser.add_argument("--against", nargs="+", required=True, help="run directories (or folders): the second side")
     parser.add_argument("--labels", nargs=2, default=("first", "second"), help="the two columns' names")
@@ -274,7 +281,7 @@ def main(argv: list[str] | None = None) -> dict:
     if args.one_change is not None:
         refusal = one_change_refusal(found, args.one_change)
         if refusal is not None:
-            print(f"compare_runs.py: {refusal}", file=sys.stderr)
+            print(f"{PROG}: {refusal}", file=sys.stderr)
             raise SystemExit(2)
     rows = compare(first, second, tuple(args.metrics), by_scenario=not args.across_scenarios,
                    comparisons=args.comparisons)

@@ -1,10 +1,16 @@
-"""The command line of the scripts that roll a saved policy out on the recipe's test episodes
-(``tools/policy_outcomes.py``, ``tools/robotics_outcomes.py``; ``tools/locomotion_probe.py`` rolls with it too): the
-arguments, the policy and its task, checked; the test episodes; and the small formatting helpers of their tables.
+"""What the commands that roll a saved policy out on the recipe's test episodes share (``torchrl-csirl outcomes``,
+``torchrl-csirl off-demos``, the study probes of docs/studies/scripts): the arguments, the policy and its task,
+checked; a run's actor (its ``policy.pt`` or its last checkpoint's); the test episodes; and the small formatting
+helpers of their tables.
+
+Examples:
+    >>> format_cell(None, ".2f"), format_cell(0.5, ".2f"), mean_or_none([])
+    ('-', '0.50', None)
 """
 from __future__ import annotations
 
 import argparse
+import os
 from collections.abc import Callable, Collection, Iterator
 from typing import Any
 
@@ -12,14 +18,18 @@ import torch
 from tensordict import TensorDictBase
 from torchrl.envs import EnvBase, ExplorationType, set_exploration_type
 
-from torchrl_csirl.envs import make_env, sample_lane_centres
-from torchrl_csirl.modules import load_policy
+from torchrl_csirl.envs import make_env, resolve_scenario, sample_lane_centres
+from torchrl_csirl.modules import load_policy, make_actor, make_input_features
 
-__all__ = ["first_crash_step", "format_cell", "load_test_policy", "mean_or_none", "roll_test_episodes"]
+__all__ = ["first_crash_step", "format_cell", "load_actor", "load_test_policy", "mean_or_none", "policy_episodes",
+           "roll_test_episodes"]
+
+#: where a checkpoint's ``loss`` state keeps the actor's weights
+ACTOR_PREFIXES = ("actor_network_params.", "actor_network.")
 
 
 def load_test_policy(description: str, argv: list[str] | None, tasks: Collection[str],
-                     kind: str) -> tuple[argparse.Namespace, Any, str]:
+                     kind: str, prog: str | None = None) -> tuple[argparse.Namespace, Any, str]:
     """Parses ``<policy> [--episodes N] [--seed S]``, loads the policy and checks its task is one of ``tasks``.
 
     Args:
@@ -27,6 +37,7 @@ def load_test_policy(description: str, argv: list[str] | None, tasks: Collection
         argv: the arguments (``None``: ``sys.argv[1:]``).
         tasks: the tasks the script handles.
         kind: what they are, for the error (e.g. ``"driving scenarios"``).
+        prog: the command's name in its usage (``None``: the script's file name).
 
     Returns:
         The parsed arguments, the policy (deterministic at test) and its task. Sets torch to one
@@ -41,7 +52,7 @@ def load_test_policy(description: str, argv: list[str] | None, tasks: Collection
         >>> args.episodes, task
         (3, 'merge')
     """
-    parser = argparse.ArgumentParser(description=description)
+    parser = argparse.ArgumentParser(prog=prog, description=description)
     parser.add_argument("policy", help="a run directory or its policy.pt")
     parser.add_argument("--episodes", type=int, default=50)
     parser.add_argument("--seed", type=int, default=1_000_000, help="seed of the first episode (the recipe's eval.seed)")
@@ -85,6 +96,55 @@ def roll_test_episodes(policy, task: str, episodes: int, seed: int, max_steps: i
                 yield env, rollout, before
     finally:
         env.close()
+
+
+def load_actor(run_dir: str, task: str) -> torch.nn.Module:
+    """The run's policy: ``policy.pt``, else the actor in its last checkpoint's ``loss`` state.
+
+    Raises:
+        SystemExit: one line, for a run with neither, or a checkpoint without an actor.
+
+    Examples:
+        >>> import tempfile
+        >>> load_actor(tempfile.mkdtemp(), "hopper")  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        SystemExit: error: ...: neither policy.pt nor checkpoints/last/state.pt
+    """
+    if os.path.isfile(os.path.join(run_dir, "policy.pt")):
+        return load_policy(run_dir)
+    path = os.path.join(run_dir, "checkpoints", "last", "state.pt")
+    if not os.path.isfile(path):
+        raise SystemExit(f"error: {run_dir}: neither policy.pt nor checkpoints/last/state.pt")
+    state = torch.load(path, weights_only=False, map_location="cpu")["states"].get("loss", {})
+    for prefix in ACTOR_PREFIXES:
+        weights = {k[len(prefix):]: v for k, v in state.items() if k.startswith(prefix)}
+        if weights:
+            break
+    else:
+        raise SystemExit(f"error: {path}: no actor in its loss state; probe the finished run (policy.pt)")
+    spec = resolve_scenario(task)
+    actor = make_actor(spec.obs_dim, spec.action_dim, input_features=make_input_features(spec, ego_relative=False))
+    actor.load_state_dict(weights)
+    return actor
+
+
+def policy_episodes(run_dir: str, task: str, episodes: int, seed: int,
+                    stochastic: bool = False) -> Iterator[TensorDictBase]:
+    """The run's policy (:func:`load_actor`) over ``episodes`` episodes, each on its own seed (``seed + i``, as
+    the test's), yielded one rollout at a time; its mean action unless ``stochastic``.
+
+    Examples:
+        >>> import os, tempfile
+        >>> from torchrl_csirl.modules import save_policy
+        >>> run = tempfile.mkdtemp()
+        >>> _ = save_policy(make_actor(25, 2), os.path.join(run, "policy.pt"), obs_dim=25, action_dim=2, scenario="merge")
+        >>> [r.shape[-1] for r in policy_episodes(run, "merge", 1, 0)] >= [1]
+        True
+    """
+    mode = ExplorationType.RANDOM if stochastic else ExplorationType.DETERMINISTIC
+    episodes_rolled = roll_test_episodes(load_actor(run_dir, task), task, episodes, seed,
+                                         resolve_scenario(task).max_steps, exploration=mode)
+    yield from (rollout for _, rollout, _ in episodes_rolled)
 
 
 def first_crash_step(rollout: TensorDictBase) -> int | None:

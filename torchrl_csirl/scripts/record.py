@@ -13,9 +13,9 @@ A record is what a table, its curves and the figures quoted about a run's traini
   end, the subgoal there, and the mean over the round's batch rows of every other quantity the run logs
   (losses, ``alpha``, ``entropy``, ``r_w``'s batch mean ``intrinsic_reward_mean``, ...), with the extremes of
   those the pages bound (:data:`EXTREMES`), to 4 significant digits and at most ``max_rounds`` rows;
-* the outputs of ``tools/`` kept beside the run (:data:`PROBES`): ``termination_probe.json`` (the tool writes
-  it there), ``locomotion_probe.json`` and ``outcomes.json`` (the last line of ``locomotion_probe.py``,
-  ``policy_outcomes.py`` or ``robotics_outcomes.py``, redirected there).
+* the outputs of the probes kept beside the run (:data:`PROBES`): ``termination_probe.json`` (the study script
+  ``docs/studies/scripts/termination_probe.py`` writes it there), ``locomotion_probe.json`` and ``outcomes.json``
+  (the last line of ``docs/studies/scripts/locomotion_probe.py`` or ``torchrl-csirl outcomes``, redirected there).
 
 Checkpoints, policies and plots stay with the run.
 A run without ``summary.json`` has not finished and is refused; an existing record is kept unless
@@ -23,11 +23,10 @@ A run without ``summary.json`` has not finished and is refused; an existing reco
 
 Usage::
 
-    python tools/record_runs.py /work/runs/mujoco/halfcheetah-dac-s0 --into docs/runs/mujoco
-    python tools/record_runs.py /work/runs/mujoco/hopper-*-s1 --into docs/runs/mujoco --force
+    torchrl-csirl record /work/runs/mujoco/halfcheetah-dac-s0 --into docs/runs/mujoco
+    torchrl-csirl record /work/runs/mujoco/hopper-*-s1 --into docs/runs/mujoco --force
 
 Examples:
-    >>> from record_runs import evaluation_rows  # doctest: +SKIP
     >>> evaluation_rows([{"frames": 10, "loss_actor": 1.0}, {"frames": 20, "updates": 5, "eval_env_return": 3.0}])
     [{'frames': 20, 'updates': 5, 'eval_env_return': 3.0}]
 """
@@ -43,11 +42,15 @@ import sys
 
 from torchrl_csirl.launch.provenance import PROVENANCE_FILE
 
+__all__ = ["RecordError", "evaluation_rows", "main", "read_metrics", "read_rounds", "record_run", "round_rows",
+           "write_rounds"]
+
+PROG = "torchrl-csirl record"
 #: the files a record copies as they are (``resumes.jsonl`` only where it exists)
 COPIED = ("summary.json", "config.yaml", PROVENANCE_FILE, "resumes.jsonl", "health.json")
-#: the outputs of tools/ a record copies where the run has them: ``termination_probe.py`` writes its own; the
-#: others are the last line of ``locomotion_probe.py`` / ``policy_outcomes.py`` / ``robotics_outcomes.py`` redirected
-#: there; ``policy_scale.json`` is the one hand-made series a record holds (docs/benchmark.md)
+#: the outputs of the probes a record copies where the run has them: ``termination_probe.py`` writes its own; the
+#: others are the last line of ``locomotion_probe.py`` / ``torchrl-csirl outcomes`` redirected there;
+#: ``policy_scale.json`` is the one hand-made series a record holds (docs/benchmark.md)
 PROBES = ("termination_probe.json", "locomotion_probe.json", "outcomes.json", "policy_scale.json")
 #: the keys of an evaluation row kept besides its ``eval_*`` metrics (a round row's position too)
 ROW_KEYS = ("frames", "updates", "round")
@@ -235,13 +238,18 @@ def record_run(run_dir: str, into: str, force: bool = False, max_rounds: int = M
     if rounds:
         write_rounds(os.path.join(target, ROUNDS_FILE), rounds)
     if not os.path.isfile(os.path.join(run_dir, PROVENANCE_FILE)):
-        print(f"record_runs.py: {target}: provenance: unknown (the run has no {PROVENANCE_FILE}: made before runs wrote it)",
+        print(f"{PROG}: {target}: provenance: unknown (the run has no {PROVENANCE_FILE}: made before runs wrote it)",
               file=sys.stderr)
     return target
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="record_runs.py", description=__doc__.split("\n\n")[0])
+    """Records each run (``argv``: the command line, ``None`` for ``sys.argv[1:]``), printing each record's folder.
+
+    Returns:
+        The exit status: 1 when a run could not be recorded (one line each on stderr), else 0.
+    """
+    parser = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0])
     parser.add_argument("runs", nargs="+", help="finished run directories")
     parser.add_argument("--into", required=True, help="the record group, e.g. docs/runs/mujoco")
     parser.add_argument("--force", action="store_true", help="replace existing records")
@@ -253,7 +261,7 @@ def main(argv: list[str] | None = None) -> int:
         try:
             print(record_run(run_dir, args.into, force=args.force, max_rounds=args.max_rounds))
         except RecordError as err:
-            print(f"record_runs.py: {err}", file=sys.stderr)
+            print(f"{PROG}: {err}", file=sys.stderr)
             failed += 1
     return 1 if failed else 0
 

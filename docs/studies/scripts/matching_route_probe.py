@@ -1,6 +1,6 @@
 """How CSIRL's matching reward pays the expert's own route: per target rule and subgoal, along the demonstrations.
 
-``python tools/matching_route_probe.py [--task antmaze-umaze] [--subgoals 0.1 0.25 0.5 1.0] [--rules final path]
+``python docs/studies/scripts/matching_route_probe.py [--task antmaze-umaze] [--subgoals 0.1 0.25 0.5 1.0] [--rules final path]
 [key=value ...]``
 
 Builds the matching reward as a run does (the CSIRL recipe's configuration for the task with the overrides; the

@@ -1,6 +1,6 @@
-"""How a robotics policy's test episodes end: AntMaze U-maze or Adroit Relocate.
+"""How a robotics policy's test episodes end: AntMaze U-maze or Adroit Relocate (``torchrl-csirl outcomes``).
 
-``python tools/robotics_outcomes.py <run dir or policy.pt> [--episodes 50] [--seed 1000000]``
+``torchrl-csirl outcomes <run dir or policy.pt> [--episodes 50] [--seed 1000000]``
 
 Rolls out the saved deterministic policy on the recipe's test episodes (seeds
 ``seed .. seed + episodes - 1``, as the final evaluation does) and reports how they end:
@@ -17,6 +17,10 @@ Rolls out the saved deterministic policy on the recipe's test episodes (seeds
   ball-target distance at the end.
 
 The last line is JSON; a Markdown table goes to stderr.
+
+Examples:
+    >>> summarize("relocate", [{"outcome": "lost", "accomplish_rate": 0.5, "return": 3.0, "final_distance": 0.2}])
+    {'episodes': 1, 'accomplish_rate': 0.5, 'at_target': 0, 'lost': 1, 'never': 0, 'return': 3.0, 'final_distance': 0.2}
 """
 from __future__ import annotations
 
@@ -26,10 +30,12 @@ import sys
 from collections import Counter, defaultdict
 
 import numpy as np
-from policy_cli import first_crash_step, format_cell, load_test_policy, mean_or_none, roll_test_episodes
 
 from torchrl_csirl.envs import accomplish_rate_from_rollout, gym_env_of
 from torchrl_csirl.envs.robotics import ROBOTICS_TASKS
+from torchrl_csirl.scripts._policy_rollouts import first_crash_step, format_cell, load_test_policy, mean_or_none, roll_test_episodes
+
+__all__ = ["OUTCOMES", "classify_episodes", "main", "print_table", "report", "summarize"]
 
 OUTCOMES = {"antmaze-umaze": ("goal", "flipped", "short"), "relocate": ("at_target", "lost", "never")}
 
@@ -108,12 +114,19 @@ def print_table(task: str, stats: dict[str, object]) -> None:
     print("| " + " | ".join(row) + " |", file=sys.stderr)
 
 
-def main(argv: list[str] | None = None) -> dict[str, object]:
-    args, policy, task = load_test_policy(__doc__.splitlines()[0], argv, OUTCOMES, "robotics tasks")
+def report(args, policy, task: str) -> dict[str, object]:
+    """Rolls ``policy`` on ``task``'s test episodes (``args.episodes`` from ``args.seed``), prints the table
+    (stderr) and the JSON line; returns the summary."""
     stats = summarize(task, classify_episodes(policy, task, args.episodes, args.seed))
     print_table(task, stats)
     print(json.dumps({"policy": os.path.abspath(args.policy), "task": task, **stats}))
     return stats
+
+
+def main(argv: list[str] | None = None) -> dict[str, object]:
+    """``torchrl-csirl outcomes`` for a robotics policy alone (``argv``: the command line); returns :func:`report`'s."""
+    return report(*load_test_policy(__doc__.splitlines()[0], argv, OUTCOMES, "robotics tasks",
+                                    prog="torchrl-csirl outcomes"))
 
 
 if __name__ == "__main__":

@@ -8,7 +8,7 @@ line printed is one JSON object: per group, its runs and the mean of the metric 
 
 Usage::
 
-    python tools/plot_curves.py --metric eval_accomplish_rate --reference "bc (test)=0.64" \
+    torchrl-csirl curves --metric eval_accomplish_rate --reference "bc (test)=0.64" \
         --output docs/figures/antmaze_one_changes.png \
         --group "anchored, path" docs/runs/antmaze-bc-path/* \
         --group "anchored, path, fixed alpha" docs/runs/antmaze-bc-path-fixed-alpha/*
@@ -25,6 +25,8 @@ import sys
 
 from torchrl_csirl.benchmark.results import eval_curve
 from torchrl_csirl.visualization import plot_method_curves
+
+__all__ = ["common_frames", "group_curves", "main", "parse_reference"]
 
 
 def common_frames(runs: list[tuple[list[float], list[float]]]) -> tuple[list[float], list[list[float]]]:
@@ -56,7 +58,8 @@ def parse_reference(text: str) -> tuple[str, float]:
 
 
 def main(argv: list[str] | None = None) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    """Draws the figure (``argv``: the command line, ``None`` for ``sys.argv[1:]``); returns the JSON line's object."""
+    parser = argparse.ArgumentParser(prog="torchrl-csirl curves", description=__doc__.split("\n\n")[0])
     parser.add_argument("--group", nargs="+", action="append", required=True, metavar=("LABEL", "RUN_DIR"),
                         help="a label, then its run directories (one per seed)")
     parser.add_argument("--metric", default="eval_accomplish_rate", help="a metrics.jsonl key (default: %(default)s)")
