@@ -5,7 +5,9 @@
 A record (``docs/runs/<group>/<cell>``, ``torchrl-csirl record`` keeps it) holds the run's ``health.json`` and its
 ``summary.json``. A run *succeeded* when its final test's score reaches ``--bar`` (default :data:`BAR`):
 
-* the test return over the expert's where the task has an expert record (locomotion: ``<group>/<task>-expert-s*``
+* on a driving scene, the expert-normalised test accomplish rate (``normalized_accomplish_rate``), the figure every
+  driving table reports;
+* else the test return over the expert's where the task has an expert record (locomotion: ``<group>/<task>-expert-s*``
   beside the records, e.g. ``docs/runs/mujoco/halfcheetah-expert-s0``), the figure the locomotion table reports;
 * else the test's success rate (a goal task's, AntMaze's, PointMaze's: the share of its 50 test episodes that reach
   the goal), else its accomplish rate.
@@ -56,7 +58,11 @@ def run_score(summary: dict[str, Any], record: str) -> tuple[float | None, str]:
         (0.96, 'success rate')
         >>> run_score({"scenario": "merge", "accomplish_rate": 0.8}, "/nowhere/group/cell")
         (0.8, 'accomplish rate')
+        >>> run_score({"scenario": "merge", "accomplish_rate": 0.8, "normalized_accomplish_rate": 0.9}, "/nowhere/g/c")
+        (0.9, 'normalized accomplish rate')
     """
+    if summary.get("normalized_accomplish_rate") is not None:
+        return float(summary["normalized_accomplish_rate"]), "normalized accomplish rate"
     expert = expert_return(record, str(summary.get("scenario")))
     if expert is not None and summary.get("return") is not None:
         return float(summary["return"]) / expert, "return over the expert's"
