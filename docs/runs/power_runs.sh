@@ -16,4 +16,10 @@ $B --methods sac gail --scenarios PointMaze_Medium-v3 --seeds 3 4 --output-dir r
 # merge, CSIRL against CSIRL-B: the spread of CSIRL's five seeds asks for six a side
 $B --methods csirl --scenarios merge --seeds 5 --output-dir runs/q-merge -- $COMMON
 $B --methods csirl-b --scenarios merge --seeds 3 4 5 --output-dir runs/q-merge -- $COMMON
+# held-out runs of the health report meant to fail (docs/runs/health-short): a tenth of the budget; a goal task
+# without its goal
+for m in csirl csirl-nocur; do for sc in merge roundabout; do
+$B --methods $m --scenarios $sc --seeds 10 --output-dir runs/q-short -- collector.total_frames=6000 $COMMON
+done; done
+$B --methods csirl --scenarios PointMaze_Medium-v3 --seeds 3 --output-dir runs/q-pm-nogoal -- $PM csirl.goal_conditioned=false $COMMON
 echo QUEUE DONE
