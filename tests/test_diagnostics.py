@@ -27,10 +27,10 @@ from torchrl_csirl.diagnostics import (
     warm_start_kept,
     where_episodes_end,
 )
-from torchrl_csirl.envs import resolve_scenario
 from torchrl_csirl.launch import csirl
 from torchrl_csirl.launch.builders import load_experts
 from torchrl_csirl.scripts import csirl_highway, diagnose
+from torchrl_csirl.tasks import resolve_scenario
 
 TINY = ["collector.frames_per_batch=100", "collector.cut_episodes=true", "collector.init_random_frames=100",
         "collector.num_workers=1", "collector.main_threads=1", "replay_buffer.warmup_frames=100",

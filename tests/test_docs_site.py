@@ -16,7 +16,7 @@ import zlib
 import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-SUBPACKAGES = ("objectives", "transforms", "curriculum", "data", "envs", "envs.robotics", "modules",
+SUBPACKAGES = ("objectives", "transforms", "curriculum", "data", "tasks", "tasks.robotics", "modules",
                "trainers", "visualization", "launch", "diagnostics")
 pytest.importorskip("mkdocs", reason="the docs extra (pip install -e '.[docs]')")
 

@@ -14,11 +14,11 @@ from tensordict import TensorDict
 from test_own_task import TINY
 
 from torchrl_csirl.data import load_expert_demonstrations, record_demonstrations
-from torchrl_csirl.envs import TASKS, make_env, make_gymnasium_task
-from torchrl_csirl.envs import registry as task_registry
-from torchrl_csirl.envs.expert_registry import make_expert
 from torchrl_csirl.launch.robotics import prepare_task
 from torchrl_csirl.scripts import csirl_highway
+from torchrl_csirl.tasks import TASKS, make_env, make_gymnasium_task
+from torchrl_csirl.tasks import registry as task_registry
+from torchrl_csirl.tasks.experts import make_expert
 
 UMAZE, MEDIUM = "PointMaze_UMaze-v3", "PointMaze_Medium-v3"
 LAYOUT = {"observation": (0, 4), "achieved_goal": (4, 6), "desired_goal": (6, 8)}
@@ -41,7 +41,7 @@ def _unregister_the_mazes():
 
 def test_a_gymnasium_robotics_id_is_found_without_env_module():
     """A fresh interpreter: gymnasium_robotics is imported for the id, and recorded for the worker processes."""
-    code = ("import sys; from torchrl_csirl.launch.robotics import prepare_task; from torchrl_csirl.envs import registry\n"
+    code = ("import sys; from torchrl_csirl.launch.robotics import prepare_task; from torchrl_csirl.tasks import registry\n"
             "assert 'gymnasium_robotics' not in sys.modules\n"
             f"print(prepare_task(['env.gym_id={UMAZE}'])[-1], list(registry._TASK_MODULES))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout

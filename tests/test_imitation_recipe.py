@@ -86,7 +86,7 @@ def test_trained_baseline_end_to_end(method, tmp_path):
 def test_progress_reward_is_the_distance_gained_toward_the_finish():
     from tensordict import TensorDict
 
-    from torchrl_csirl.envs import SCENARIOS
+    from torchrl_csirl.tasks import SCENARIOS
     from torchrl_csirl.transforms import ProgressReward
 
     spec = SCENARIOS["roundabout"]  # (x, y) positions, features_range +-100 m

@@ -14,12 +14,12 @@ import torch
 from tensordict import TensorDict
 
 from torchrl_csirl._compat import gym_env_of
-from torchrl_csirl.envs import TaskSpec, make_env, resolve_scenario
-from torchrl_csirl.envs.expert import make_expert
 from torchrl_csirl.launch.csirl import CSIRL_RECIPE
 from torchrl_csirl.modules import DropFeatures, load_policy, make_actor, make_input_features, save_policy
 from torchrl_csirl.modules.features import feature_map_from_config
 from torchrl_csirl.scripts import csirl_robotics, imitation_robotics, train_expert
+from torchrl_csirl.tasks import TaskSpec, make_env, resolve_scenario
+from torchrl_csirl.tasks.driving.expert import make_expert
 
 TINY = [
     "collector.total_frames=400", "collector.frames_per_batch=200", "collector.cut_episodes=true",

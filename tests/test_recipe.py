@@ -118,8 +118,8 @@ def test_watch_films_the_final_evaluation_episodes(full_run, tmp_path):
 
 
 def test_saved_policy_rolls_out_in_two_lines(full_run):
-    from torchrl_csirl.envs import make_env
     from torchrl_csirl.modules import load_policy
+    from torchrl_csirl.tasks import make_env
 
     policy = load_policy(full_run["run_dir"])
     rollout = make_env(policy.metadata["scenario"], seed=0).rollout(10, policy)
@@ -237,7 +237,7 @@ def test_fixed_subgoal_switch_keeps_the_subgoal_at_the_last_curriculum_state(tmp
 
 
 def test_matching_scale_defaults_to_the_scenario_and_can_be_overridden(tmp_path):
-    from torchrl_csirl.envs import SCENARIOS
+    from torchrl_csirl.tasks import SCENARIOS
 
     spec = SCENARIOS["merge"]
     curriculum = torch.zeros(5, spec.obs_dim)
@@ -640,8 +640,8 @@ def test_meta_gradient_balance_of_a_trained_run(full_run):
 def test_policy_outcomes_reports_outcomes_and_speeds_and_splits_merge_by_the_traffic_ahead(tmp_path, capsys):
     import policy_outcomes
 
-    from torchrl_csirl.envs import SCENARIOS, make_env
     from torchrl_csirl.modules import make_actor, save_policy
+    from torchrl_csirl.tasks import SCENARIOS, make_env
 
     def saved(scenario):
         spec = SCENARIOS[scenario]

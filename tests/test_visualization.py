@@ -9,7 +9,7 @@ from PIL import Image
 
 from torchrl_csirl.curriculum import scan_subgoal
 from torchrl_csirl.data import load_expert_demonstrations
-from torchrl_csirl.envs import SCENARIOS, make_gym_env
+from torchrl_csirl.tasks import SCENARIOS, make_gym_env
 from torchrl_csirl.visualization import (
     plot_learning_curve,
     plot_method_curves,

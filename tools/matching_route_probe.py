@@ -24,10 +24,10 @@ import sys
 import torch
 
 from torchrl_csirl.diagnostics import discounted_returns, route_opening
-from torchrl_csirl.envs import resolve_scenario
 from torchrl_csirl.launch.builders import load_experts
 from torchrl_csirl.launch.csirl import make_matching
 from torchrl_csirl.launch.recipes import load_config_for
+from torchrl_csirl.tasks import resolve_scenario
 
 RULES = ("final", "next", "path")
 

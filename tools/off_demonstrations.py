@@ -28,9 +28,9 @@ from locomotion_probe import policy_episodes  # noqa: E402
 from policy_cli import first_crash_step  # noqa: E402
 
 from torchrl_csirl.diagnostics import check_line, flat_observations, states_off_the_demonstrations  # noqa: E402
-from torchrl_csirl.envs import resolve_scenario  # noqa: E402
 from torchrl_csirl.launch.builders import load_experts  # noqa: E402
 from torchrl_csirl.launch.robotics import prepare_task  # noqa: E402
+from torchrl_csirl.tasks import resolve_scenario  # noqa: E402
 
 
 def policy_states(run_dir: str, cfg, episodes: int) -> tuple[list[torch.Tensor], list[int | None]]:

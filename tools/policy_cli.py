@@ -12,8 +12,8 @@ import torch
 from tensordict import TensorDictBase
 from torchrl.envs import EnvBase, ExplorationType, set_exploration_type
 
-from torchrl_csirl.envs import make_env, sample_lane_centres
 from torchrl_csirl.modules import load_policy
+from torchrl_csirl.tasks import make_env, sample_lane_centres
 
 __all__ = ["first_crash_step", "format_cell", "load_test_policy", "mean_or_none", "roll_test_episodes"]
 

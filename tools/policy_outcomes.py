@@ -26,7 +26,7 @@ import torch
 from policy_cli import format_cell, load_test_policy, mean_or_none, roll_test_episodes
 from torchrl.envs import EnvBase
 
-from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, accomplish_rate_from_rollout, gym_env_of, success_from_rollout
+from torchrl_csirl.tasks import SCENARIOS, ScenarioSpec, accomplish_rate_from_rollout, gym_env_of, success_from_rollout
 
 OUTCOMES = ("success", "crash", "offroad", "timeout")
 

@@ -4,7 +4,7 @@ The table's rows and columns (:data:`METHOD_ORDER`, :data:`SCENARIO_ORDER`, :dat
 :data:`LOCOMOTION_ORDER`), every cell's budget (:data:`TABLE_BUDGETS`) and settings (:data:`TASK_OVERRIDES`),
 which recipe runs a method on a task (:func:`recipe_of`) and the cells of a sweep (:func:`plan_cells`). Method
 and task names come from their registries (:data:`torchrl_csirl.launch.imitation.METHODS`,
-:data:`torchrl_csirl.envs.TASKS`); running the cells is :mod:`torchrl_csirl.benchmark.runner`'s.
+:data:`torchrl_csirl.tasks.TASKS`); running the cells is :mod:`torchrl_csirl.benchmark.runner`'s.
 
 Examples:
     >>> SCENARIO_ORDER, LOCOMOTION_ORDER
@@ -17,8 +17,8 @@ import sys
 from dataclasses import dataclass
 
 from torchrl_csirl.benchmark.published import PAPER_TABLE
-from torchrl_csirl.envs import LOCOMOTION_TASKS, TASKS, import_task_module, resolve_scenario, task_names
 from torchrl_csirl.launch.imitation import METHODS, REFERENCE_METHODS
+from torchrl_csirl.tasks import LOCOMOTION_TASKS, TASKS, import_task_module, resolve_scenario, task_names
 
 __all__ = ["ABLATIONS", "BASELINE_VARIANTS", "CSIRL_METHODS", "CSIRL_RECIPE", "CSIRL_ROBOTICS_RECIPE", "IMITATION_RECIPE",
            "IMITATION_ROBOTICS_RECIPE", "LOCOMOTION_ORDER", "LOCOMOTION_TITLES", "METHOD_ORDER", "PAPER_ROBOTICS_METHODS",
@@ -56,7 +56,7 @@ BASELINE_VARIANTS: dict[str, tuple[str, tuple[str, ...]]] = {
 ABLATIONS = ("csirl-nocur", "csirl-noexp", "csirl-bc", *BASELINE_VARIANTS)
 #: methods whose run does not depend on the seed (the expert driver is deterministic): first seed only
 SEED_FREE_METHODS = ("expert",)
-#: the table's columns: the task registry's driving scenes (:func:`~torchrl_csirl.envs.task_names`), in the
+#: the table's columns: the task registry's driving scenes (:func:`~torchrl_csirl.tasks.task_names`), in the
 #: paper's order (its Table I's columns)
 SCENARIO_ORDER = tuple(sorted(task_names(driving=True), key=lambda s: (_PAPER_COLUMNS.get(s, len(_PAPER_COLUMNS)), s)))
 #: the robotics table's columns (the paper's Figure 7), scored by the test return
@@ -110,7 +110,7 @@ class BenchmarkError(ValueError):
 def is_robotics(scenario: str) -> bool:
     """Whether ``scenario`` is scored by return and run by the robotics scripts: every task but the driving
     scenes (the robotics tasks, a task of your own, a gymnasium id), by the task's ``family`` in the registry
-    (:func:`~torchrl_csirl.envs.resolve_scenario`); a name the registry does not know yet counts as one.
+    (:func:`~torchrl_csirl.tasks.resolve_scenario`); a name the registry does not know yet counts as one.
 
     Examples:
         >>> is_robotics("relocate"), is_robotics("MountainCarContinuous-v0"), is_robotics("merge")
@@ -133,7 +133,7 @@ def is_gymnasium_id(scenario: str) -> bool:
     names, or registered by ``make_gymnasium_task`` in this process."""
     import gymnasium as gym
 
-    from torchrl_csirl.envs.gym_ids import import_gym_provider
+    from torchrl_csirl.tasks.gym_ids import import_gym_provider
 
     if scenario in TASKS:
         return TASKS[scenario].family == "gymnasium"

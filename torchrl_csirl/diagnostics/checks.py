@@ -766,7 +766,7 @@ def states_off_the_demonstrations(policy_states: torch.Tensor | Sequence[torch.T
             ``episode_largest_gaps_sd`` is None).
         demonstrations: ``[L_i, D]`` each demonstration's observations.
         matched: the observation entries the matching reward reads (left out).
-        names: a name per observation entry (the task's :meth:`~torchrl_csirl.envs.ScenarioSpec.feature_name`).
+        names: a name per observation entry (the task's :meth:`~torchrl_csirl.tasks.ScenarioSpec.feature_name`).
 
     Examples:
         >>> _ = torch.manual_seed(0)

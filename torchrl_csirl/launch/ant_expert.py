@@ -92,8 +92,8 @@ def evaluate_waypoint_expert(policy, episodes: int, seed: int) -> dict[str, floa
     Returns:
         ``success_rate`` (goal reached), ``progress`` (mean route progress), ``steps`` (mean length).
     """
-    from torchrl_csirl.envs import make_gym_env
-    from torchrl_csirl.envs.robotics import WaypointAntExpert
+    from torchrl_csirl.tasks import make_gym_env
+    from torchrl_csirl.tasks.robotics import WaypointAntExpert
 
     env = make_gym_env("antmaze-umaze")
     expert = WaypointAntExpert(policy)

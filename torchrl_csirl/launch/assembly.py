@@ -16,9 +16,9 @@ from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
 from torchrl.envs import Compose, EnvBase, Transform
 
 from torchrl_csirl.data import ExpertDemonstrations, FilledRowsCheckpointer
-from torchrl_csirl.envs import ScenarioSpec, TaskSpec
 from torchrl_csirl.launch.collection import PolicyMirror, make_collector, make_eval_env
 from torchrl_csirl.modules import make_input_features
+from torchrl_csirl.tasks import ScenarioSpec, TaskSpec
 from torchrl_csirl.trainers import (
     CheckpointHook,
     CSIRLTrainer,

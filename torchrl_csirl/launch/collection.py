@@ -17,9 +17,9 @@ from torch import nn
 from torchrl.collectors import BaseCollector, Collector
 from torchrl.envs import EnvBase
 
-from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, TaskSpec, env_factory, make_serial_env, resolve_scenario  # noqa: F401 - SCENARIOS: doctests
-from torchrl_csirl.envs import make_env as make_scenario_env
 from torchrl_csirl.launch.config import ConfigError
+from torchrl_csirl.tasks import SCENARIOS, ScenarioSpec, TaskSpec, env_factory, make_serial_env, resolve_scenario  # noqa: F401 - SCENARIOS: doctests
+from torchrl_csirl.tasks import make_env as make_scenario_env
 from torchrl_csirl.trainers import WorkerErrorLog, ignoring_interrupts, shutdown_collector, start_collector
 
 MAX_ENVS_PER_WORKER = 4

@@ -72,7 +72,7 @@ __all__ = [
 
 def driving_scenes() -> tuple[str, ...]:
     """The driving scenes, read from the task registry when asked (``env.task``'s choices)."""
-    from torchrl_csirl.envs import task_names
+    from torchrl_csirl.tasks import task_names
 
     return task_names(family="driving")
 

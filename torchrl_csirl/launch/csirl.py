@@ -30,7 +30,6 @@ from torchrl.objectives import BCLoss
 
 from torchrl_csirl.curriculum import SubgoalCurriculum
 from torchrl_csirl.data import DemonstrationMixer, ExpertDemonstrations
-from torchrl_csirl.envs import FAILURE_KEYS, SCENARIOS, ScenarioSpec, resolve_scenario  # noqa: F401 - SCENARIOS: used by tests
 from torchrl_csirl.hyperparameters import CSIRLHyperparameters
 from torchrl_csirl.launch.assembly import Run, assemble_trainer, make_online_buffer, model_input_features
 from torchrl_csirl.launch.collection import check_collector_config
@@ -55,6 +54,7 @@ from torchrl_csirl.launch.robotics import RoboticsExpertConfig, RoboticsSections
 from torchrl_csirl.launch.run import ExpertDataError, resolve_device
 from torchrl_csirl.modules import LearnerPrecision, PrecisionUnsupported, expert_reference_states
 from torchrl_csirl.objectives import ActorBehaviourCloning, CSIRLLearner, make_csirl_learner, pretrain_actor
+from torchrl_csirl.tasks import FAILURE_KEYS, SCENARIOS, ScenarioSpec, resolve_scenario  # noqa: F401 - SCENARIOS: used by tests
 from torchrl_csirl.trainers import MetaRewardUpdate, SACUpdate, SubgoalSelectionHook
 from torchrl_csirl.transforms import CombineRewards, GoalConditionedMatchingReward, IntrinsicReward, SubgoalMatchingReward
 

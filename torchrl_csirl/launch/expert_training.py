@@ -15,7 +15,6 @@ from omegaconf import DictConfig, OmegaConf
 from torchrl.envs import ExplorationType, set_exploration_type
 from torchrl.objectives import SoftUpdate
 
-from torchrl_csirl.envs import resolve_scenario, task_names
 from torchrl_csirl.launch.ant_expert import (
     TASK,
     AntCheckpointConfig,
@@ -34,6 +33,7 @@ from torchrl_csirl.launch.robotics import RoboticsEnvConfig
 from torchrl_csirl.launch.run import resolve_device
 from torchrl_csirl.modules import make_actor, make_input_features, make_qvalue
 from torchrl_csirl.objectives import SACHyperparameters, make_sac_learner
+from torchrl_csirl.tasks import resolve_scenario, task_names
 from torchrl_csirl.trainers import KeepBestPolicy, SACUpdate, StopAtTarget
 
 __all__ = ["ANT_EXPERT_RECIPE", "BEST_POLICY_FILE", "DemosConfig", "EXPERT_RECIPE", "ExpertEnvConfig", "ExpertTrainingConfig",

@@ -14,8 +14,8 @@ from torchrl_csirl.data import (
     load_expert_demonstrations,
     load_minari_dataset,
 )
-from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, TaskSpec  # noqa: F401 - SCENARIOS: doctests
 from torchrl_csirl.launch.run import ExpertDataError
+from torchrl_csirl.tasks import SCENARIOS, ScenarioSpec, TaskSpec  # noqa: F401 - SCENARIOS: doctests
 
 
 # ---------------------------------------------------------------------------------------- data

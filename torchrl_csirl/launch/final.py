@@ -7,8 +7,8 @@ from typing import Any
 
 from omegaconf import DictConfig
 
-from torchrl_csirl.envs import ScenarioSpec
 from torchrl_csirl.launch.assembly import Run
+from torchrl_csirl.tasks import ScenarioSpec
 
 
 def learning_curve_auc(history: list[dict[str, Any]]) -> float | None:
@@ -28,7 +28,7 @@ def evaluation_summary(cfg: DictConfig, spec: ScenarioSpec, method: str, final: 
                  expert_rate: float | None) -> dict[str, Any]:
     """The summary fields of a run's final test evaluation ``final`` (:func:`evaluate_policy`'s
     output), with the accomplish rate normalised by ``expert_rate`` (None: not normalised)."""
-    from torchrl_csirl.envs import normalized_accomplish_rate
+    from torchrl_csirl.tasks import normalized_accomplish_rate
 
     return {
         "scenario": spec.name,

@@ -15,7 +15,7 @@ Methods (``method=<name>``):
   :func:`~torchrl_csirl.trainers.imitation.make_imitation_method`; the ``<method>`` section holds
   the fields of its hyperparameter dataclass (docs/baselines.md gives their sources).
 * ``random``, ``expert``: reference rows, no training: uniform random actions, and the expert
-  driver (:class:`~torchrl_csirl.envs.expert_policy.ExpertDriverPolicy`), scored on the same
+  driver (:class:`~torchrl_csirl.tasks.expert_policy.ExpertDriverPolicy`), scored on the same
   test episodes.
 
 The pieces every recipe shares (environments, collector, buffers, logging, evaluation,
@@ -50,7 +50,6 @@ from torchrl.envs.utils import RandomPolicy
 from torchrl.objectives import BCLoss, SoftUpdate
 
 from torchrl_csirl.data import DemonstrationMixer, ExpertDemonstrations
-from torchrl_csirl.envs import ScenarioSpec, TaskSpec, resolve_scenario
 from torchrl_csirl.launch.assembly import Run, assemble_trainer, make_logger, make_online_buffer, model_input_features
 from torchrl_csirl.launch.collection import check_collector_config, make_eval_env
 from torchrl_csirl.launch.config import (
@@ -77,6 +76,7 @@ from torchrl_csirl.launch.robotics import RoboticsSections
 from torchrl_csirl.launch.run import expert_accomplish_rate, resolve_device
 from torchrl_csirl.modules import make_actor, make_qvalue, with_standardization
 from torchrl_csirl.objectives._imitation import SACHyperparameters, make_sac_learner
+from torchrl_csirl.tasks import ScenarioSpec, TaskSpec, resolve_scenario
 from torchrl_csirl.trainers import BCUpdate, SACUpdate, evaluate_policy
 from torchrl_csirl.trainers.imitation import (
     IMITATION_METHODS,
@@ -327,7 +327,7 @@ def reference_policy(method: str, env: Any, spec: ScenarioSpec) -> Any:
     """Uniform random actions (``random``) or the expert driver on ``env`` (``expert``)."""
     if method == "random":
         return RandomPolicy(env.full_action_spec[env.action_key])
-    from torchrl_csirl.envs.expert_policy import ExpertDriverPolicy
+    from torchrl_csirl.tasks.expert_policy import ExpertDriverPolicy
 
     return ExpertDriverPolicy(env, spec.name)
 

@@ -1,7 +1,7 @@
 """One registry of recipes: what each training script is, in one record (:class:`Recipe`).
 
 A recipe names the methods it trains, its configuration schema (one for the driving scenes, one for
-every other task: the task's :attr:`~torchrl_csirl.envs.TaskSpec.family` picks it), its presets, the
+every other task: the task's :attr:`~torchrl_csirl.tasks.TaskSpec.family` picks it), its presets, the
 checks a loaded configuration must pass, its trainer and its finish. Loading is the same for every
 recipe (:meth:`Recipe.configure`): the command line parsed once
 (:func:`~torchrl_csirl.launch.config.parse_command_line`), the task it names registered

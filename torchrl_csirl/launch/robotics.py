@@ -3,7 +3,7 @@ and ``recipes/imitation_robotics.py`` put over their driving recipe's schema
 (:class:`RoboticsSections`), and the checks both share.
 
 Besides the paper's robotics tasks (AntMaze, Relocate) these scripts run any other task: one
-registered with :func:`~torchrl_csirl.envs.register_task` in a module that ``env.module=`` imports,
+registered with :func:`~torchrl_csirl.tasks.register_task` in a module that ``env.module=`` imports,
 or any gymnasium id with flat ``Box`` spaces (``env.gym_id=``, :func:`prepare_task`).
 """
 from __future__ import annotations
@@ -15,8 +15,6 @@ from typing import Optional
 
 from omegaconf import DictConfig, OmegaConf
 
-from torchrl_csirl.envs import import_task_module, make_gymnasium_task, resolve_scenario, task_names
-from torchrl_csirl.envs.robotics import ANT_GOAL_SPEC
 from torchrl_csirl.launch import config as config_lib  # noqa: F401 - doctests
 from torchrl_csirl.launch.config import (
     CollectorConfig,
@@ -27,6 +25,8 @@ from torchrl_csirl.launch.config import (
     option,
     parse_command_line,
 )
+from torchrl_csirl.tasks import import_task_module, make_gymnasium_task, resolve_scenario, task_names
+from torchrl_csirl.tasks.robotics import ANT_GOAL_SPEC
 
 __all__ = ["RoboticsCollectorConfig", "RoboticsEnvConfig", "RoboticsExpertConfig", "RoboticsModelConfig",
            "RoboticsSections", "check_task_sections", "name_task", "prepare_task", "requested_task", "schema_family",
@@ -97,8 +97,8 @@ def name_task(command: CommandLine, run_dir: str | None = None,
     """The task of a parsed command line, registered before the configuration is loaded: (the command line with
     ``env.task`` set where it follows from the line, the task's name; None: the schema's default).
 
-    ``env.module`` is imported (its :func:`~torchrl_csirl.envs.register_task` calls run);
-    ``env.gym_id`` becomes a task (:func:`~torchrl_csirl.envs.make_gymnasium_task`) with
+    ``env.module`` is imported (its :func:`~torchrl_csirl.tasks.register_task` calls run);
+    ``env.gym_id`` becomes a task (:func:`~torchrl_csirl.tasks.make_gymnasium_task`) with
     ``env.features`` and ``env.success``, and ``env.task`` is set to it. Resuming (``run_dir``),
     the run's saved ``env`` section is read under the command line; ``default_task``: a new run's task when the
     line names none.

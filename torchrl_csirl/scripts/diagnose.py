@@ -32,7 +32,7 @@ def _is_csirl(run_dir: str) -> bool:
 
 def _action_dim(cfg) -> int | None:
     """The action size of a saved run's task (None: a task this process cannot resolve, e.g. an unimported module's)."""
-    from torchrl_csirl.envs import resolve_scenario
+    from torchrl_csirl.tasks import resolve_scenario
 
     try:
         return resolve_scenario(cfg.env.task).action_dim

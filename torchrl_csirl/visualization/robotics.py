@@ -1,6 +1,6 @@
 """The curriculum of a robotics task, drawn from its spec: the maze from above, or the matching features.
 
-The picture reads the task's :class:`~torchrl_csirl.envs.spec.TaskSpec` only:
+The picture reads the task's :class:`~torchrl_csirl.tasks.spec.TaskSpec` only:
 
 * a task with a maze (``spec.maze_map``, AntMaze) is drawn from above: walls, the curriculum
   trajectory's matching features (the ant's x, y), its start, the goal and the subgoals;
@@ -18,7 +18,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from torchrl_csirl.envs.spec import TaskSpec
+from torchrl_csirl.tasks.spec import TaskSpec
 from torchrl_csirl.visualization._figure import as_int, new_figure, save_png
 
 __all__ = ["plot_robotics_curriculum"]
@@ -83,7 +83,7 @@ def plot_robotics_curriculum(
 
     Examples:
         >>> import tempfile, torch
-        >>> from torchrl_csirl.envs import resolve_scenario
+        >>> from torchrl_csirl.tasks import resolve_scenario
         >>> spec = resolve_scenario("relocate")
         >>> out = plot_robotics_curriculum(spec, torch.rand(50, 39), [10, 30], tempfile.mkdtemp() + "/c.png")
         >>> out.suffix

@@ -16,7 +16,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from torchrl_csirl.envs.scenarios import ScenarioSpec, make_gym_env, resolve_scenario
+from torchrl_csirl.tasks.catalog import ScenarioSpec, make_gym_env, resolve_scenario
 from torchrl_csirl.visualization._figure import as_int, new_figure, save_png
 
 __all__ = ["ScenePicture", "ego_positions", "render_curriculum", "render_scene", "world_to_pixel"]
@@ -35,7 +35,7 @@ def ego_positions(scenario: str | ScenarioSpec, observations: Any) -> np.ndarray
     Observations are clipped to ``[-1, 1]``, so positions outside the range come back at its edge.
 
     Args:
-        scenario: scenario name, gym id or :class:`~torchrl_csirl.envs.ScenarioSpec`.
+        scenario: scenario name, gym id or :class:`~torchrl_csirl.tasks.ScenarioSpec`.
         observations: ``[L, obs_dim]`` (or ``[obs_dim]``) array or tensor.
 
     Returns:

@@ -179,14 +179,14 @@ def _lighten_mujoco(env: Any) -> None:
 
 
 def make_render_env(task: str) -> Any:
-    """The task's TorchRL environment (:func:`~torchrl_csirl.envs.make_env`) with headless ``rgb_array``
+    """The task's TorchRL environment (:func:`~torchrl_csirl.tasks.make_env`) with headless ``rgb_array``
     rendering, checked with one picture.
 
     Raises:
         VideoError: when the task cannot be rendered here, saying why (:func:`render_failure_hint`):
             an environment that takes no ``render_mode``, no EGL for MuJoCo, ...
     """
-    from torchrl_csirl.envs import make_env, resolve_scenario
+    from torchrl_csirl.tasks import make_env, resolve_scenario
 
     spec = resolve_scenario(task)
     try:
@@ -305,7 +305,7 @@ def film_test_episodes(policy: Any, task: str, directory: str | os.PathLike, *, 
     Raises:
         VideoError: no headless rendering or no writer for ``fmt`` here.
     """
-    from torchrl_csirl.envs import resolve_scenario
+    from torchrl_csirl.tasks import resolve_scenario
 
     spec = resolve_scenario(task)
     limit = max_steps or spec.max_steps
@@ -348,7 +348,7 @@ def _write_still(rollout: Any, frames: np.ndarray, shown: list[int], path: Path,
 def describe_rollout(rollout: Any) -> dict[str, Any]:
     """Steps, return, outcome flags and progress of a filmed episode (for a one-line report; the accomplish
     rate is ``None`` for a task without a route, e.g. locomotion)."""
-    from torchrl_csirl.envs import accomplish_rate_from_rollout, success_from_rollout
+    from torchrl_csirl.tasks import accomplish_rate_from_rollout, success_from_rollout
 
     keys = rollout.keys(True)
     has_distance = "distance_to_finish" in keys and ("next", "distance_to_finish") in keys  # none in locomotion

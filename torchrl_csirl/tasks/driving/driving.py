@@ -4,7 +4,7 @@ Every scene shares :class:`CSIRLDrivingMixin`:
 
 * continuous ``[acceleration, steering]`` actions in ``[-1, 1]`` (scaled by the action config),
 * a flattened Kinematics observation (``fast=True`` uses the pandas-free
-  :class:`~torchrl_csirl.envs._observation.FastKinematicObservation`, identical output),
+  :class:`~torchrl_csirl.tasks.driving._observation.FastKinematicObservation`, identical output),
 * termination on crash, off-road and arrival at the finish (``arrival_terminal``, plus
   scene-specific conditions), truncation at ``max_steps`` policy steps,
 * ``info`` entries ``distance_to_finish``, ``progress``, ``crashed``, ``offroad``, ``arrived``,
@@ -31,9 +31,9 @@ from highway_env.utils import near_split
 from highway_env.vehicle.controller import ControlledVehicle, MDPVehicle
 from highway_env.vehicle.kinematics import Vehicle
 
-from torchrl_csirl.envs._observation import FastKinematicObservation
-from torchrl_csirl.envs._road import CachedRegulatedRoad, CachedRoad
-from torchrl_csirl.envs._vehicles import FastVehicle, IntersectionIDMVehicle, ScenarioIDMVehicle
+from torchrl_csirl.tasks.driving._observation import FastKinematicObservation
+from torchrl_csirl.tasks.driving._road import CachedRegulatedRoad, CachedRoad
+from torchrl_csirl.tasks.driving._vehicles import FastVehicle, IntersectionIDMVehicle, ScenarioIDMVehicle
 
 __all__ = [
     "CSIRLDrivingMixin",
@@ -43,7 +43,7 @@ __all__ = [
     "CSIRLRoundaboutEnv",
 ]
 
-_VEHICLE_PATH = "torchrl_csirl.envs._vehicles."
+_VEHICLE_PATH = "torchrl_csirl.tasks.driving._vehicles."
 _UPSTREAM_IDM = "highway_env.vehicle.behavior.IDMVehicle"
 
 POSITION_VELOCITY = ["presence", "x", "y", "vx", "vy"]
@@ -510,7 +510,7 @@ class _FastRegulatedRoad(CachedRegulatedRoad):
     Upstream predicts both vehicles of every pair (O(n^2) predictions, the ego's deep-copying the
     road each time). Predictions depend only on the vehicles' state, which a pass changes only
     when it makes a vehicle yield (target speed); the cache is emptied then, so the decisions
-    are exactly upstream's. With :class:`~torchrl_csirl.envs._vehicles.FastVehicle` as ego the
+    are exactly upstream's. With :class:`~torchrl_csirl.tasks.driving._vehicles.FastVehicle` as ego the
     remaining predictions are copy-free.
     """
 

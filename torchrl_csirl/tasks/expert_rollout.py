@@ -7,9 +7,9 @@ from typing import Any, Callable
 
 import numpy as np
 
-from torchrl_csirl.envs.expert_registry import expert_tasks, make_expert
-from torchrl_csirl.envs.metrics import accomplish_rate
-from torchrl_csirl.envs.scenarios import TASKS, resolve_scenario
+from torchrl_csirl.tasks.catalog import TASKS, resolve_scenario
+from torchrl_csirl.tasks.experts import expert_tasks, make_expert
+from torchrl_csirl.tasks.metrics import accomplish_rate
 
 __all__ = ["clear_traffic", "rollout_expert"]
 
@@ -42,7 +42,7 @@ def rollout_expert(
     Args:
         env: a gymnasium env of a CSIRL task (``make_gym_env(name)``, a driving scenario or a
             robotics task with an expert, see
-            :func:`~torchrl_csirl.envs.expert_registry.expert_tasks`).
+            :func:`~torchrl_csirl.tasks.experts.expert_tasks`).
         seed: reset seed.
         expert: the expert (default: ``make_expert`` of the env's task).
         scenario: task name, when it cannot be read from the env.
@@ -73,7 +73,7 @@ def rollout_expert(
         ``return`` (sum of rewards), ``length``, ``seed``.
 
     Examples:
-        >>> from torchrl_csirl.envs import make_gym_env
+        >>> from torchrl_csirl.tasks import make_gym_env
         >>> episode = rollout_expert(make_gym_env("intersection"), seed=0)
         >>> episode["observation"].shape[1], episode["action"].shape[1]
         (35, 2)

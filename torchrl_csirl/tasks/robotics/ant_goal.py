@@ -4,7 +4,7 @@ D4RL and Minari built their AntMaze data from a goal-reaching ant policy driven 
 by waypoints from a path planner (SPEC section 5, docs/studies/robotics.md). No such policy is reachable
 offline, so we train our own:
 
-* :class:`AntGoalEnv` (task ``"ant-goal"``, :func:`~torchrl_csirl.envs.make_env`): the U-maze ant
+* :class:`AntGoalEnv` (task ``"ant-goal"``, :func:`~torchrl_csirl.tasks.make_env`): the U-maze ant
   (gymnasium-robotics' ``AntMazeEnv`` model, 0.05 s steps) starting anywhere in a random free cell
   with a random heading, walking a chain of ``CHAIN_HOPS`` (4) goals: each goal is the centre of
   the ant's cell or of a neighbouring free cell, with +-1 m of noise (0.9-6.3 m hops, shorter ones
@@ -18,7 +18,7 @@ offline, so we train our own:
   orientation, joint angles, velocities; no position) then the goal vector in the torso's heading
   frame, clipped to 5 m. Where the hop is in the maze does not matter to the policy.
 * :class:`WaypointAntExpert`: the expert of ``"antmaze-umaze"``. At each step the breadth-first
-  cell route (:func:`~torchrl_csirl.envs.robotics.maze_cell_route`) from the ant's cell to the goal
+  cell route (:func:`~torchrl_csirl.tasks.robotics.maze_cell_route`) from the ant's cell to the goal
   cell gives the waypoint (the centre of the next cell on it; the goal itself in the goal cell),
   and the trained goal-reaching policy acts on it with its mean action.
 
@@ -37,7 +37,7 @@ import numpy as np
 import torch
 
 from torchrl_csirl._paths import EXPERTS_DIR
-from torchrl_csirl.envs.robotics.tasks import (
+from torchrl_csirl.tasks.robotics.tasks import (
     ANT_LAYOUT,
     ANTMAZE_SUCCESS_RADIUS,
     ANTMAZE_UMAZE_MAP,
@@ -126,7 +126,7 @@ def ant_goal_observation(ant_values: np.ndarray, position: np.ndarray, goal: np.
 class AntGoalEnv(AntMazeUMazeEnv):
     """Chained-hop goal reaching for the U-maze ant (the training task of the AntMaze expert).
 
-    The U-maze ant of :class:`~torchrl_csirl.envs.robotics.AntMazeUMazeEnv` (same model, position,
+    The U-maze ant of :class:`~torchrl_csirl.tasks.robotics.AntMazeUMazeEnv` (same model, position,
     rendering and info keys) with its own episodes: each starts in a uniformly drawn free cell
     (+-1 m around its centre, a uniform heading) and chains :data:`CHAIN_HOPS` goals, each the
     centre (+-1 m) of the ant's current cell or of a free neighbour, the next drawn on arrival at
@@ -275,7 +275,7 @@ def next_waypoint(position: np.ndarray, goal: np.ndarray, maze: Any) -> np.ndarr
         maze: a gymnasium-robotics ``Maze`` (``cell_xy_to_rowcol``, ``cell_rowcol_to_xy``, ``maze_map``).
 
     Examples:
-        >>> from torchrl_csirl.envs.robotics import AntMazeUMazeEnv
+        >>> from torchrl_csirl.tasks.robotics import AntMazeUMazeEnv
         >>> maze = AntMazeUMazeEnv().maze
         >>> next_waypoint(np.array([-4.0, 4.0]), np.array([-4.0, -4.0]), maze).tolist()
         [0.0, 4.0]
@@ -288,7 +288,7 @@ def pursuit_waypoint(position: np.ndarray, goal: np.ndarray, maze: Any, lookahea
     """Pure pursuit along the cell route: the point ``lookahead`` metres on from the ant's foot on it.
 
     The route is the polyline through the centres of the cells from the ant's cell to the goal's
-    (:func:`~torchrl_csirl.envs.robotics.maze_cell_route`), ending at the goal. The waypoint is
+    (:func:`~torchrl_csirl.tasks.robotics.maze_cell_route`), ending at the goal. The waypoint is
     found by projecting the ant onto that polyline and walking ``lookahead`` metres along it
     (the goal if the route ends sooner). Unlike :func:`next_waypoint`, whose waypoint jumps to the
     next cell's centre as soon as the ant enters a cell, and then lies round the corner of a wall,
@@ -301,7 +301,7 @@ def pursuit_waypoint(position: np.ndarray, goal: np.ndarray, maze: Any, lookahea
         lookahead: metres along the route ahead of the ant. Defaults to ``3.0`` (cells are 4 m).
 
     Examples:
-        >>> from torchrl_csirl.envs.robotics import AntMazeUMazeEnv
+        >>> from torchrl_csirl.tasks.robotics import AntMazeUMazeEnv
         >>> maze = AntMazeUMazeEnv().maze
         >>> pursuit_waypoint(np.array([-4.0, 4.0]), np.array([-4.0, -4.0]), maze).tolist()
         [-1.0, 4.0]
@@ -321,7 +321,7 @@ class WaypointAntExpert:
     """The AntMaze expert: a goal-reaching ant policy driven through the maze by waypoints.
 
     Interface of every expert (``reset(env)``, ``act(env)``) on an
-    :class:`~torchrl_csirl.envs.robotics.AntMazeUMazeEnv`.
+    :class:`~torchrl_csirl.tasks.robotics.AntMazeUMazeEnv`.
 
     The waypoint is :func:`pursuit_waypoint` (``lookahead`` metres ahead on the route through
     the cell centres), and the policy's mean action is multiplied by ``action_gain``: the shipped
@@ -347,7 +347,7 @@ class WaypointAntExpert:
             ``lookahead`` / ``action_gain`` out of range.
 
     Examples:
-        >>> from torchrl_csirl.envs import make_gym_env
+        >>> from torchrl_csirl.tasks import make_gym_env
         >>> env = make_gym_env("antmaze-umaze")
         >>> _ = env.reset(seed=0)
         >>> WaypointAntExpert().act(env).shape
@@ -401,7 +401,7 @@ class WaypointAntExpert:
 
 def make_waypoint_ant_expert(name: str = "antmaze-umaze", policy: Any = None, *, lookahead: float | None = 3.0,
                              action_gain: float = 0.6) -> WaypointAntExpert:
-    """The expert of ``"antmaze-umaze"`` (its :attr:`~torchrl_csirl.envs.TaskSpec.expert`): a
+    """The expert of ``"antmaze-umaze"`` (its :attr:`~torchrl_csirl.tasks.TaskSpec.expert`): a
     :class:`WaypointAntExpert` with these settings (``policy``: a policy file or run directory).
 
     Examples:

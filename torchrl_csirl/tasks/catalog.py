@@ -1,7 +1,7 @@
 """The paper's four driving scenarios: specifications, gymnasium registration, factory.
 
 Each :class:`ScenarioSpec` describes one scene (see ``docs/scenarios.md``): the gymnasium id
-registered on ``import torchrl_csirl.envs``, the flattened observation layout (which entries
+registered on ``import torchrl_csirl.tasks``, the flattened observation layout (which entries
 are the ego vehicle, which are its position), the episode limit, the finish position used by
 the accomplish-rate metric and the published matching-reward scale.
 """
@@ -19,17 +19,17 @@ import torch
 from torchrl.envs import EnvBase
 from torchrl.envs.libs.gym import GymEnv
 
-from torchrl_csirl.envs.driving import (
+from torchrl_csirl.tasks.driving.driving import (
     CSIRLHighwayEnv,
     CSIRLIntersectionEnv,
     CSIRLMergeEnv,
     CSIRLRoundaboutEnv,
 )
-from torchrl_csirl.envs.info import INFO_KEYS, ScenarioInfoReader, info_spec
-from torchrl_csirl.envs.locomotion import LOCOMOTION_TASKS
-from torchrl_csirl.envs.robotics.ant_goal import ANT_GOAL_SPEC
-from torchrl_csirl.envs.robotics.tasks import ROBOTICS_TASKS
-from torchrl_csirl.envs.spec import TaskSpec
+from torchrl_csirl.tasks.info import INFO_KEYS, ScenarioInfoReader, info_spec
+from torchrl_csirl.tasks.locomotion import LOCOMOTION_TASKS
+from torchrl_csirl.tasks.robotics.ant_goal import ANT_GOAL_SPEC
+from torchrl_csirl.tasks.robotics.tasks import ROBOTICS_TASKS
+from torchrl_csirl.tasks.spec import TaskSpec
 
 __all__ = [
     "SCENARIOS",
@@ -49,9 +49,9 @@ LANE_SAMPLE_SPACING = 1.0
 
 @dataclass(frozen=True, kw_only=True)
 class ScenarioSpec(TaskSpec):
-    """Static description of a CSIRL driving scenario (a :class:`~torchrl_csirl.envs.spec.TaskSpec`).
+    """Static description of a CSIRL driving scenario (a :class:`~torchrl_csirl.tasks.spec.TaskSpec`).
 
-    Attributes (besides :class:`~torchrl_csirl.envs.spec.TaskSpec`'s):
+    Attributes (besides :class:`~torchrl_csirl.tasks.spec.TaskSpec`'s):
         name: short name ("highway-fast", "merge", "roundabout", "intersection").
         gym_id: registered gymnasium id ("csirl/<name>-v0").
         base_env: the highway-env scene it derives from.
@@ -71,7 +71,7 @@ class ScenarioSpec(TaskSpec):
         description: one line on the scene.
 
     Examples:
-        >>> from torchrl_csirl.envs import SCENARIOS
+        >>> from torchrl_csirl.tasks import SCENARIOS
         >>> spec = SCENARIOS["merge"]
         >>> spec.obs_dim, spec.max_steps, spec.position_feature_indices
         (25, 60, (1,))
@@ -179,7 +179,7 @@ def _spec(
         matching_scale=float(matching_scale),
         dt=1.0 / config["policy_frequency"],
         family="driving",
-        expert="torchrl_csirl.envs.expert_driver:make_expert_driver",
+        expert="torchrl_csirl.tasks.driving.expert_driver:make_expert_driver",
         observation_layout=MappingProxyType(
             {"ego": (0, n_features), "others": (n_features, vehicles_count * n_features)}
         ),
@@ -231,8 +231,8 @@ SCENARIOS: dict[str, ScenarioSpec] = {
 TASKS: dict[str, TaskSpec] = {**SCENARIOS, **ROBOTICS_TASKS, ANT_GOAL_SPEC.name: ANT_GOAL_SPEC, **LOCOMOTION_TASKS}
 """Every task by name: the driving :data:`SCENARIOS`, the robotics tasks (``"antmaze-umaze"``,
 ``"relocate"``) and ``"ant-goal"`` (the AntMaze expert's training task,
-:class:`~torchrl_csirl.envs.robotics.AntGoalEnv`), all described by a
-:class:`~torchrl_csirl.envs.spec.TaskSpec`."""
+:class:`~torchrl_csirl.tasks.robotics.AntGoalEnv`), all described by a
+:class:`~torchrl_csirl.tasks.spec.TaskSpec`."""
 
 
 def register_scenarios() -> None:
@@ -252,7 +252,7 @@ def resolve_scenario(name: str | TaskSpec) -> TaskSpec:
     """The spec of a task name, gym id or spec (ValueError if unknown).
 
     Driving scenarios give a :class:`ScenarioSpec`, robotics tasks a
-    :class:`~torchrl_csirl.envs.robotics.RoboticsTaskSpec`.
+    :class:`~torchrl_csirl.tasks.robotics.RoboticsTaskSpec`.
 
     Examples:
         >>> resolve_scenario("csirl/relocate-v0").name
@@ -285,7 +285,7 @@ def make_gym_env(name: str, render_mode: str | None = None, **config_overrides) 
         the unwrapped environment (episode limit implemented as truncation inside).
 
     Examples:
-        >>> from torchrl_csirl.envs import make_gym_env
+        >>> from torchrl_csirl.tasks import make_gym_env
         >>> env = make_gym_env("merge")
         >>> obs, info = env.reset(seed=0)
         >>> obs.shape, round(info["distance_to_finish"], 1)
@@ -306,10 +306,10 @@ def make_scenario_env(
 ) -> EnvBase:
     """A task of :data:`TASKS` that has a ``csirl/<name>-v0`` gymnasium id (the driving scenarios, the
     robotics tasks, ``ant-goal``) as a TorchRL :class:`~torchrl.envs.libs.gym.GymEnv`, its info entries
-    read into the TensorDict with fixed specs (:func:`~torchrl_csirl.envs.info.info_spec`).
+    read into the TensorDict with fixed specs (:func:`~torchrl_csirl.tasks.info.info_spec`).
 
-    The factory of these tasks (:func:`~torchrl_csirl.envs.registry.env_factory`), what
-    :func:`~torchrl_csirl.envs.make_env` builds for them; the arguments are :func:`~torchrl_csirl.envs.make_env`'s.
+    The factory of these tasks (:func:`~torchrl_csirl.tasks.registry.env_factory`), what
+    :func:`~torchrl_csirl.tasks.make_env` builds for them; the arguments are :func:`~torchrl_csirl.tasks.make_env`'s.
 
     Examples:
         >>> make_scenario_env("merge", seed=0).rollout(2, break_when_any_done=False)["next", "distance_to_finish"].shape

@@ -65,7 +65,7 @@ class DAPGRelocatePolicy(nn.Module):
         """The policy reading ``"observation"`` and writing ``"action"`` (for ``env.rollout``).
 
         Examples:
-            >>> from torchrl_csirl.envs import make_env
+            >>> from torchrl_csirl.tasks import make_env
             >>> env = make_env("relocate", seed=0)
             >>> env.rollout(3, DAPGRelocatePolicy().as_tensordict_module())["action"].shape
             torch.Size([3, 30])
@@ -77,10 +77,10 @@ class DAPGRelocateExpert:
     """The DAPG policy as an expert with the driving expert's interface (``reset(env)``, ``act(env)``).
 
     ``act`` reads the environment's current flat observation
-    (:meth:`~torchrl_csirl.envs.robotics.RelocateEnv.observation`).
+    (:meth:`~torchrl_csirl.tasks.robotics.RelocateEnv.observation`).
 
     Examples:
-        >>> from torchrl_csirl.envs import make_gym_env
+        >>> from torchrl_csirl.tasks import make_gym_env
         >>> env = make_gym_env("relocate")
         >>> _ = env.reset(seed=0)
         >>> expert = DAPGRelocateExpert()
@@ -102,7 +102,7 @@ class DAPGRelocateExpert:
 
 
 def make_relocate_expert(name: str = "relocate") -> DAPGRelocateExpert:
-    """The expert of ``"relocate"`` (its :attr:`~torchrl_csirl.envs.TaskSpec.expert`): the shipped DAPG policy.
+    """The expert of ``"relocate"`` (its :attr:`~torchrl_csirl.tasks.TaskSpec.expert`): the shipped DAPG policy.
 
     Examples:
         >>> type(make_relocate_expert()).__name__

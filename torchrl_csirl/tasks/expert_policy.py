@@ -2,9 +2,9 @@
 
 :class:`ExpertDriverPolicy` lets :func:`~torchrl_csirl.trainers.evaluate_policy` (and any
 ``env.rollout``) drive a scenario's TorchRL environment with the privileged
-:class:`~torchrl_csirl.envs.expert_driver.ExpertDriver`, so the expert is scored on exactly the test
+:class:`~torchrl_csirl.tasks.driving.expert_driver.ExpertDriver`, so the expert is scored on exactly the test
 episodes (same seeds, same metric) as the learned policies. On a robotics task it drives the
-task's expert (:func:`~torchrl_csirl.envs.expert_registry.make_expert`: the DAPG hand, the waypoint-driven ant).
+task's expert (:func:`~torchrl_csirl.tasks.experts.make_expert`: the DAPG hand, the waypoint-driven ant).
 """
 from __future__ import annotations
 
@@ -15,8 +15,8 @@ from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 from torchrl.envs import EnvBase
 
-from torchrl_csirl.envs.expert_driver import ExpertDriver
-from torchrl_csirl.envs.expert_registry import make_expert
+from torchrl_csirl.tasks.driving.expert_driver import ExpertDriver
+from torchrl_csirl.tasks.experts import make_expert
 
 __all__ = ["ExpertDriverPolicy"]
 
@@ -25,7 +25,7 @@ class ExpertDriverPolicy(TensorDictModuleBase):
     """Writes the expert driver's action for the current state of ``env`` into ``"action"``.
 
     The driver reads the simulator, not the observation: the policy belongs to one environment
-    (a :func:`~torchrl_csirl.envs.make_env` environment, batch size ``[]``). A new episode (a new
+    (a :func:`~torchrl_csirl.tasks.make_env` environment, batch size ``[]``). A new episode (a new
     ego vehicle after a reset) re-plans the driver's route.
 
     A robotics task's expert is memoryless and reads the task environment itself (its
@@ -37,7 +37,7 @@ class ExpertDriverPolicy(TensorDictModuleBase):
         driver: a driver to use instead of ``make_expert(scenario)``.
 
     Examples:
-        >>> from torchrl_csirl.envs import make_env
+        >>> from torchrl_csirl.tasks import make_env
         >>> env = make_env("merge", seed=0)
         >>> rollout = env.rollout(5, ExpertDriverPolicy(env, "merge"))
         >>> rollout["action"].shape, bool(rollout["action"].abs().max() <= 1)

@@ -36,8 +36,8 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from torchrl_csirl.envs.headless import ensure_headless_gl
-from torchrl_csirl.envs.spec import TaskSpec
+from torchrl_csirl.tasks.headless import ensure_headless_gl
+from torchrl_csirl.tasks.spec import TaskSpec
 
 __all__ = [
     "ANTMAZE_UMAZE_MAP",
@@ -368,9 +368,9 @@ class RelocateEnv(_RoboticsTaskEnv):
 
 @dataclass(frozen=True, kw_only=True)
 class RoboticsTaskSpec(TaskSpec):
-    """A robotics task (:class:`~torchrl_csirl.envs.spec.TaskSpec`): overrides are constructor keywords.
+    """A robotics task (:class:`~torchrl_csirl.tasks.spec.TaskSpec`): overrides are constructor keywords.
 
-    Attributes (besides :class:`~torchrl_csirl.envs.spec.TaskSpec`'s):
+    Attributes (besides :class:`~torchrl_csirl.tasks.spec.TaskSpec`'s):
         base_env: the gymnasium-robotics environment wrapped.
         env_options: the constructor keywords accepted as overrides.
         maze_map: the maze (rows of cells, ``1`` a wall; AntMaze) or ``None``; cell ``(row, col)``
@@ -379,7 +379,7 @@ class RoboticsTaskSpec(TaskSpec):
         maze_cell_size: the side of a maze cell [m].
 
     Examples:
-        >>> from torchrl_csirl.envs.robotics import ROBOTICS_TASKS
+        >>> from torchrl_csirl.tasks.robotics import ROBOTICS_TASKS
         >>> spec = ROBOTICS_TASKS["relocate"]
         >>> spec.obs_dim, spec.action_dim, spec.max_steps
         (39, 30, 200)
@@ -436,7 +436,7 @@ def _antmaze_spec() -> RoboticsTaskSpec:
         matching_scale=100.0,
         dt=0.05,
         family="robotics",
-        expert="torchrl_csirl.envs.robotics.ant_goal:make_waypoint_ant_expert",
+        expert="torchrl_csirl.tasks.robotics.ant_goal:make_waypoint_ant_expert",
         observation_layout=MappingProxyType(layout),
         description="ant in D4RL's U-maze: start cell (1, 1) at (-4, 4), goal cell (3, 1) at (-4, -4)",
     )
@@ -464,7 +464,7 @@ def _relocate_spec() -> RoboticsTaskSpec:
         matching_scale=100.0,
         dt=0.01,
         family="robotics",
-        expert="torchrl_csirl.envs.robotics.expert:make_relocate_expert",
+        expert="torchrl_csirl.tasks.robotics.expert:make_relocate_expert",
         observation_layout=MappingProxyType(layout),
         description="Adroit hand picks up the ball and carries it to a random target (within 0.1 m)",
     )

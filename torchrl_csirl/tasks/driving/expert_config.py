@@ -1,6 +1,6 @@
 """The expert driver's per-scene settings (:class:`ExpertConfig`, :data:`EXPERT_CONFIGS`) and its action units.
 
-The driver (:class:`~torchrl_csirl.envs.expert_driver.ExpertDriver`) commands physical acceleration
+The driver (:class:`~torchrl_csirl.tasks.driving.expert_driver.ExpertDriver`) commands physical acceleration
 [m/s^2] and steering [rad]; :func:`normalize_action` turns them into the learner's normalised action
 ``[acceleration / 15, steering / (pi / 2)]`` clipped to ``[-1, 1]``.
 """
@@ -20,7 +20,7 @@ STEERING_SCALE = math.pi / 2
 
 @dataclasses.dataclass(frozen=True)
 class ExpertConfig:
-    """Per-scenario settings of :class:`~torchrl_csirl.envs.expert_driver.ExpertDriver`.
+    """Per-scenario settings of :class:`~torchrl_csirl.tasks.driving.expert_driver.ExpertDriver`.
 
     Args:
         destination: road-network node the route leads to (``None``: keep driving along the road).
@@ -54,7 +54,7 @@ class ExpertConfig:
             vehicle ahead in its own lane; other vehicles' IDM counts a vehicle within 1 m of their lane
             as in it, so the vehicle beside it in the next lane, which the ego now seems to be ahead
             of, brakes and opens a gap; the ego moves over once the gap behind it is free (see
-            :meth:`~torchrl_csirl.envs.route_follower.RouteFollower.nudge_control`), so that two slow
+            :meth:`~torchrl_csirl.tasks.driving.route_follower.RouteFollower.nudge_control`), so that two slow
             vehicles side by side do not block both lanes. The nudge candidates follow with the
             ``close_following`` gap (at the highest target speed), which must be short enough for the
             ego to get ahead of the centre of the vehicle beside it.

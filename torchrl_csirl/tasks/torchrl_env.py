@@ -1,7 +1,7 @@
-"""TorchRL environments for the CSIRL tasks, by name: the built-in ones and those of :func:`~torchrl_csirl.envs.register_task`.
+"""TorchRL environments for the CSIRL tasks, by name: the built-in ones and those of :func:`~torchrl_csirl.tasks.register_task`.
 
 The info entries (:data:`INFO_KEYS`, :func:`info_spec`, :class:`ScenarioInfoReader`) live in
-:mod:`torchrl_csirl.envs.info` and are importable from here too.
+:mod:`torchrl_csirl.tasks.info` and are importable from here too.
 """
 from __future__ import annotations
 
@@ -11,9 +11,9 @@ from functools import partial
 import torch
 from torchrl.envs import EnvBase, SerialEnv
 
-from torchrl_csirl.envs.info import FAILURE_KEYS, INFO_KEYS, ScenarioInfoReader, info_spec
-from torchrl_csirl.envs.registry import build_env, env_factory, registered_factory
-from torchrl_csirl.envs.scenarios import resolve_scenario
+from torchrl_csirl.tasks.catalog import resolve_scenario
+from torchrl_csirl.tasks.info import FAILURE_KEYS, INFO_KEYS, ScenarioInfoReader, info_spec
+from torchrl_csirl.tasks.registry import build_env, env_factory, registered_factory
 
 __all__ = ["FAILURE_KEYS", "INFO_KEYS", "ScenarioInfoReader", "info_spec", "make_env", "make_serial_env"]
 
@@ -27,8 +27,8 @@ def make_env(
 ) -> EnvBase:
     """Create a task (driving scenario, robotics, locomotion or a registered one) as a TorchRL environment.
 
-    Every task is built the same way, by its factory (:func:`~torchrl_csirl.envs.registry.build_env`):
-    the driving and robotics tasks' is :func:`~torchrl_csirl.envs.scenarios.make_scenario_env`, a
+    Every task is built the same way, by its factory (:func:`~torchrl_csirl.tasks.registry.build_env`):
+    the driving and robotics tasks' is :func:`~torchrl_csirl.tasks.catalog.make_scenario_env`, a
     :class:`~torchrl.envs.libs.gym.GymEnv` on the registered ``csirl/<name>-v0`` id with the
     task's info entries (``"distance_to_finish"``, ``"progress"``, ``"crashed"``,
     ``"offroad"``, ``"arrived"``, ``"success"``) read into the TensorDict with fixed specs.
@@ -47,7 +47,7 @@ def make_env(
         device: device of the output TensorDicts, for every task: given to a factory that takes
             ``device``, else the environment is moved there (None: where its factory puts it).
         info_keys: which info entries to read (for a factory that takes ``info_keys``).
-        **overrides: highway-env config entries (see :func:`~torchrl_csirl.envs.make_gym_env`),
+        **overrides: highway-env config entries (see :func:`~torchrl_csirl.tasks.make_gym_env`),
             e.g. ``fast=False`` for the stock observation code; for a robotics task its
             constructor keywords (e.g. ``render_mode="rgb_array"``).
 
@@ -55,7 +55,7 @@ def make_env(
         the TorchRL environment.
 
     Examples:
-        >>> from torchrl_csirl.envs import make_env
+        >>> from torchrl_csirl.tasks import make_env
         >>> env = make_env("merge", seed=0)
         >>> td = env.rollout(3, break_when_any_done=False)
         >>> td["observation"].shape, td["next", "distance_to_finish"].shape
@@ -80,13 +80,13 @@ def make_serial_env(name: str | Callable[[], EnvBase], num_envs: int, seed: int 
 
     Args:
         name: task name or gym id, or a zero-argument factory of one environment
-            (:func:`~torchrl_csirl.envs.registry.env_factory`: what a spawned worker receives).
+            (:func:`~torchrl_csirl.tasks.registry.env_factory`: what a spawned worker receives).
         num_envs: environments in the batch (positive).
         seed: seed applied with ``env.set_seed`` (each copy gets its own seed derived from it).
         **kwargs: as :func:`make_env`.
 
     Examples:
-        >>> from torchrl_csirl.envs import make_serial_env
+        >>> from torchrl_csirl.tasks import make_serial_env
         >>> env = make_serial_env("merge", 2, seed=0)
         >>> env.rollout(3, break_when_any_done=False)["observation"].shape
         torch.Size([2, 3, 25])

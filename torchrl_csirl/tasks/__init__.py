@@ -1,9 +1,9 @@
 """The paper's tasks: driving scenarios (highway-env based), robotics tasks, the metrics; and beyond the
-paper gymnasium's MuJoCo locomotion (``hopper``, ``halfcheetah``: :mod:`torchrl_csirl.envs.locomotion`).
+paper gymnasium's MuJoCo locomotion (``hopper``, ``halfcheetah``: :mod:`torchrl_csirl.tasks.locomotion`).
 
 Importing this package registers the gymnasium ids ``csirl/highway-fast-v0``,
 ``csirl/merge-v0``, ``csirl/roundabout-v0``, ``csirl/intersection-v0`` and the robotics tasks'
-``csirl/antmaze-umaze-v0`` and ``csirl/relocate-v0`` (:mod:`torchrl_csirl.envs.robotics`).
+``csirl/antmaze-umaze-v0`` and ``csirl/relocate-v0`` (:mod:`torchrl_csirl.tasks.robotics`).
 
 * :class:`TaskSpec`: what every task is (observation layout, matching features, finish/goal,
   episode limit); :data:`TASKS` all of them by name; :func:`register_task` adds your own (with the
@@ -20,21 +20,7 @@ Importing this package registers the gymnasium ids ``csirl/highway-fast-v0``,
 from __future__ import annotations
 
 from torchrl_csirl._compat import gym_env_of
-from torchrl_csirl.envs.gymnasium_env import make_gymnasium_env
-from torchrl_csirl.envs.gymnasium_task import make_gymnasium_task
-from torchrl_csirl.envs.info import FAILURE_KEYS, INFO_KEYS, info_spec
-from torchrl_csirl.envs.locomotion import LOCOMOTION_TASKS, LocomotionExpert, make_locomotion_env
-from torchrl_csirl.envs.metrics import (
-    accomplish_rate,
-    accomplish_rate_from_rollout,
-    area_under_curve,
-    episode_success,
-    normalized_accomplish_rate,
-    success_from_rollout,
-)
-from torchrl_csirl.envs.parallel import YieldingParallelEnv
-from torchrl_csirl.envs.registry import env_factory, import_task_module, register_task, task_names
-from torchrl_csirl.envs.scenarios import (
+from torchrl_csirl.tasks.catalog import (
     SCENARIOS,
     TASKS,
     ScenarioSpec,
@@ -44,8 +30,22 @@ from torchrl_csirl.envs.scenarios import (
     sample_lane_centres,
     scenario_config_overrides,
 )
-from torchrl_csirl.envs.spec import TaskSpec
-from torchrl_csirl.envs.torchrl_env import make_env, make_serial_env
+from torchrl_csirl.tasks.gymnasium_env import make_gymnasium_env
+from torchrl_csirl.tasks.gymnasium_task import make_gymnasium_task
+from torchrl_csirl.tasks.info import FAILURE_KEYS, INFO_KEYS, info_spec
+from torchrl_csirl.tasks.locomotion import LOCOMOTION_TASKS, LocomotionExpert, make_locomotion_env
+from torchrl_csirl.tasks.metrics import (
+    accomplish_rate,
+    accomplish_rate_from_rollout,
+    area_under_curve,
+    episode_success,
+    normalized_accomplish_rate,
+    success_from_rollout,
+)
+from torchrl_csirl.tasks.parallel import YieldingParallelEnv
+from torchrl_csirl.tasks.registry import env_factory, import_task_module, register_task, task_names
+from torchrl_csirl.tasks.spec import TaskSpec
+from torchrl_csirl.tasks.torchrl_env import make_env, make_serial_env
 
 register_scenarios()
 

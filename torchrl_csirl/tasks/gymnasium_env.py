@@ -1,9 +1,9 @@
 """A gymnasium environment with flat ``Box`` spaces as the TorchRL environment of a CSIRL task.
 
-The environment side of :func:`~torchrl_csirl.envs.make_gymnasium_task` (which registers the task):
+The environment side of :func:`~torchrl_csirl.tasks.make_gymnasium_task` (which registers the task):
 :class:`GymnasiumTaskWrapper` (actions in ``[-1, 1]``, float32 observations, ``info["success"]``)
 and :func:`make_gymnasium_env`, the task's picklable factory, also that of the locomotion tasks
-(:mod:`torchrl_csirl.envs.locomotion`). It depends on no registry.
+(:mod:`torchrl_csirl.tasks.locomotion`). It depends on no registry.
 
 A ``Dict`` observation of flat ``Box`` entries (a goal-conditioned gymnasium-robotics task:
 ``observation``, ``achieved_goal``, ``desired_goal``) becomes one flat observation, its entries in the
@@ -22,9 +22,9 @@ import torch
 from torchrl.envs import EnvBase
 from torchrl.envs.libs.gym import GymWrapper
 
-from torchrl_csirl.envs.gym_ids import import_gym_provider
-from torchrl_csirl.envs.headless import ensure_headless_gl
-from torchrl_csirl.envs.info import ScenarioInfoReader, info_spec
+from torchrl_csirl.tasks.gym_ids import import_gym_provider
+from torchrl_csirl.tasks.headless import ensure_headless_gl
+from torchrl_csirl.tasks.info import ScenarioInfoReader, info_spec
 
 __all__ = ["GOAL_KEYS", "SUCCESS_RULES", "GymnasiumTaskWrapper", "check_flat_box_spaces", "is_goal_space",
            "make_gymnasium_env", "observation_layout", "remove_maze_xml"]

@@ -1,9 +1,9 @@
 """Any gymnasium environment with flat ``Box`` spaces as a CSIRL task, without code.
 
 :func:`make_gymnasium_task` reads the environment's spaces and episode limit, writes a
-:class:`~torchrl_csirl.envs.TaskSpec` and registers it (:func:`~torchrl_csirl.envs.register_task`)
+:class:`~torchrl_csirl.tasks.TaskSpec` and registers it (:func:`~torchrl_csirl.tasks.register_task`)
 under the gymnasium id, with :func:`make_gymnasium_env` as its factory
-(:mod:`torchrl_csirl.envs.gymnasium_env`, also importable from here). The environment seen by
+(:mod:`torchrl_csirl.tasks.gymnasium_env`, also importable from here). The environment seen by
 the learner:
 
 * actions in ``[-1, 1]``, rescaled to the environment's bounds (gymnasium's ``RescaleAction``);
@@ -16,7 +16,7 @@ Such a task has no finish position: its accomplish rate is its success rate, and
 reported beside it (docs/own-task.md).
 
 An id gymnasium does not know is looked for in the installed providers (``gymnasium_robotics``,
-:func:`~torchrl_csirl.envs.gym_ids.import_gym_provider`). A goal-conditioned task (a ``Dict`` observation
+:func:`~torchrl_csirl.tasks.gym_ids.import_gym_provider`). A goal-conditioned task (a ``Dict`` observation
 with ``achieved_goal`` and ``desired_goal``, gymnasium-robotics' PointMaze, AntMaze, Fetch ...) is
 flattened (``observation``, ``achieved_goal``, ``desired_goal``: the spec's ``observation_layout``), its
 matching features default to ``achieved_goal``, its success to the env's ``info["success"]``, and an
@@ -32,8 +32,9 @@ from types import MappingProxyType
 
 import gymnasium as gym
 
-from torchrl_csirl.envs.gym_ids import import_gym_provider
-from torchrl_csirl.envs.gymnasium_env import (
+from torchrl_csirl.tasks.catalog import TASKS
+from torchrl_csirl.tasks.gym_ids import import_gym_provider
+from torchrl_csirl.tasks.gymnasium_env import (
     SUCCESS_RULES,
     GymnasiumTaskWrapper,
     check_flat_box_spaces,
@@ -42,15 +43,14 @@ from torchrl_csirl.envs.gymnasium_env import (
     observation_layout,
     remove_maze_xml,
 )
-from torchrl_csirl.envs.registry import import_task_module, register_task
-from torchrl_csirl.envs.scenarios import TASKS
-from torchrl_csirl.envs.spec import TaskSpec
+from torchrl_csirl.tasks.registry import import_task_module, register_task
+from torchrl_csirl.tasks.spec import TaskSpec
 
 __all__ = ["GYM_EXPERTS", "GymnasiumTaskWrapper", "make_gymnasium_env", "make_gymnasium_task", "parse_feature_indices"]
 
-#: environment class (a gymnasium id's ``entry_point``) -> its expert (a :attr:`~torchrl_csirl.envs.TaskSpec.expert`)
+#: environment class (a gymnasium id's ``entry_point``) -> its expert (a :attr:`~torchrl_csirl.tasks.TaskSpec.expert`)
 GYM_EXPERTS: dict[str, str] = {
-    "gymnasium_robotics.envs.maze.point_maze:PointMazeEnv": "torchrl_csirl.envs.robotics.point_maze_expert:make_point_maze_expert",
+    "gymnasium_robotics.envs.maze.point_maze:PointMazeEnv": "torchrl_csirl.tasks.robotics.point_maze_expert:make_point_maze_expert",
 }
 
 

@@ -1,11 +1,11 @@
-"""Every task's expert, by name: the factory named by its spec's :attr:`~torchrl_csirl.envs.TaskSpec.expert`.
+"""Every task's expert, by name: the factory named by its spec's :attr:`~torchrl_csirl.tasks.TaskSpec.expert`.
 
 Each task family names its expert where it declares its specs (``"module:function"``, imported on
-use): the driving scenarios :func:`~torchrl_csirl.envs.expert_driver.make_expert_driver`, AntMaze
-:func:`~torchrl_csirl.envs.robotics.ant_goal.make_waypoint_ant_expert`, Relocate
-:func:`~torchrl_csirl.envs.robotics.expert.make_relocate_expert`, the locomotion tasks
-:class:`~torchrl_csirl.envs.locomotion.LocomotionExpert`. A task of your own
-(:func:`~torchrl_csirl.envs.register_task`) gets an expert the same way.
+use): the driving scenarios :func:`~torchrl_csirl.tasks.driving.expert_driver.make_expert_driver`, AntMaze
+:func:`~torchrl_csirl.tasks.robotics.ant_goal.make_waypoint_ant_expert`, Relocate
+:func:`~torchrl_csirl.tasks.robotics.expert.make_relocate_expert`, the locomotion tasks
+:class:`~torchrl_csirl.tasks.locomotion.LocomotionExpert`. A task of your own
+(:func:`~torchrl_csirl.tasks.register_task`) gets an expert the same way.
 """
 from __future__ import annotations
 
@@ -13,14 +13,14 @@ import importlib
 import inspect
 from typing import Any, Callable
 
-from torchrl_csirl.envs.scenarios import TASKS
+from torchrl_csirl.tasks.catalog import TASKS
 
 __all__ = ["expert_factory", "expert_tasks", "make_expert"]
 
 
 def expert_tasks() -> tuple[str, ...]:
-    """The tasks with an expert (a non-empty :attr:`~torchrl_csirl.envs.TaskSpec.expert`), in
-    :data:`~torchrl_csirl.envs.TASKS`' order: the four driving scenarios, AntMaze (the waypoint-driven
+    """The tasks with an expert (a non-empty :attr:`~torchrl_csirl.tasks.TaskSpec.expert`), in
+    :data:`~torchrl_csirl.tasks.TASKS`' order: the four driving scenarios, AntMaze (the waypoint-driven
     ant), Relocate (the DAPG policy), the locomotion tasks (their shipped SAC experts), then any
     registered task that names one.
 
@@ -56,10 +56,10 @@ def make_expert(name: str, **options: Any) -> Any:
     """Build the expert of a task: ``factory(name, **options)`` of :func:`expert_factory`.
 
     The options are the factory's: a driving scenario's are fields of its
-    :class:`~torchrl_csirl.envs.expert_config.ExpertConfig`; ``"antmaze-umaze"`` takes ``policy=<policy.pt
+    :class:`~torchrl_csirl.tasks.driving.expert_config.ExpertConfig`; ``"antmaze-umaze"`` takes ``policy=<policy.pt
     or run directory of recipes/train_ant_expert.py>``, ``lookahead=`` and ``action_gain=``
-    (:class:`~torchrl_csirl.envs.robotics.WaypointAntExpert`); ``"hopper"``, ``"halfcheetah"`` take
-    ``policy=`` (default: the shipped SAC policy, :class:`~torchrl_csirl.envs.locomotion.LocomotionExpert`);
+    (:class:`~torchrl_csirl.tasks.robotics.WaypointAntExpert`); ``"hopper"``, ``"halfcheetah"`` take
+    ``policy=`` (default: the shipped SAC policy, :class:`~torchrl_csirl.tasks.locomotion.LocomotionExpert`);
     ``"relocate"`` (the DAPG expert) takes none.
 
     Every expert has ``reset(env)`` and ``act(env) -> action``.

@@ -10,7 +10,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from torchrl_csirl.envs.expert_config import ExpertConfig
+from torchrl_csirl.tasks.driving.expert_config import ExpertConfig
 
 __all__ = ["Behaviour", "RouteFollower"]
 

@@ -1,8 +1,8 @@
 """The paper's robotics tasks on gymnasium-robotics: AntMaze U-maze and Adroit Relocate.
 
 * :data:`ROBOTICS_TASKS` / :class:`RoboticsTaskSpec`: the tasks' specs (the same
-  :class:`~torchrl_csirl.envs.spec.TaskSpec` as the driving scenarios), reached through
-  :func:`torchrl_csirl.envs.make_env` (``"antmaze-umaze"``, ``"relocate"``).
+  :class:`~torchrl_csirl.tasks.spec.TaskSpec` as the driving scenarios), reached through
+  :func:`torchrl_csirl.tasks.make_env` (``"antmaze-umaze"``, ``"relocate"``).
 * :class:`AntMazeUMazeEnv`, :class:`RelocateEnv`: the gymnasium environments.
 * :class:`DAPGRelocatePolicy`: the shipped DAPG expert of Relocate.
 * :class:`AntGoalEnv` (task ``"ant-goal"``) and :class:`WaypointAntExpert`: the AntMaze expert's
@@ -10,7 +10,7 @@
 """
 from __future__ import annotations
 
-from torchrl_csirl.envs.robotics.ant_goal import (
+from torchrl_csirl.tasks.robotics.ant_goal import (
     ANT_GOAL_SPEC,
     ANT_POLICY_PATH,
     AntGoalEnv,
@@ -18,7 +18,7 @@ from torchrl_csirl.envs.robotics.ant_goal import (
     next_waypoint,
     pursuit_waypoint,
 )
-from torchrl_csirl.envs.robotics.tasks import (
+from torchrl_csirl.tasks.robotics.tasks import (
     ANTMAZE_UMAZE_MAP,
     ROBOTICS_TASKS,
     AntMazeUMazeEnv,

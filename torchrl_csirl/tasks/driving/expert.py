@@ -24,18 +24,18 @@ It is a *route-following controller with a short-horizon look-ahead*:
 
 Where the pieces live (this module gathers their public names):
 
-* :mod:`~torchrl_csirl.envs.expert_config`: :class:`ExpertConfig`, the per-scene :data:`EXPERT_CONFIGS`,
+* :mod:`~torchrl_csirl.tasks.driving.expert_config`: :class:`ExpertConfig`, the per-scene :data:`EXPERT_CONFIGS`,
   the action units (:func:`normalize_action`);
-* :mod:`~torchrl_csirl.envs.road_clone`: the light road copies of the look-ahead;
-* :mod:`~torchrl_csirl.envs.route_follower`: the route, its geometry and the IDM + steering controllers;
-* :mod:`~torchrl_csirl.envs.expert_driver`: :class:`ExpertDriver`, the decision;
-* :mod:`~torchrl_csirl.envs.expert_registry`: every task's expert by name (:func:`make_expert`,
+* :mod:`~torchrl_csirl.tasks.driving.road_clone`: the light road copies of the look-ahead;
+* :mod:`~torchrl_csirl.tasks.driving.route_follower`: the route, its geometry and the IDM + steering controllers;
+* :mod:`~torchrl_csirl.tasks.driving.expert_driver`: :class:`ExpertDriver`, the decision;
+* :mod:`~torchrl_csirl.tasks.experts`: every task's expert by name (:func:`make_expert`,
   :func:`expert_tasks`), read from its spec's ``expert``;
-* :mod:`~torchrl_csirl.envs.expert_rollout`: :func:`rollout_expert`, :func:`clear_traffic`.
+* :mod:`~torchrl_csirl.tasks.expert_rollout`: :func:`rollout_expert`, :func:`clear_traffic`.
 
 Examples:
-    >>> from torchrl_csirl.envs.expert import make_expert, rollout_expert
-    >>> from torchrl_csirl.envs import make_gym_env
+    >>> from torchrl_csirl.tasks.driving.expert import make_expert, rollout_expert
+    >>> from torchrl_csirl.tasks import make_gym_env
     >>> env = make_gym_env("merge")
     >>> episode = rollout_expert(env, seed=0, empty_road=True)
     >>> bool(episode["success"]), episode["action"].shape[1]
@@ -43,17 +43,17 @@ Examples:
 """
 from __future__ import annotations
 
-from torchrl_csirl.envs.expert_config import (
+from torchrl_csirl.tasks.driving.expert_config import (
     ACCELERATION_SCALE,
     EXPERT_CONFIGS,
     STEERING_SCALE,
     ExpertConfig,
     normalize_action,
 )
-from torchrl_csirl.envs.expert_driver import ExpertDriver, make_expert_driver
-from torchrl_csirl.envs.expert_registry import expert_tasks, make_expert
-from torchrl_csirl.envs.expert_rollout import clear_traffic, rollout_expert
-from torchrl_csirl.envs.road_clone import clone_road, fast_network, perceived_vehicles
+from torchrl_csirl.tasks.driving.expert_driver import ExpertDriver, make_expert_driver
+from torchrl_csirl.tasks.driving.road_clone import clone_road, fast_network, perceived_vehicles
+from torchrl_csirl.tasks.expert_rollout import clear_traffic, rollout_expert
+from torchrl_csirl.tasks.experts import expert_tasks, make_expert
 
 __all__ = [
     "ACCELERATION_SCALE",

@@ -1,6 +1,6 @@
-"""Your own task, by name: :func:`register_task` adds a :class:`~torchrl_csirl.envs.TaskSpec` and the
-function that builds its TorchRL environment to :data:`~torchrl_csirl.envs.TASKS`, so that
-:func:`~torchrl_csirl.envs.make_env`, the run layer (:mod:`torchrl_csirl.launch`), every script and
+"""Your own task, by name: :func:`register_task` adds a :class:`~torchrl_csirl.tasks.TaskSpec` and the
+function that builds its TorchRL environment to :data:`~torchrl_csirl.tasks.TASKS`, so that
+:func:`~torchrl_csirl.tasks.make_env`, the run layer (:mod:`torchrl_csirl.launch`), every script and
 the benchmark take it by name, as they take ``"merge"``.
 
 Worker processes (collectors, ``ParallelEnv``) are started with the spawn method and do not see
@@ -24,10 +24,10 @@ from functools import partial
 import torch
 from torchrl.envs import EnvBase
 
-from torchrl_csirl.envs.info import INFO_KEYS
-from torchrl_csirl.envs.locomotion import locomotion_factories
-from torchrl_csirl.envs.scenarios import TASKS, make_scenario_env, resolve_scenario
-from torchrl_csirl.envs.spec import TaskSpec
+from torchrl_csirl.tasks.catalog import TASKS, make_scenario_env, resolve_scenario
+from torchrl_csirl.tasks.info import INFO_KEYS
+from torchrl_csirl.tasks.locomotion import locomotion_factories
+from torchrl_csirl.tasks.spec import TaskSpec
 
 __all__ = ["build_env", "env_factory", "import_task_module", "register_task", "registered_factory", "task_names"]
 
@@ -69,7 +69,7 @@ def register_task(spec: TaskSpec, make_env: Callable[..., EnvBase], *, replace: 
         ...                 finish_position=None, ego_feature_indices=(0, 1, 2),
         ...                 position_feature_indices=(0, 1), matching_scale=1.0)
         >>> _ = register_task(spec, partial(GymEnv, "Pendulum-v1"))
-        >>> from torchrl_csirl.envs import make_env, resolve_scenario
+        >>> from torchrl_csirl.tasks import make_env, resolve_scenario
         >>> resolve_scenario("doc-pendulum").family, make_env("doc-pendulum", seed=0).rollout(3)["observation"].shape
         ('custom', torch.Size([3, 3]))
     """
@@ -92,7 +92,7 @@ def _register(spec: TaskSpec, make_env: Callable[..., EnvBase]) -> None:
 
 
 def _register_builtin_tasks() -> None:
-    """The built-in tasks with their factories: the locomotion tasks' own (:func:`~torchrl_csirl.envs.locomotion.locomotion_factories`),
+    """The built-in tasks with their factories: the locomotion tasks' own (:func:`~torchrl_csirl.tasks.locomotion.locomotion_factories`),
     the others' ``partial(make_scenario_env, name)`` (their ``csirl/<name>-v0`` gymnasium id as a ``GymEnv``)."""
     locomotion = locomotion_factories()
     for spec in tuple(TASKS.values()):
@@ -119,7 +119,7 @@ def build_env(
     info_keys=INFO_KEYS,
     **overrides,
 ) -> EnvBase:
-    """The one way a task's environment is built from its factory (what :func:`~torchrl_csirl.envs.make_env` does).
+    """The one way a task's environment is built from its factory (what :func:`~torchrl_csirl.tasks.make_env` does).
 
     ``factory(**overrides)``, also given ``device`` and ``info_keys`` when it names them among its
     parameters; then moved to ``device`` when it is elsewhere (``None``: left where the factory put
@@ -157,9 +157,9 @@ def env_factory(name: str | TaskSpec, **overrides) -> Callable[[], EnvBase]:
     """A picklable zero-argument factory of the task's TorchRL environment, for worker processes.
 
     ``partial(build_env, factory, **overrides)`` (:func:`build_env`, the path of
-    :func:`~torchrl_csirl.envs.make_env`) with the task's own factory: the built-in tasks' resolve by
+    :func:`~torchrl_csirl.tasks.make_env`) with the task's own factory: the built-in tasks' resolve by
     name in the worker, registered ones are their own function, so a spawned worker needs no
-    registry. ``overrides`` are :func:`~torchrl_csirl.envs.make_env`'s keywords. After
+    registry. ``overrides`` are :func:`~torchrl_csirl.tasks.make_env`'s keywords. After
     :func:`import_task_module`, the factory imports those modules first in the worker (a module that
     registers a gymnasium id must have run there before ``gymnasium.make`` finds the id).
 
@@ -195,7 +195,7 @@ def task_names(*, driving: bool | None = None, family: str | None = None) -> tup
 
     Args:
         driving: only the driving scenes (True) / only the others (False).
-        family: only the tasks of this :attr:`~torchrl_csirl.envs.TaskSpec.family` (``"driving"``,
+        family: only the tasks of this :attr:`~torchrl_csirl.tasks.TaskSpec.family` (``"driving"``,
             ``"robotics"``, ``"locomotion"``, ``"gymnasium"``, ``"custom"``).
 
     Examples:

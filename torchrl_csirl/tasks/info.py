@@ -1,7 +1,7 @@
 """The info entries a CSIRL task writes into its TensorDicts: their keys, their specs and the reader.
 
-Every environment builder reads them (:func:`~torchrl_csirl.envs.make_env`, the gymnasium tasks'
-:func:`~torchrl_csirl.envs.make_gymnasium_env`): this module depends on no task and no registry.
+Every environment builder reads them (:func:`~torchrl_csirl.tasks.make_env`, the gymnasium tasks'
+:func:`~torchrl_csirl.tasks.make_gymnasium_env`): this module depends on no task and no registry.
 """
 from __future__ import annotations
 

@@ -33,8 +33,8 @@ class YieldingParallelEnv(ParallelEnv):
 
     Examples:
         >>> from functools import partial
-        >>> from torchrl_csirl.envs import make_env
-        >>> from torchrl_csirl.envs.parallel import YieldingParallelEnv
+        >>> from torchrl_csirl.tasks import make_env
+        >>> from torchrl_csirl.tasks.parallel import YieldingParallelEnv
         >>> env = YieldingParallelEnv(2, partial(make_env, "merge"))
         >>> env.rollout(3, break_when_any_done=False).batch_size
         torch.Size([2, 3])

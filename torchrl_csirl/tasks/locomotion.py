@@ -6,7 +6,7 @@ The matching reward needs a progress coordinate: the torso's x position. gymnasi
 the observation by default; here the observation keeps it as entry 0
 (``exclude_current_positions_from_observation=False``), the matching reward and the nearest-state
 search read it (``position_feature_indices = ego_feature_indices = (0,)``), and the task lists it in
-:attr:`~torchrl_csirl.envs.TaskSpec.hidden_feature_indices`, so every network (actor, critics,
+:attr:`~torchrl_csirl.tasks.TaskSpec.hidden_feature_indices`, so every network (actor, critics,
 learned reward, discriminators) reads the observation through
 :class:`~torchrl_csirl.modules.DropFeatures` and sees exactly gymnasium's default observation
 (11 entries for the hopper, 17 for the cheetah). The demonstrations keep x, as the matching reward
@@ -18,7 +18,7 @@ matching scale makes an expert's 1 000-step episode earn a few hundred (the hopp
 20 m, the cheetah about 300 m).
 
 Examples:
-    >>> from torchrl_csirl.envs import make_env, resolve_scenario
+    >>> from torchrl_csirl.tasks import make_env, resolve_scenario
     >>> spec = resolve_scenario("hopper")
     >>> spec.obs_dim, spec.hidden_feature_indices, spec.matching_features
     (12, (0,), ('x',))
@@ -36,8 +36,8 @@ import numpy as np
 import torch
 
 from torchrl_csirl._paths import EXPERTS_DIR
-from torchrl_csirl.envs.gymnasium_env import make_gymnasium_env
-from torchrl_csirl.envs.spec import TaskSpec
+from torchrl_csirl.tasks.gymnasium_env import make_gymnasium_env
+from torchrl_csirl.tasks.spec import TaskSpec
 
 __all__ = ["LOCOMOTION_GYM_IDS", "LOCOMOTION_MAKE_KWARGS", "LOCOMOTION_TASKS", "LocomotionExpert", "expert_policy_path",
            "locomotion_factories", "make_locomotion_env"]
@@ -111,7 +111,7 @@ class LocomotionExpert:
     """A locomotion task's expert: the shipped SAC policy (or another saved one), deterministic.
 
     It reads the observation the environment gives (x included, which the policy's input map drops),
-    through the unwrapped MuJoCo environment, as every expert of :func:`~torchrl_csirl.envs.expert_registry.make_expert`
+    through the unwrapped MuJoCo environment, as every expert of :func:`~torchrl_csirl.tasks.experts.make_expert`
     reads its simulator.
 
     Args:

@@ -1,15 +1,15 @@
 """The expert of gymnasium-robotics' PointMaze (``PointMaze_UMaze-v3``, ``PointMaze_Medium-v3``, any map).
 
 A waypoint controller over the maze's map: the shortest route of cells from the ball's cell to the goal's
-(breadth-first, :func:`~torchrl_csirl.envs.robotics.maze_cell_route`), then a PD controller pushing the
+(breadth-first, :func:`~torchrl_csirl.tasks.robotics.maze_cell_route`), then a PD controller pushing the
 ball toward the centre of the route's next cell (the goal itself once the ball is in the goal's cell)::
 
     a = clip(kp (waypoint - position) - kd velocity, -1, 1)
 
 It reads nothing but the ball's position, its velocity and the goal, so it acts on the flat observation of
-the gymnasium task (:func:`~torchrl_csirl.envs.make_gymnasium_task`: ``observation`` 0-4 is the ball's
+the gymnasium task (:func:`~torchrl_csirl.tasks.make_gymnasium_task`: ``observation`` 0-4 is the ball's
 (x, y, vx, vy), ``desired_goal`` 6-8) as a TorchRL policy, and on the gymnasium environment itself
-(``reset(env)``, ``act(env)``, the interface of :func:`~torchrl_csirl.envs.expert_registry.make_expert`).
+(``reset(env)``, ``act(env)``, the interface of :func:`~torchrl_csirl.tasks.experts.make_expert`).
 """
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ import numpy as np
 import torch
 from tensordict import TensorDictBase
 
-from torchrl_csirl.envs.robotics.tasks import maze_cell_route
+from torchrl_csirl.tasks.robotics.tasks import maze_cell_route
 
 __all__ = ["PointMazeExpert", "make_point_maze_expert"]
 
@@ -109,7 +109,7 @@ class PointMazeExpert:
 
 
 def make_point_maze_expert(name: str, kp: float = 10.0, kd: float = 1.0) -> PointMazeExpert:
-    """The expert of the PointMaze task ``name`` (a gymnasium id, its :attr:`~torchrl_csirl.envs.TaskSpec.expert`):
+    """The expert of the PointMaze task ``name`` (a gymnasium id, its :attr:`~torchrl_csirl.tasks.TaskSpec.expert`):
     the maze map read from the environment, the ball and goal from the task's observation layout.
 
     Examples:
@@ -119,9 +119,9 @@ def make_point_maze_expert(name: str, kp: float = 10.0, kd: float = 1.0) -> Poin
     """
     import gymnasium as gym
 
-    from torchrl_csirl.envs.gym_ids import import_gym_provider
-    from torchrl_csirl.envs.gymnasium_env import remove_maze_xml
-    from torchrl_csirl.envs.scenarios import TASKS
+    from torchrl_csirl.tasks.catalog import TASKS
+    from torchrl_csirl.tasks.gym_ids import import_gym_provider
+    from torchrl_csirl.tasks.gymnasium_env import remove_maze_xml
 
     import_gym_provider(name)
     env = gym.make(name)

@@ -5,9 +5,9 @@ observation layout (named slices), the matching features ``h(s)`` (the potential
 matching reward) and the features of the nearest-state search, the finish (or goal), the
 episode limit and how to build the gymnasium environment.
 
-* :class:`~torchrl_csirl.envs.ScenarioSpec` (driving, highway-env scenes) adds the Kinematics
+* :class:`~torchrl_csirl.tasks.ScenarioSpec` (driving, highway-env scenes) adds the Kinematics
   feature ranges and the highway-env config;
-* :class:`~torchrl_csirl.envs.robotics.RoboticsTaskSpec` (AntMaze U-maze, Adroit Relocate) adds
+* :class:`~torchrl_csirl.tasks.robotics.RoboticsTaskSpec` (AntMaze U-maze, Adroit Relocate) adds
   the gymnasium-robotics environment it wraps.
 """
 from __future__ import annotations
@@ -26,8 +26,8 @@ class TaskSpec:
     Attributes:
         name: short name (``"merge"``, ``"antmaze-umaze"``, ...).
         gym_id: registered gymnasium id (``"csirl/<name>-v0"``), registered on
-            ``import torchrl_csirl.envs``; empty for a task registered with its own factory
-            (:func:`~torchrl_csirl.envs.register_task`).
+            ``import torchrl_csirl.tasks``; empty for a task registered with its own factory
+            (:func:`~torchrl_csirl.tasks.register_task`).
         entry_point: ``"module:Class"`` of the environment (empty: as ``gym_id``).
         family: ``"driving"``, ``"robotics"``, ``"gymnasium"`` (``env.gym_id=``) or ``"custom"``
             (the default: a task of your own).
@@ -51,12 +51,12 @@ class TaskSpec:
         dt: seconds per policy step.
         expert: ``"module:function"`` of the task's expert factory, ``factory(name, **options)`` returning
             an object with ``reset(env)`` and ``act(env) -> action`` (what
-            :func:`~torchrl_csirl.envs.expert_registry.make_expert` builds); empty: the task has no expert.
+            :func:`~torchrl_csirl.tasks.experts.make_expert` builds); empty: the task has no expert.
         observation_layout: name -> ``(start, stop)`` slice of the flat observation.
         description: one line on the task.
 
     Examples:
-        >>> from torchrl_csirl.envs import resolve_scenario
+        >>> from torchrl_csirl.tasks import resolve_scenario
         >>> spec = resolve_scenario("antmaze-umaze")
         >>> spec.family, spec.obs_dim, spec.matching_features
         ('robotics', 29, ('x', 'y'))

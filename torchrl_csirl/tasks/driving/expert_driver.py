@@ -2,10 +2,10 @@
 
 The expert reads the simulator state (road network, ego vehicle, other vehicles) from ``env.unwrapped``
 and returns continuous actions in the learner's normalised units
-(:func:`~torchrl_csirl.envs.expert_config.normalize_action`). Every few steps it simulates a handful of
-candidate behaviours (:class:`~torchrl_csirl.envs.route_follower.Behaviour`) on a light copy of the road
-(:func:`~torchrl_csirl.envs.road_clone.clone_road`) and applies the one with the most route progress
-that stays safe (see :mod:`torchrl_csirl.envs.expert`).
+(:func:`~torchrl_csirl.tasks.driving.expert_config.normalize_action`). Every few steps it simulates a handful of
+candidate behaviours (:class:`~torchrl_csirl.tasks.driving.route_follower.Behaviour`) on a light copy of the road
+(:func:`~torchrl_csirl.tasks.driving.road_clone.clone_road`) and applies the one with the most route progress
+that stays safe (see :mod:`torchrl_csirl.tasks.driving.expert`).
 """
 from __future__ import annotations
 
@@ -15,10 +15,10 @@ from typing import Any
 
 import numpy as np
 
-from torchrl_csirl.envs.expert_config import EXPERT_CONFIGS, ExpertConfig, normalize_action
-from torchrl_csirl.envs.road_clone import clone_road, perceived_vehicles
-from torchrl_csirl.envs.route_follower import Behaviour, RouteFollower
-from torchrl_csirl.envs.scenarios import SCENARIOS
+from torchrl_csirl.tasks.catalog import SCENARIOS
+from torchrl_csirl.tasks.driving.expert_config import EXPERT_CONFIGS, ExpertConfig, normalize_action
+from torchrl_csirl.tasks.driving.road_clone import clone_road, perceived_vehicles
+from torchrl_csirl.tasks.driving.route_follower import Behaviour, RouteFollower
 
 __all__ = ["ExpertDriver", "make_expert_driver"]
 
@@ -44,12 +44,12 @@ class ExpertDriver:
     """Privileged expert driver for a CSIRL driving scenario.
 
     Args:
-        scenario: a driving scenario (a key of :data:`~torchrl_csirl.envs.expert_config.EXPERT_CONFIGS`).
+        scenario: a driving scenario (a key of :data:`~torchrl_csirl.tasks.driving.expert_config.EXPERT_CONFIGS`).
         config: optional :class:`ExpertConfig` overriding the scenario's defaults.
         dt: simulation step [s] (0.2 s in all CSIRL scenarios).
 
     Examples:
-        >>> from torchrl_csirl.envs import make_gym_env
+        >>> from torchrl_csirl.tasks import make_gym_env
         >>> env = make_gym_env("highway-fast")
         >>> _ = env.reset(seed=0)
         >>> expert = ExpertDriver("highway-fast")
@@ -245,8 +245,8 @@ class ExpertDriver:
 
 
 def make_expert_driver(name: str, **overrides: Any) -> ExpertDriver:
-    """The expert of a driving scenario (its :attr:`~torchrl_csirl.envs.TaskSpec.expert`): an
-    :class:`ExpertDriver` with fields of its :class:`~torchrl_csirl.envs.expert_config.ExpertConfig` overridden.
+    """The expert of a driving scenario (its :attr:`~torchrl_csirl.tasks.TaskSpec.expert`): an
+    :class:`ExpertDriver` with fields of its :class:`~torchrl_csirl.tasks.driving.expert_config.ExpertConfig` overridden.
 
     Raises:
         ValueError: an unknown scenario, or an override that is no field of the config.
