@@ -19,6 +19,7 @@ CASES = [
     ("torchrl_csirl.envs.driving", "torchrl_csirl.tasks.driving.driving", "CSIRLMergeEnv"),
     ("torchrl_csirl.envs.scenarios", "torchrl_csirl.tasks.catalog", "SCENARIOS"),
     ("torchrl_csirl.envs.robotics.ant_goal", "torchrl_csirl.tasks.robotics.ant_goal", "ANT_GOAL_SPEC"),
+    ("torchrl_csirl.benchmark.plan", "torchrl_csirl.sweep.plan", "METHOD_ORDER"),
 ]
 
 
@@ -48,8 +49,8 @@ def test_the_old_import_forms_work():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", FutureWarning)
         import torchrl_csirl.envs.driving as m
-        from torchrl_csirl.envs.spec import TaskSpec
         import torchrl_csirl.tasks
+        from torchrl_csirl.envs.spec import TaskSpec
         from torchrl_csirl.tasks import driving
     assert m.__name__ == "torchrl_csirl.tasks.driving.driving"
     assert TaskSpec is torchrl_csirl.tasks.TaskSpec

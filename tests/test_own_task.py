@@ -264,7 +264,7 @@ def test_the_console_command_trains_csirl_on_the_hopper(tmp_path):
 def test_the_benchmark_knows_the_tasks_an_env_module_override_registers(tmp_path):
     """A fresh interpreter: ``--scenarios own-pendulum`` is known once ``env.module=own_task_module`` (an
     override of the sweep) is imported, as the cells will import it; a module that cannot be imported is one line."""
-    code = ("import sys; from torchrl_csirl.benchmark.plan import plan_cells, BenchmarkError\n"
+    code = ("import sys; from torchrl_csirl.sweep.plan import plan_cells, BenchmarkError\n"
             f"todo, _ = plan_cells(['bc'], ['own-pendulum'], [0], {str(tmp_path)!r}, ['env.module=own_task_module'])\n"
             "print([c.name for c in todo], 'env.module=own_task_module' in todo[0].command)\n"
             "try:\n    plan_cells(['bc'], ['own-pendulum'], [0], '.', ['bc:env.module=no_such_module_here'])\n"

@@ -100,7 +100,7 @@ def test_plot_curves_draws_each_group_at_the_frames_all_its_seeds_evaluated(tmp_
 
     import plot_curves
 
-    from torchrl_csirl.benchmark.results import eval_curve
+    from torchrl_csirl.sweep.results import eval_curve
 
     runs = os.path.join(ROOT, "docs", "runs")
     groups = {name: [os.path.join(runs, name, f"antmaze-umaze-csirl-s{s}") for s in range(3)]

@@ -23,7 +23,7 @@ import argparse
 import json
 import sys
 
-from torchrl_csirl.benchmark.results import eval_curve
+from torchrl_csirl.sweep.results import eval_curve
 from torchrl_csirl.visualization import plot_method_curves
 
 

@@ -42,6 +42,9 @@ MOVED: dict[str, str] = {
     **{f"torchrl_csirl.envs.{m}": f"torchrl_csirl.tasks.driving.{m}"
        for m in ("driving", "_road", "_vehicles", "road_clone", "route_follower", "_observation", "expert",
                  "expert_config", "expert_driver")},
+    "torchrl_csirl.benchmark": "torchrl_csirl.sweep",
+    **{f"torchrl_csirl.benchmark.{m}": f"torchrl_csirl.sweep.{m}"
+       for m in ("curves", "plan", "published", "report", "results", "runner")},
 }
 
 

@@ -1,7 +1,7 @@
 """The published numbers the benchmark's tables set beside ours: the paper's Table I on the driving scenarios
 and, on the locomotion tasks, IQ-Learn's Table 3 (which ran GAIL, DAC and ValueDICE beside IQ-Learn).
 
-Numbers only, no code that runs a cell or writes a table: :mod:`torchrl_csirl.benchmark.report` prints
+Numbers only, no code that runs a cell or writes a table: :mod:`torchrl_csirl.sweep.report` prints
 them, ``tests/test_tables.py`` checks the pages against them.
 
 Examples:

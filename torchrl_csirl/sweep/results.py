@@ -1,9 +1,9 @@
 """A sweep's finished runs and the table's rows: each run's ``summary.json`` read with its row's method,
 grouped by (method, scenario) into mean ± std over seeds, set against ``csirl`` (Welch's test and the verdict
 rule of :mod:`torchrl_csirl.launch.verdicts`, Holm's correction across one table's comparisons) and the
-paper's value (:mod:`torchrl_csirl.benchmark.published`).
+paper's value (:mod:`torchrl_csirl.sweep.published`).
 
-The rows are plain dicts, the CSV's lines; :mod:`torchrl_csirl.benchmark.report` writes them as Markdown.
+The rows are plain dicts, the CSV's lines; :mod:`torchrl_csirl.sweep.report` writes them as Markdown.
 
 Examples:
     >>> rows = table_rows([{"method": "csirl", "scenario": "merge", "seed": s, "run_dir": "",
@@ -18,7 +18,9 @@ import os
 from collections import defaultdict
 from typing import Any
 
-from torchrl_csirl.benchmark.plan import (
+from torchrl_csirl.launch.summaries import find_summaries, mean_std
+from torchrl_csirl.launch.verdicts import compare_family
+from torchrl_csirl.sweep.plan import (
     ABLATIONS,
     LOCOMOTION_ORDER,
     METHOD_ORDER,
@@ -29,9 +31,7 @@ from torchrl_csirl.benchmark.plan import (
     return_task_order,
     score_key,
 )
-from torchrl_csirl.benchmark.published import PAPER_TABLE
-from torchrl_csirl.launch.summaries import find_summaries, mean_std
-from torchrl_csirl.launch.verdicts import compare_family
+from torchrl_csirl.sweep.published import PAPER_TABLE
 
 __all__ = ["add_comparison_to_csirl", "add_normalized_returns", "best_evaluation", "cell_method", "comparison_table",
            "eval_curve", "off_budget", "read_runs", "table_rows"]

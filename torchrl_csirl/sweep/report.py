@@ -3,7 +3,7 @@ tasks (driving: the expert-normalised accomplish rate beside the paper's Table I
 locomotion: the expert-normalised return beside the published results), each with outcomes, cost and the
 difference from ``csirl``.
 
-The rows come from :func:`torchrl_csirl.benchmark.results.table_rows`.
+The rows come from :func:`torchrl_csirl.sweep.results.table_rows`.
 
 Examples:
     >>> row = {"method": "csirl", "scenario": "merge", "runs": 2, "frames": "60000", "vs_csirl": None,
@@ -18,7 +18,8 @@ import csv
 from collections.abc import Callable
 from typing import Any
 
-from torchrl_csirl.benchmark.plan import (
+from torchrl_csirl.launch.verdicts import ALPHA, BEYOND_NOISE, NO_DIFFERENCE, POWER
+from torchrl_csirl.sweep.plan import (
     LOCOMOTION_ORDER,
     LOCOMOTION_TITLES,
     METHOD_ORDER,
@@ -28,9 +29,8 @@ from torchrl_csirl.benchmark.plan import (
     TABLE_BUDGETS,
     return_task_order,
 )
-from torchrl_csirl.benchmark.published import PAPER_TABLE, PUBLISHED_EXPERTS, PUBLISHED_GAP, PUBLISHED_LOCOMOTION, published_gap
-from torchrl_csirl.benchmark.results import off_budget
-from torchrl_csirl.launch.verdicts import ALPHA, BEYOND_NOISE, NO_DIFFERENCE, POWER
+from torchrl_csirl.sweep.published import PAPER_TABLE, PUBLISHED_EXPERTS, PUBLISHED_GAP, PUBLISHED_LOCOMOTION, published_gap
+from torchrl_csirl.sweep.results import off_budget
 
 __all__ = ["budget_caption", "driving_tables", "locomotion_tables", "markdown_table", "published_table",
            "robotics_tables", "write_csv"]

@@ -4,7 +4,7 @@ The table's rows and columns (:data:`METHOD_ORDER`, :data:`SCENARIO_ORDER`, :dat
 :data:`LOCOMOTION_ORDER`), every cell's budget (:data:`TABLE_BUDGETS`) and settings (:data:`TASK_OVERRIDES`),
 which recipe runs a method on a task (:func:`recipe_of`) and the cells of a sweep (:func:`plan_cells`). Method
 and task names come from their registries (:data:`torchrl_csirl.launch.imitation.METHODS`,
-:data:`torchrl_csirl.tasks.TASKS`); running the cells is :mod:`torchrl_csirl.benchmark.runner`'s.
+:data:`torchrl_csirl.tasks.TASKS`); running the cells is :mod:`torchrl_csirl.sweep.runner`'s.
 
 Examples:
     >>> SCENARIO_ORDER, LOCOMOTION_ORDER
@@ -16,8 +16,8 @@ import os
 import sys
 from dataclasses import dataclass
 
-from torchrl_csirl.benchmark.published import PAPER_TABLE
 from torchrl_csirl.launch.imitation import METHODS, REFERENCE_METHODS
+from torchrl_csirl.sweep.published import PAPER_TABLE
 from torchrl_csirl.tasks import LOCOMOTION_TASKS, TASKS, import_task_module, resolve_scenario, task_names
 
 __all__ = ["ABLATIONS", "BASELINE_VARIANTS", "CSIRL_METHODS", "CSIRL_RECIPE", "CSIRL_ROBOTICS_RECIPE", "IMITATION_RECIPE",

@@ -15,7 +15,8 @@ from typing import Any
 
 from omegaconf import OmegaConf
 
-from torchrl_csirl.benchmark.plan import (
+from torchrl_csirl.launch.config import EvalConfig
+from torchrl_csirl.sweep.plan import (
     ABLATIONS,
     LOCOMOTION_ORDER,
     METHOD_ORDER,
@@ -24,8 +25,7 @@ from torchrl_csirl.benchmark.plan import (
     is_robotics,
     return_task_order,
 )
-from torchrl_csirl.benchmark.results import eval_curve
-from torchrl_csirl.launch.config import EvalConfig
+from torchrl_csirl.sweep.results import eval_curve
 
 __all__ = ["LEARNER_ORDER", "curve_kinds", "evaluation_schedule", "learning_curve_figures"]
 

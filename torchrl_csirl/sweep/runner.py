@@ -2,7 +2,7 @@
 an existing cluster), stopped without losing work on SIGTERM or Ctrl-C (local Ray, Linux:
 :mod:`torchrl_csirl.launch.processes`).
 
-The cells come from :func:`torchrl_csirl.benchmark.plan.plan_cells`; the trial workers import
+The cells come from :func:`torchrl_csirl.sweep.plan.plan_cells`; the trial workers import
 :func:`run_cell` from this module.
 
 Examples:
@@ -17,9 +17,9 @@ import os
 import shlex
 from typing import Any
 
-from torchrl_csirl.benchmark.plan import Cell
 from torchrl_csirl.launch.processes import StopCellsOnSigterm, run_cell_process, tune_sigint_handler_off
 from torchrl_csirl.launch.run import running_command
+from torchrl_csirl.sweep.plan import Cell
 
 __all__ = ["run_cell", "run_sweep", "sweep_command"]
 
