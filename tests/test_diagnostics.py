@@ -11,7 +11,7 @@ import os
 import pytest
 import torch
 
-from torchrl_csirl.diagnostics import (
+from torchrl_csirl.analysis.diagnostics import (
     OFF_DEMONSTRATION_SD,
     action_saturation,
     critic_calibration,

@@ -17,7 +17,7 @@ import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SUBPACKAGES = ("objectives", "transforms", "curriculum", "data", "tasks", "tasks.robotics", "modules",
-               "trainers", "visualization", "launch", "diagnostics")
+               "trainers", "analysis.visualization", "launch", "analysis.diagnostics")
 pytest.importorskip("mkdocs", reason="the docs extra (pip install -e '.[docs]')")
 
 

@@ -20,6 +20,9 @@ CASES = [
     ("torchrl_csirl.envs.scenarios", "torchrl_csirl.tasks.catalog", "SCENARIOS"),
     ("torchrl_csirl.envs.robotics.ant_goal", "torchrl_csirl.tasks.robotics.ant_goal", "ANT_GOAL_SPEC"),
     ("torchrl_csirl.benchmark.plan", "torchrl_csirl.sweep.plan", "METHOD_ORDER"),
+    ("torchrl_csirl.diagnostics", "torchrl_csirl.analysis.diagnostics", "health_report"),
+    ("torchrl_csirl.visualization.curves", "torchrl_csirl.analysis.visualization.curves", "plot_learning_curve"),
+    ("torchrl_csirl.launch.verdicts", "torchrl_csirl.analysis.verdicts", "compare_family"),
 ]
 
 

@@ -40,8 +40,8 @@ def test_compare_runs_sets_two_seed_sets_side_by_side_with_welchs_test(capsys):
 
     import compare_runs
 
-    from torchrl_csirl.launch.summaries import find_summaries
-    from torchrl_csirl.launch.verdicts import compare_seeds
+    from torchrl_csirl.analysis.summaries import find_summaries
+    from torchrl_csirl.analysis.verdicts import compare_seeds
 
     runs = os.path.join(ROOT, "docs", "runs")
     first = [os.path.join(runs, "csirl", f"merge-csirl-s{s}") for s in range(3)]

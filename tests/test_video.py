@@ -12,17 +12,17 @@ import torch
 from omegaconf import OmegaConf
 from PIL import Image
 
-from torchrl_csirl.launch.config import ConfigError
-from torchrl_csirl.launch.csirl import CSIRL_RECIPE
-from torchrl_csirl.modules import make_actor, save_policy
-from torchrl_csirl.scripts import watch
-from torchrl_csirl.visualization import VideoError, write_video
-from torchrl_csirl.visualization.filmstrip import PANEL_PX, filmstrip_steps
-from torchrl_csirl.visualization.video import (
+from torchrl_csirl.analysis.visualization import VideoError, write_video
+from torchrl_csirl.analysis.visualization.filmstrip import PANEL_PX, filmstrip_steps
+from torchrl_csirl.analysis.visualization.video import (
     frame_stride,
     make_render_env,
     video_format_available,
 )
+from torchrl_csirl.launch.config import ConfigError
+from torchrl_csirl.launch.csirl import CSIRL_RECIPE
+from torchrl_csirl.modules import make_actor, save_policy
+from torchrl_csirl.scripts import watch
 
 RECIPES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "recipes")
 

@@ -23,7 +23,7 @@ import torch
 import yaml
 from record_runs import read_rounds
 
-from torchrl_csirl.diagnostics import critic_calibration
+from torchrl_csirl.analysis.diagnostics import critic_calibration
 
 
 def horizon_bonus(alpha: float, entropy: float, gamma: float) -> float:

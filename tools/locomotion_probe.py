@@ -27,8 +27,8 @@ from omegaconf import OmegaConf
 from policy_cli import roll_test_episodes
 from torchrl.envs.utils import ExplorationType
 
+from torchrl_csirl.analysis.diagnostics import discounted_returns
 from torchrl_csirl.data.shipped import load_expert_demonstrations
-from torchrl_csirl.diagnostics import discounted_returns
 from torchrl_csirl.launch.builders import load_experts
 from torchrl_csirl.launch.csirl import make_matching
 from torchrl_csirl.modules import load_policy, make_actor, make_input_features, make_qvalue
@@ -119,7 +119,7 @@ def plot_critic(path: str, title: str, q_expert: torch.Tensor, q_policy: torch.T
                 known: tuple[str, torch.Tensor] | None) -> str:
     """Two panels: ``Q`` along the expert's demonstration (mean and range over the critics, the return to go
     of the known reward beside it), and along the policy's episode; written as PNG."""
-    from torchrl_csirl.visualization._figure import new_figure, save_png
+    from torchrl_csirl.analysis.visualization._figure import new_figure, save_png
 
     fig = new_figure(1000, 360)
     fig.suptitle(title, fontsize=10)

@@ -23,7 +23,7 @@ import sys
 
 import torch
 
-from torchrl_csirl.diagnostics import discounted_returns, route_opening
+from torchrl_csirl.analysis.diagnostics import discounted_returns, route_opening
 from torchrl_csirl.launch.builders import load_experts
 from torchrl_csirl.launch.csirl import make_matching
 from torchrl_csirl.launch.recipes import load_config_for

@@ -23,8 +23,8 @@ import argparse
 import json
 import sys
 
+from torchrl_csirl.analysis.visualization import plot_method_curves
 from torchrl_csirl.sweep.results import eval_curve
-from torchrl_csirl.visualization import plot_method_curves
 
 
 def common_frames(runs: list[tuple[list[float], list[float]]]) -> tuple[list[float], list[list[float]]]:

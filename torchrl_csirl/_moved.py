@@ -45,6 +45,14 @@ MOVED: dict[str, str] = {
     "torchrl_csirl.benchmark": "torchrl_csirl.sweep",
     **{f"torchrl_csirl.benchmark.{m}": f"torchrl_csirl.sweep.{m}"
        for m in ("curves", "plan", "published", "report", "results", "runner")},
+    "torchrl_csirl.diagnostics": "torchrl_csirl.analysis.diagnostics",
+    **{f"torchrl_csirl.diagnostics.{m}": f"torchrl_csirl.analysis.diagnostics.{m}"
+       for m in ("calibration", "checks", "probe", "report")},
+    "torchrl_csirl.visualization": "torchrl_csirl.analysis.visualization",
+    **{f"torchrl_csirl.visualization.{m}": f"torchrl_csirl.analysis.visualization.{m}"
+       for m in ("_figure", "curves", "filmstrip", "health", "robotics", "scene", "video")},
+    "torchrl_csirl.launch.summaries": "torchrl_csirl.analysis.summaries",
+    "torchrl_csirl.launch.verdicts": "torchrl_csirl.analysis.verdicts",
 }
 
 

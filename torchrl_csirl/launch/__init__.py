@@ -20,8 +20,8 @@ an installed wheel) are thin calls into this layer. Its modules:
   (environments, collector), :mod:`~torchrl_csirl.launch.assembly` (buffer, logger, :class:`Run`, the trainer),
   :mod:`~torchrl_csirl.launch.lifecycle` (start, resume, train, :func:`run_recipe`),
   :mod:`~torchrl_csirl.launch.final` (the final test and summary).
-* :mod:`torchrl_csirl.launch.summaries`: finished runs' ``summary.json`` files, mean / std over
-  seeds; :mod:`torchrl_csirl.launch.verdicts`: the one rule for verdict words (Welch's test, Holm's correction,
+* :mod:`torchrl_csirl.analysis.summaries`: finished runs' ``summary.json`` files, mean / std over
+  seeds; :mod:`torchrl_csirl.analysis.verdicts`: the one rule for verdict words (Welch's test, Holm's correction,
   the minimum detectable difference, the seeds a difference needs).
 * :mod:`torchrl_csirl.launch.provenance`: a run's ``provenance.json`` (commit, dirty tree, package versions, CPU).
 * :mod:`torchrl_csirl.launch.processes`: a local sweep's cell processes (pid files; SIGTERM stops

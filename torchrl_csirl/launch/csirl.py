@@ -329,9 +329,9 @@ class CSIRLParts:
 # ---------------------------------------------------------------------------------------- finish
 def curriculum_plots(run: Run[CSIRLParts]) -> list[str]:
     """The subgoal curriculum with its uncertainty profiles, and the task with the selected subgoals: the driving
-    scene (:func:`~torchrl_csirl.visualization.render_curriculum`) or any other task's picture
-    (:func:`~torchrl_csirl.visualization.plot_robotics_curriculum`: the maze from above, or the matching features)."""
-    from torchrl_csirl.visualization import plot_robotics_curriculum, plot_subgoal_curriculum, render_curriculum
+    scene (:func:`~torchrl_csirl.analysis.visualization.render_curriculum`) or any other task's picture
+    (:func:`~torchrl_csirl.analysis.visualization.plot_robotics_curriculum`: the maze from above, or the matching features)."""
+    from torchrl_csirl.analysis.visualization import plot_robotics_curriculum, plot_subgoal_curriculum, render_curriculum
 
     curriculum, history = run.parts.curriculum, run.parts.selection.history
     picture = render_curriculum if run.spec.family == "driving" else plot_robotics_curriculum
@@ -358,10 +358,10 @@ def finish(run: Run[CSIRLParts]) -> dict[str, object]:
 
 def write_health(run: Run[CSIRLParts], episodes: int, metrics_dir: str | None = None,
                  out_dir: str | None = None, test: dict[str, object] | None = None) -> dict[str, object]:
-    """The run's health report (:mod:`torchrl_csirl.diagnostics`) in ``health.json`` / ``health.png`` of
+    """The run's health report (:mod:`torchrl_csirl.analysis.diagnostics`) in ``health.json`` / ``health.png`` of
     ``out_dir`` (default: the run's directory), one line naming the flagged checks; the summary's fields.
     ``test``: the final test's summary, where the run has one (the task's last word in the report)."""
-    from torchrl_csirl.diagnostics import health_report, write_health_report
+    from torchrl_csirl.analysis.diagnostics import health_report, write_health_report
 
     report = health_report(run, method_name(run.cfg), episodes=episodes, metrics_dir=metrics_dir, test=test)
     paths = write_health_report(report, out_dir)

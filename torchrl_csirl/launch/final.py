@@ -51,9 +51,9 @@ def final_summary(run: Run, method: str, title: str) -> dict[str, Any]:
     fields every recipe reports (the method adds its own). A run keeping its best policy
     (``run.keep_best``, :class:`~torchrl_csirl.trainers.KeepBestPolicy`) is tested and saved with
     those weights (``policy_from`` in the summary); its checkpoint keeps the last ones."""
+    from torchrl_csirl.analysis.visualization import plot_learning_curve
     from torchrl_csirl.launch.run import expert_accomplish_rate
     from torchrl_csirl.modules import save_policy
-    from torchrl_csirl.visualization import plot_learning_curve
 
     trainer, cfg = run.trainer, run.cfg
     run.checkpoint.save(trainer)

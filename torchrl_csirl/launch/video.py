@@ -13,7 +13,7 @@ def film_final_episode(run: Any) -> list[str]:
     """Films the final evaluation's first episode (seed ``eval.seed``, deterministic) with the run's
     policy, logs it and returns its path; a machine that cannot render or write it gets a warning
     line instead (the run's results are kept)."""
-    from torchrl_csirl.visualization.video import VideoError, film_test_episodes
+    from torchrl_csirl.analysis.visualization.video import VideoError, film_test_episodes
 
     run.mirror.sync()
     directory = os.path.join(run.run_dir, "videos")

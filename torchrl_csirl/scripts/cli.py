@@ -97,8 +97,8 @@ def _benchmark(argv: list[str]) -> None:
 
 
 def _watch(argv: list[str]) -> None:
+    from torchrl_csirl.analysis.visualization.video import VideoError
     from torchrl_csirl.launch.run import run_script
-    from torchrl_csirl.visualization.video import VideoError
 
     run_script(partial(_script("watch").main, argv), known_errors=(VideoError,))
 

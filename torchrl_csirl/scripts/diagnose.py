@@ -1,6 +1,6 @@
 """Why a run failed: ``python -m torchrl_csirl.scripts.diagnose <run dir> [--episodes 5]`` (``torchrl-csirl diagnose``).
 
-Writes the run's health report (:mod:`torchrl_csirl.diagnostics`) into its directory, ``health.json`` and
+Writes the run's health report (:mod:`torchrl_csirl.analysis.diagnostics`) into its directory, ``health.json`` and
 ``health.png``, and prints one line per check: ``FLAG`` (out of range, with what it means), ``ok``, or ``--``
 (the run gives too little to say). A CSIRL run is rebuilt from a copy of its configuration and last checkpoint
 (the run itself is not changed, nor resumed) and its networks probed: the critics against Monte Carlo
@@ -73,7 +73,7 @@ def diagnose(run_dir: str, episodes: int = 5) -> dict[str, object]:
     Raises:
         ConfigError: one line, for a folder that is not a run (no ``config.yaml``) or a CSIRL run without a checkpoint.
     """
-    from torchrl_csirl.diagnostics import (
+    from torchrl_csirl.analysis.diagnostics import (
         HealthReport,
         check_line,
         policy_entropy,

@@ -81,7 +81,7 @@ LEARNER_ORDER = tuple(m for m in (*METHOD_ORDER, *ABLATIONS) if m not in REFEREN
 def learning_curve_figures(runs: list[dict[str, Any]], out_dir: str) -> list[str]:
     """PNGs per scenario (``curve_kinds``): every trained method's evaluation curve (mean ± std over seeds),
     the reference rows as lines."""
-    from torchrl_csirl.visualization import plot_method_curves
+    from torchrl_csirl.analysis.visualization import plot_method_curves
 
     paths = []
     order = (*SCENARIO_ORDER, *return_task_order([r["scenario"] for r in runs]))

@@ -18,7 +18,7 @@ import csv
 from collections.abc import Callable
 from typing import Any
 
-from torchrl_csirl.launch.verdicts import ALPHA, BEYOND_NOISE, NO_DIFFERENCE, POWER
+from torchrl_csirl.analysis.verdicts import ALPHA, BEYOND_NOISE, NO_DIFFERENCE, POWER
 from torchrl_csirl.sweep.plan import (
     LOCOMOTION_ORDER,
     LOCOMOTION_TITLES,
@@ -92,7 +92,7 @@ def _cost(row: dict[str, Any] | None) -> str:
 
 def _difference(row: dict[str, Any] | None, fmt: str = "+.3f") -> str:
     """``+d (t x)`` against ``csirl``, in bold beyond seed noise (the verdict rule,
-    :mod:`torchrl_csirl.launch.verdicts`), else ``+d (t x; detectable m)`` with the minimum detectable difference;
+    :mod:`torchrl_csirl.analysis.verdicts`), else ``+d (t x; detectable m)`` with the minimum detectable difference;
     ``—`` without a comparison.
 
     Examples:

@@ -1,6 +1,6 @@
 """A sweep's finished runs and the table's rows: each run's ``summary.json`` read with its row's method,
 grouped by (method, scenario) into mean ± std over seeds, set against ``csirl`` (Welch's test and the verdict
-rule of :mod:`torchrl_csirl.launch.verdicts`, Holm's correction across one table's comparisons) and the
+rule of :mod:`torchrl_csirl.analysis.verdicts`, Holm's correction across one table's comparisons) and the
 paper's value (:mod:`torchrl_csirl.sweep.published`).
 
 The rows are plain dicts, the CSV's lines; :mod:`torchrl_csirl.sweep.report` writes them as Markdown.
@@ -18,8 +18,8 @@ import os
 from collections import defaultdict
 from typing import Any
 
-from torchrl_csirl.launch.summaries import find_summaries, mean_std
-from torchrl_csirl.launch.verdicts import compare_family
+from torchrl_csirl.analysis.summaries import find_summaries, mean_std
+from torchrl_csirl.analysis.verdicts import compare_family
 from torchrl_csirl.sweep.plan import (
     ABLATIONS,
     LOCOMOTION_ORDER,
@@ -158,7 +158,7 @@ def comparison_table(scenario: str) -> str:
 def add_comparison_to_csirl(rows: list[dict[str, Any]], groups: dict[tuple[str, str], list[dict]]) -> None:
     """Each row's difference from ``csirl`` on its scenario (in its :func:`score_key`: expert-normalised on the
     driving scenarios, the return on the robotics tasks), with Welch's test over seeds and the verdict rule
-    (:func:`~torchrl_csirl.launch.verdicts.compare_family`: Holm's correction across the comparisons of one
+    (:func:`~torchrl_csirl.analysis.verdicts.compare_family`: Holm's correction across the comparisons of one
     :func:`comparison_table`): ``vs_csirl`` (the difference), ``vs_csirl_t``, ``vs_csirl_p``, ``vs_csirl_p_holm``,
     ``vs_csirl_comparisons``, ``vs_csirl_detectable`` (the minimum detectable difference), ``vs_csirl_beyond_noise``
     and ``vs_csirl_verdict``; None without a comparison (``csirl`` itself, the reference rows ``expert`` and

@@ -41,7 +41,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
-from torchrl_csirl.launch.summaries import mean_std
+from torchrl_csirl.analysis.summaries import mean_std
 
 __all__ = [
     "ALPHA",

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from torchrl_csirl.visualization.filmstrip import caption_steps, filmstrip_steps, plot_filmstrip
+from torchrl_csirl.analysis.visualization.filmstrip import caption_steps, filmstrip_steps, plot_filmstrip
 
 __all__ = [
     "VIDEO_FORMATS",
@@ -285,7 +285,7 @@ def film_test_episodes(policy: Any, task: str, directory: str | os.PathLike, *, 
     Episode ``i`` is seeded with ``seed + i``; files are ``<prefix>-<i>.<fmt>``, played in real time
     (at most :data:`MAX_FPS` pictures a second: faster tasks keep every k-th step), or, with
     ``filmstrip=N``, ``<prefix>-<i>.png``: N pictures from the reset to the episode's end in one row
-    (:mod:`~torchrl_csirl.visualization.filmstrip`).
+    (:mod:`~torchrl_csirl.analysis.visualization.filmstrip`).
 
     Args:
         policy: the actor (e.g. :func:`~torchrl_csirl.modules.load_policy`).

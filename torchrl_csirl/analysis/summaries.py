@@ -1,6 +1,6 @@
 """Run summaries across seeds: find a sweep's ``summary.json`` files and their mean / std. Shared by
 ``recipes/benchmark.py`` (its report) and ``tools/summarize_runs.py``; the tests between two seed sets and their
-verdict words are :mod:`torchrl_csirl.launch.verdicts`'.
+verdict words are :mod:`torchrl_csirl.analysis.verdicts`'.
 
 Examples:
     >>> mean_std([0.8, 1.0])["mean"]

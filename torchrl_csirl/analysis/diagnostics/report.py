@@ -1,8 +1,8 @@
-"""A run's health report: every check of :mod:`~torchrl_csirl.diagnostics.checks` on one run, written as
+"""A run's health report: every check of :mod:`~torchrl_csirl.analysis.diagnostics.checks` on one run, written as
 ``health.json`` and ``health.png`` in its directory.
 
 :func:`health_report` reads a run's ``metrics.jsonl`` and, for a CSIRL run, probes its networks
-(:func:`~torchrl_csirl.diagnostics.probe.probe_learner`); :func:`write_health_report` writes the two files and
+(:func:`~torchrl_csirl.analysis.diagnostics.probe.probe_learner`); :func:`write_health_report` writes the two files and
 returns the report. CSIRL writes it at the end of every run; ``torchrl-csirl diagnose <run dir>``
 (:mod:`torchrl_csirl.scripts.diagnose`) writes it for a finished or stopped run from its last checkpoint.
 """
@@ -13,7 +13,7 @@ import os
 from dataclasses import dataclass, field
 from typing import Any
 
-from torchrl_csirl.diagnostics.checks import (
+from torchrl_csirl.analysis.diagnostics.checks import (
     HealthCheck,
     action_saturation,
     critic_calibration,
@@ -30,7 +30,7 @@ from torchrl_csirl.diagnostics.checks import (
     warm_start_kept,
     where_episodes_end,
 )
-from torchrl_csirl.diagnostics.probe import LearnerProbe, probe_learner
+from torchrl_csirl.analysis.diagnostics.probe import LearnerProbe, probe_learner
 
 __all__ = ["HEALTH_FILE", "HEALTH_PICTURE", "HealthReport", "check_line", "health_report", "read_metrics", "write_health_report"]
 
@@ -177,7 +177,7 @@ def health_report(run: Any, method: str, *, episodes: int = 5, metrics_dir: str 
 
 def write_health_report(report: HealthReport, run_dir: str | None = None) -> dict[str, str]:
     """``health.json`` and ``health.png`` in ``run_dir`` (default: the report's); returns their paths."""
-    from torchrl_csirl.visualization import plot_health
+    from torchrl_csirl.analysis.visualization import plot_health
 
     run_dir = run_dir or report.run_dir
     path = os.path.join(run_dir, HEALTH_FILE)

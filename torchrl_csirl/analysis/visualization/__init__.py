@@ -5,7 +5,7 @@ state, the user's backend is left alone), writes a PNG and returns its :class:`p
 
 * :func:`plot_learning_curve`: evaluation accomplish / success rate vs environment frames.
 * :func:`plot_subgoal_curriculum`: subgoal index vs frames and the critics' uncertainty profiles.
-* :func:`plot_health`: a run's health report in four panels (:mod:`torchrl_csirl.diagnostics`).
+* :func:`plot_health`: a run's health report in four panels (:mod:`torchrl_csirl.analysis.diagnostics`).
 * :func:`render_curriculum`: the highway-env scene with the curriculum trajectory and subgoals.
 * :func:`plot_robotics_curriculum`: a robotics task's curriculum (the maze from above, or the
   matching features along the trajectory) with the subgoals.
@@ -14,12 +14,12 @@ state, the user's backend is left alone), writes a PNG and returns its :class:`p
 """
 from __future__ import annotations
 
-from torchrl_csirl.visualization.curves import plot_learning_curve, plot_method_curves, plot_subgoal_curriculum
-from torchrl_csirl.visualization.filmstrip import plot_filmstrip
-from torchrl_csirl.visualization.health import plot_health
-from torchrl_csirl.visualization.robotics import plot_robotics_curriculum
-from torchrl_csirl.visualization.scene import render_curriculum
-from torchrl_csirl.visualization.video import VIDEO_FORMATS, VideoError, film_test_episodes, write_video
+from torchrl_csirl.analysis.visualization.curves import plot_learning_curve, plot_method_curves, plot_subgoal_curriculum
+from torchrl_csirl.analysis.visualization.filmstrip import plot_filmstrip
+from torchrl_csirl.analysis.visualization.health import plot_health
+from torchrl_csirl.analysis.visualization.robotics import plot_robotics_curriculum
+from torchrl_csirl.analysis.visualization.scene import render_curriculum
+from torchrl_csirl.analysis.visualization.video import VIDEO_FORMATS, VideoError, film_test_episodes, write_video
 
 __all__ = ["VIDEO_FORMATS", "VideoError", "film_test_episodes", "plot_filmstrip", "plot_health", "plot_learning_curve",
            "plot_method_curves", "plot_robotics_curriculum", "plot_subgoal_curriculum", "render_curriculum", "write_video"]

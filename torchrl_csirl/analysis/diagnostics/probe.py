@@ -44,7 +44,7 @@ class LearnerProbe:
             (a goal-conditioned matching reward), else empty.
         goal_gaps: per episode (a goal-conditioned matching reward), the distance from its goal to the goal of the
             demonstration it selects, over the curriculum trajectory's length along its matching features (the
-            share :func:`~torchrl_csirl.diagnostics.checks.demonstrations_share_a_goal` reads); else empty.
+            share :func:`~torchrl_csirl.analysis.diagnostics.checks.demonstrations_share_a_goal` reads); else empty.
         actions: ``[T, A]`` the policy's actions.
         goal_conditioned: the matching reward follows the demonstration of each episode's goal
             (:class:`~torchrl_csirl.transforms.GoalConditionedMatchingReward`), not the first one only.

@@ -1,4 +1,4 @@
-"""The health report's calibration, frozen: every threshold of :mod:`~torchrl_csirl.diagnostics.checks` (and the
+"""The health report's calibration, frozen: every threshold of :mod:`~torchrl_csirl.analysis.diagnostics.checks` (and the
 probe's measuring settings), its value, and the recorded runs (``docs/runs/<group>/<cell>``) that set it.
 
 A threshold chosen on the runs it then diagnoses says little about runs it was not tuned on: this table
@@ -8,7 +8,7 @@ set a value (runs without a record, planted inputs) is in ``note``. The own-task
 :func:`calibration_table` (``docs/own-task.md``, the calibration).
 
 Examples:
-    >>> from torchrl_csirl.diagnostics.calibration import CALIBRATION, frozen_values
+    >>> from torchrl_csirl.analysis.diagnostics.calibration import CALIBRATION, frozen_values
     >>> frozen_values()["OFF_DEMONSTRATION_SD"], len(CALIBRATION["OFF_DEMONSTRATION_SD"].runs)
     (5.0, 9)
 """
@@ -17,7 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from torchrl_csirl.diagnostics import checks, probe
+from torchrl_csirl.analysis.diagnostics import checks, probe
 
 __all__ = ["CALIBRATION", "Threshold", "calibration_runs", "calibration_table", "current_values", "frozen_values"]
 

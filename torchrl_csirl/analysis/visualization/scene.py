@@ -16,8 +16,8 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from torchrl_csirl.analysis.visualization._figure import as_int, new_figure, save_png
 from torchrl_csirl.tasks.catalog import ScenarioSpec, make_gym_env, resolve_scenario
-from torchrl_csirl.visualization._figure import as_int, new_figure, save_png
 
 __all__ = ["ScenePicture", "ego_positions", "render_curriculum", "render_scene", "world_to_pixel"]
 

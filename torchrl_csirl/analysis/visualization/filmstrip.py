@@ -6,7 +6,7 @@ from standing still).
 * :func:`caption_steps`: ``"step k"`` captions, with the torso's x where the task's observation has one.
 * :func:`plot_filmstrip`: the pictures in one row, written as PNG.
 
-:func:`~torchrl_csirl.visualization.video.film_test_episodes` (``filmstrip=N``) and
+:func:`~torchrl_csirl.analysis.visualization.video.film_test_episodes` (``filmstrip=N``) and
 ``recipes/watch.py --filmstrip N`` film the test episodes with these.
 """
 from __future__ import annotations
@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from torchrl_csirl.visualization._figure import new_figure, save_png
+from torchrl_csirl.analysis.visualization._figure import new_figure, save_png
 
 __all__ = ["caption_steps", "filmstrip_steps", "plot_filmstrip"]
 

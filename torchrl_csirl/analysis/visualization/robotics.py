@@ -18,8 +18,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from torchrl_csirl.analysis.visualization._figure import as_int, new_figure, save_png
 from torchrl_csirl.tasks.spec import TaskSpec
-from torchrl_csirl.visualization._figure import as_int, new_figure, save_png
 
 __all__ = ["plot_robotics_curriculum"]
 

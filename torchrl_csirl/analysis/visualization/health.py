@@ -16,7 +16,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from torchrl_csirl.visualization._figure import empty_message, new_figure, save_png
+from torchrl_csirl.analysis.visualization._figure import empty_message, new_figure, save_png
 
 __all__ = ["plot_health"]
 
@@ -112,11 +112,11 @@ def _ends_panel(ax, report) -> None:
 
 
 def plot_health(report, path: str | os.PathLike) -> Path:
-    """The four panels of a :class:`~torchrl_csirl.diagnostics.HealthReport`, its flagged checks in the title.
+    """The four panels of a :class:`~torchrl_csirl.analysis.diagnostics.HealthReport`, its flagged checks in the title.
 
     Examples:
         >>> import tempfile, pathlib
-        >>> from torchrl_csirl.diagnostics import HealthReport
+        >>> from torchrl_csirl.analysis.diagnostics import HealthReport
         >>> out = pathlib.Path(tempfile.mkdtemp()) / "health.png"
         >>> plot_health(HealthReport("runs/x", "merge", "csirl"), out) == out
         True

@@ -10,7 +10,7 @@ from matplotlib import cm, colormaps
 from matplotlib.colors import Normalize
 from matplotlib.ticker import EngFormatter, MaxNLocator
 
-from torchrl_csirl.visualization._figure import (
+from torchrl_csirl.analysis.visualization._figure import (
     as_int,
     empty_message,
     finite_array,
