@@ -8,7 +8,7 @@ each, batches alternating between the two so that both see the same machine load
 
 Two ways to use worker processes:
 
-* default, what the recipe does (``torchrl_csirl.launch.builders.make_collector``): TorchRL's
+* default, what the recipe does (``torchrl_csirl.run.builders.make_collector``): TorchRL's
   multi-process synchronous collector, ``Collector([env_fn] * W, policy, num_collectors=W,
   sync=True)``. Every worker holds its environments *and a copy of the policy* (weights in
   shared memory) and collects its share of the batch on its own; the main process only

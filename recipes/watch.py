@@ -4,7 +4,7 @@ Thin by design: the script's body is :mod:`torchrl_csirl.scripts.watch`, so an i
 the same thing as ``python -m torchrl_csirl.scripts.watch``; ``--help`` says what it accepts.
 """
 from torchrl_csirl.analysis.visualization.video import VideoError
-from torchrl_csirl.launch.run import run_script
+from torchrl_csirl.run.run import run_script
 from torchrl_csirl.scripts.watch import main
 
 if __name__ == "__main__":

@@ -27,8 +27,8 @@ from torchrl_csirl.analysis.diagnostics import (
     warm_start_kept,
     where_episodes_end,
 )
-from torchrl_csirl.launch import csirl
-from torchrl_csirl.launch.builders import load_experts
+from torchrl_csirl.methods import csirl
+from torchrl_csirl.run.builders import load_experts
 from torchrl_csirl.scripts import csirl_highway, diagnose
 from torchrl_csirl.tasks import resolve_scenario
 
@@ -241,7 +241,7 @@ def test_a_run_writes_its_report_and_diagnose_rewrites_it_without_touching_the_r
 
 
 def test_diagnose_refuses_a_folder_that_is_not_a_run(tmp_path):
-    from torchrl_csirl.launch.config import ConfigError
+    from torchrl_csirl.run.config import ConfigError
 
     with pytest.raises(ConfigError, match="not a run directory"):
         diagnose.diagnose(str(tmp_path))

@@ -23,6 +23,11 @@ CASES = [
     ("torchrl_csirl.diagnostics", "torchrl_csirl.analysis.diagnostics", "health_report"),
     ("torchrl_csirl.visualization.curves", "torchrl_csirl.analysis.visualization.curves", "plot_learning_curve"),
     ("torchrl_csirl.launch.verdicts", "torchrl_csirl.analysis.verdicts", "compare_family"),
+    ("torchrl_csirl.launch", "torchrl_csirl.run", "recipe_for"),
+    ("torchrl_csirl.launch.config", "torchrl_csirl.run.config", "option"),
+    ("torchrl_csirl.launch.csirl", "torchrl_csirl.methods.csirl", "CSIRLTaskConfig"),
+    ("torchrl_csirl.launch.imitation", "torchrl_csirl.methods.baselines", "IMITATION_RECIPE"),
+    ("torchrl_csirl.launch.robotics", "torchrl_csirl.run.task_schemas", "schema_family"),
 ]
 
 
@@ -52,11 +57,14 @@ def test_the_old_import_forms_work():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", FutureWarning)
         import torchrl_csirl.envs.driving as m
+        import torchrl_csirl.run.config
         import torchrl_csirl.tasks
         from torchrl_csirl.envs.spec import TaskSpec
+        from torchrl_csirl.launch.config import ConfigError
         from torchrl_csirl.tasks import driving
     assert m.__name__ == "torchrl_csirl.tasks.driving.driving"
     assert TaskSpec is torchrl_csirl.tasks.TaskSpec
+    assert ConfigError is torchrl_csirl.run.config.ConfigError
     assert driving.__name__ == "torchrl_csirl.tasks.driving"  # the old submodule shadows nothing of the new package
 
 

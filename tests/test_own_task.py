@@ -12,9 +12,9 @@ import pytest
 import torch
 
 from torchrl_csirl.data import record_demonstrations
-from torchrl_csirl.launch import ConfigError, ExpertDataError
-from torchrl_csirl.launch.csirl import CSIRL_RECIPE
-from torchrl_csirl.launch.robotics import prepare_task
+from torchrl_csirl.methods.csirl import CSIRL_RECIPE
+from torchrl_csirl.run import ConfigError, ExpertDataError
+from torchrl_csirl.run.task_schemas import prepare_task
 from torchrl_csirl.scripts import csirl_highway, csirl_robotics, imitation_robotics
 from torchrl_csirl.tasks import make_gymnasium_task, register_task, resolve_scenario
 
@@ -232,7 +232,7 @@ def test_train_expert_trains_sac_on_a_gymnasium_id_and_writes_its_demonstrations
     (["env.task=hopper"], "CSIRLTaskConfig"), (["env.task=roundabout"], "CSIRLHighwayConfig"), ([], "CSIRLHighwayConfig"),
 ])
 def test_the_csirl_script_configures_every_task_with_its_familys_schema(overrides, schema):
-    from torchrl_csirl.launch import csirl
+    from torchrl_csirl.methods import csirl
 
     cfg = csirl.load_config(overrides)
     assert ("gym_id" in cfg.env) == (schema == "CSIRLTaskConfig")

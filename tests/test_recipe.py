@@ -13,7 +13,8 @@ import pytest
 import torch
 from omegaconf import OmegaConf
 
-from torchrl_csirl.launch import assembly, builders, config, csirl, run
+from torchrl_csirl.methods import csirl
+from torchrl_csirl.run import assembly, builders, config, run
 from torchrl_csirl.trainers import (
     TrainingDivergedError,
     load_checkpoint,
@@ -769,7 +770,7 @@ def test_help_lists_every_key_with_what_it_accepts():
 
 
 def test_method_registry_reads_each_method_with_its_recipe_schema():
-    from torchrl_csirl.launch import known_methods, load_config_for
+    from torchrl_csirl.run import known_methods, load_config_for
 
     assert {"csirl", "csirl-b"} <= set(known_methods())
     cfg = load_config_for("csirl-b")(["preset=paper"])
@@ -780,7 +781,7 @@ def test_method_registry_reads_each_method_with_its_recipe_schema():
 def test_main_threads_hold_from_the_runs_first_step(tmp_path):
     """``collector.main_threads`` reaches the work before the collector starts (an actor's warm start): two runs
     sharing two cores with one thread each, but a warm start on torch's default threads, spin in OpenMP."""
-    from torchrl_csirl.launch import lifecycle
+    from torchrl_csirl.run import lifecycle
 
     cfg = csirl.load_config(["collector.main_threads=1", f"logger.output_dir={tmp_path}", "logger.exp_name=threads"])
     seen = []

@@ -1,5 +1,5 @@
 """tools/: the analysis and probe scripts run as scripts from their own folder (their imports of the
-run layer (``torchrl_csirl.launch``) resolve from any working directory)."""
+run layer (``torchrl_csirl.run``) resolve from any working directory)."""
 from __future__ import annotations
 
 import os

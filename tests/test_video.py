@@ -19,9 +19,9 @@ from torchrl_csirl.analysis.visualization.video import (
     make_render_env,
     video_format_available,
 )
-from torchrl_csirl.launch.config import ConfigError
-from torchrl_csirl.launch.csirl import CSIRL_RECIPE
+from torchrl_csirl.methods.csirl import CSIRL_RECIPE
 from torchrl_csirl.modules import make_actor, save_policy
+from torchrl_csirl.run.config import ConfigError
 from torchrl_csirl.scripts import watch
 
 RECIPES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "recipes")
@@ -77,7 +77,7 @@ def _pendulum_without_render_mode(**overrides):
 def test_an_env_without_render_mode_is_named_as_the_cause_and_its_run_has_videos_off(tmp_path, capsys):
     from types import SimpleNamespace
 
-    from torchrl_csirl.launch.video import film_final_episode
+    from torchrl_csirl.run.video import film_final_episode
     from torchrl_csirl.tasks import TaskSpec, register_task
 
     spec = TaskSpec(name="pendulum-no-render", obs_dim=3, action_dim=1, max_steps=200, finish_position=None,

@@ -43,8 +43,8 @@ from omegaconf import OmegaConf
 
 from torchrl_csirl.analysis.summaries import find_summaries, mean_std
 from torchrl_csirl.analysis.verdicts import compare_family, compare_seeds, describe
-from torchrl_csirl.launch.config import flatten_config
-from torchrl_csirl.launch.provenance import code_fields, machine_fields, read_provenance
+from torchrl_csirl.run.config import flatten_config
+from torchrl_csirl.run.provenance import code_fields, machine_fields, read_provenance
 
 #: what is compared by default: the paper's metric, normalised, and the run's cost
 METRICS = ("normalized_accomplish_rate", "success_rate", "crash_rate", "total_wall_s")
@@ -127,7 +127,7 @@ def markdown(rows: list[dict], labels: tuple[str, str]) -> str:
 # ---------------------------------------------------------------------------------------- what differs
 def run_fields(run_dir: str, ignore: tuple[str, ...] = ()) -> dict[str, dict[str, Any] | None]:
     """A run's ``configuration`` (flat ``config.yaml``, :data:`NOT_A_CHANGE` and ``ignore`` left out), ``code``
-    (:func:`~torchrl_csirl.launch.provenance.code_fields`) and ``machine``; None where the run has no such file."""
+    (:func:`~torchrl_csirl.run.provenance.code_fields`) and ``machine``; None where the run has no such file."""
     skip = (*NOT_A_CHANGE, *ignore)
     config_path = os.path.join(run_dir, "config.yaml")
     configuration = None

@@ -29,9 +29,9 @@ from torchrl.envs.utils import ExplorationType
 
 from torchrl_csirl.analysis.diagnostics import discounted_returns
 from torchrl_csirl.data.shipped import load_expert_demonstrations
-from torchrl_csirl.launch.builders import load_experts
-from torchrl_csirl.launch.csirl import make_matching
+from torchrl_csirl.methods.csirl import make_matching
 from torchrl_csirl.modules import load_policy, make_actor, make_input_features, make_qvalue
+from torchrl_csirl.run.builders import load_experts
 from torchrl_csirl.tasks import resolve_scenario
 
 ACTOR_PREFIXES = ("actor_network_params.", "actor_network.")

@@ -28,8 +28,8 @@ from locomotion_probe import policy_episodes  # noqa: E402
 from policy_cli import first_crash_step  # noqa: E402
 
 from torchrl_csirl.analysis.diagnostics import check_line, flat_observations, states_off_the_demonstrations  # noqa: E402
-from torchrl_csirl.launch.builders import load_experts  # noqa: E402
-from torchrl_csirl.launch.robotics import prepare_task  # noqa: E402
+from torchrl_csirl.run.builders import load_experts  # noqa: E402
+from torchrl_csirl.run.task_schemas import prepare_task  # noqa: E402
 from torchrl_csirl.tasks import resolve_scenario  # noqa: E402
 
 

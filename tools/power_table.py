@@ -22,7 +22,7 @@ import sys
 from dataclasses import dataclass
 
 from torchrl_csirl.analysis.verdicts import compare_seeds, detectable_difference, seeds_needed
-from torchrl_csirl.launch.provenance import read_provenance
+from torchrl_csirl.run.provenance import read_provenance
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 #: the difference of interest, a share of the expert's score

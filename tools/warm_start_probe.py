@@ -23,10 +23,10 @@ import tempfile
 import torch
 from robotics_outcomes import OUTCOMES, classify_episodes, print_table, summarize
 
-from torchrl_csirl.launch.builders import load_experts
-from torchrl_csirl.launch.csirl import make_loss_modules, warm_start_actor
-from torchrl_csirl.launch.recipes import load_config_for
+from torchrl_csirl.methods.csirl import make_loss_modules, warm_start_actor
 from torchrl_csirl.modules import load_policy, save_policy
+from torchrl_csirl.run.builders import load_experts
+from torchrl_csirl.run.recipes import load_config_for
 from torchrl_csirl.tasks import resolve_scenario
 
 

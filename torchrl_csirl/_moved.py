@@ -51,6 +51,15 @@ MOVED: dict[str, str] = {
     "torchrl_csirl.visualization": "torchrl_csirl.analysis.visualization",
     **{f"torchrl_csirl.visualization.{m}": f"torchrl_csirl.analysis.visualization.{m}"
        for m in ("_figure", "curves", "filmstrip", "health", "robotics", "scene", "video")},
+    "torchrl_csirl.launch": "torchrl_csirl.run",
+    **{f"torchrl_csirl.launch.{m}": f"torchrl_csirl.run.{m}"
+       for m in ("config", "recipes", "run", "lifecycle", "assembly", "builders", "collection", "experts", "final",
+                 "processes", "provenance", "video")},
+    "torchrl_csirl.launch.robotics": "torchrl_csirl.run.task_schemas",
+    "torchrl_csirl.launch.csirl": "torchrl_csirl.methods.csirl",
+    "torchrl_csirl.launch.imitation": "torchrl_csirl.methods.baselines",
+    "torchrl_csirl.launch.expert_training": "torchrl_csirl.methods.expert",
+    "torchrl_csirl.launch.ant_expert": "torchrl_csirl.methods.ant_expert",
     "torchrl_csirl.launch.summaries": "torchrl_csirl.analysis.summaries",
     "torchrl_csirl.launch.verdicts": "torchrl_csirl.analysis.verdicts",
 }

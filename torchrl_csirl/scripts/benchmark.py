@@ -20,7 +20,7 @@ existing Ray cluster (``ray start --head`` on it first); ``--max-concurrent`` an
 ``--cpus-per-trial`` size the trials. Ctrl-C or SIGTERM to the sweep (its pid: ``<output-dir>/logs/sweep.pid``)
 stops it without losing work: each running cell gets SIGTERM (it checkpoints at its next batch boundary) and the
 sweep exits (status 130, 143) once they have, naming the command that continues it: the same one (local Ray, Linux:
-:mod:`torchrl_csirl.launch.processes`).
+:mod:`torchrl_csirl.run.processes`).
 
 Write the table (method rows x scenario columns, expert-normalised accomplish rate mean +- std over
 seeds, the paper's Table I beside it; on the robotics tasks the test return, the paper's metric
@@ -39,7 +39,7 @@ import json
 import os
 import sys
 
-from torchrl_csirl.launch.processes import SweepBusyError
+from torchrl_csirl.run.processes import SweepBusyError
 from torchrl_csirl.sweep.curves import LEARNER_ORDER, curve_kinds, evaluation_schedule, learning_curve_figures
 from torchrl_csirl.sweep.plan import (
     ABLATIONS,

@@ -63,9 +63,9 @@ def _script(name: str) -> Any:
 
 
 def _train(argv: list[str]) -> None:
-    from torchrl_csirl.launch.config import ConfigError
-    from torchrl_csirl.launch.recipes import known_methods, recipe_for
-    from torchrl_csirl.launch.run import run_script
+    from torchrl_csirl.run.config import ConfigError
+    from torchrl_csirl.run.recipes import known_methods, recipe_for
+    from torchrl_csirl.run.run import run_script
 
     method, rest = split_method(argv)
     try:
@@ -82,7 +82,7 @@ def _raise(error: BaseException) -> None:
 
 
 def _expert(argv: list[str]) -> None:
-    from torchrl_csirl.launch.run import run_script
+    from torchrl_csirl.run.run import run_script
 
     if argv[:1] == ["demos"]:
         _script("generate_experts").main(argv[1:])
@@ -98,13 +98,13 @@ def _benchmark(argv: list[str]) -> None:
 
 def _watch(argv: list[str]) -> None:
     from torchrl_csirl.analysis.visualization.video import VideoError
-    from torchrl_csirl.launch.run import run_script
+    from torchrl_csirl.run.run import run_script
 
     run_script(partial(_script("watch").main, argv), known_errors=(VideoError,))
 
 
 def _diagnose(argv: list[str]) -> None:
-    from torchrl_csirl.launch.run import run_script
+    from torchrl_csirl.run.run import run_script
 
     run_script(partial(_script("diagnose").main, argv))
 

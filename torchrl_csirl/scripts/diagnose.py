@@ -20,8 +20,8 @@ import tempfile
 
 from omegaconf import OmegaConf
 
-from torchrl_csirl.launch.config import ConfigError
-from torchrl_csirl.launch.run import run_script
+from torchrl_csirl.run.config import ConfigError
+from torchrl_csirl.run.run import run_script
 
 __all__ = ["diagnose", "main"]
 
@@ -55,8 +55,8 @@ def _final_test(run_dir: str) -> dict | None:
 
 def _rebuilt(run_dir: str, workdir: str):
     """The CSIRL run rebuilt from a copy of its configuration and last checkpoint (one in-process collector)."""
-    from torchrl_csirl.launch.csirl import CSIRL_RECIPE
-    from torchrl_csirl.launch.lifecycle import resume_run
+    from torchrl_csirl.methods.csirl import CSIRL_RECIPE
+    from torchrl_csirl.run.lifecycle import resume_run
 
     copy = os.path.join(workdir, "run")
     os.makedirs(copy)
@@ -97,7 +97,7 @@ def diagnose(run_dir: str, episodes: int = 5) -> dict[str, object]:
         return report.as_dict() | {"lines": report.lines()}
     if not os.path.isfile(os.path.join(run_dir, "checkpoints", "last", "state.pt")):
         raise ConfigError(f"diagnose {run_dir}: no checkpoint to probe (checkpoints/last/state.pt)")
-    from torchrl_csirl.launch.csirl import write_health
+    from torchrl_csirl.methods.csirl import write_health
 
     with tempfile.TemporaryDirectory() as workdir:
         run = _rebuilt(run_dir, workdir)

@@ -23,8 +23,8 @@ from torchrl_csirl.analysis.visualization.video import (
     VideoError,
     default_video_format,
 )
-from torchrl_csirl.launch.config import ConfigError
-from torchrl_csirl.launch.run import run_script
+from torchrl_csirl.run.config import ConfigError
+from torchrl_csirl.run.run import run_script
 
 __all__ = ["main", "read_run"]
 

@@ -15,7 +15,7 @@ from typing import Any
 
 from omegaconf import OmegaConf
 
-from torchrl_csirl.launch.config import EvalConfig
+from torchrl_csirl.run.config import EvalConfig
 from torchrl_csirl.sweep.plan import (
     ABLATIONS,
     LOCOMOTION_ORDER,

@@ -3,7 +3,7 @@
 The table's rows and columns (:data:`METHOD_ORDER`, :data:`SCENARIO_ORDER`, :data:`ROBOTICS_ORDER`,
 :data:`LOCOMOTION_ORDER`), every cell's budget (:data:`TABLE_BUDGETS`) and settings (:data:`TASK_OVERRIDES`),
 which recipe runs a method on a task (:func:`recipe_of`) and the cells of a sweep (:func:`plan_cells`). Method
-and task names come from their registries (:data:`torchrl_csirl.launch.imitation.METHODS`,
+and task names come from their registries (:data:`torchrl_csirl.methods.baselines.METHODS`,
 :data:`torchrl_csirl.tasks.TASKS`); running the cells is :mod:`torchrl_csirl.sweep.runner`'s.
 
 Examples:
@@ -16,7 +16,7 @@ import os
 import sys
 from dataclasses import dataclass
 
-from torchrl_csirl.launch.imitation import METHODS, REFERENCE_METHODS
+from torchrl_csirl.methods.baselines import METHODS, REFERENCE_METHODS
 from torchrl_csirl.sweep.published import PAPER_TABLE
 from torchrl_csirl.tasks import LOCOMOTION_TASKS, TASKS, import_task_module, resolve_scenario, task_names
 

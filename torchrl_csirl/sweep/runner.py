@@ -1,6 +1,6 @@
 """Running a sweep's cells: each one its recipe in a subprocess, as a Ray Tune trial (local Ray by default, or
 an existing cluster), stopped without losing work on SIGTERM or Ctrl-C (local Ray, Linux:
-:mod:`torchrl_csirl.launch.processes`).
+:mod:`torchrl_csirl.run.processes`).
 
 The cells come from :func:`torchrl_csirl.sweep.plan.plan_cells`; the trial workers import
 :func:`run_cell` from this module.
@@ -17,8 +17,8 @@ import os
 import shlex
 from typing import Any
 
-from torchrl_csirl.launch.processes import StopCellsOnSigterm, run_cell_process, tune_sigint_handler_off
-from torchrl_csirl.launch.run import running_command
+from torchrl_csirl.run.processes import StopCellsOnSigterm, run_cell_process, tune_sigint_handler_off
+from torchrl_csirl.run.run import running_command
 from torchrl_csirl.sweep.plan import Cell
 
 __all__ = ["run_cell", "run_sweep", "sweep_command"]

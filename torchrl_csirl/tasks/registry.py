@@ -1,6 +1,6 @@
 """Your own task, by name: :func:`register_task` adds a :class:`~torchrl_csirl.tasks.TaskSpec` and the
 function that builds its TorchRL environment to :data:`~torchrl_csirl.tasks.TASKS`, so that
-:func:`~torchrl_csirl.tasks.make_env`, the run layer (:mod:`torchrl_csirl.launch`), every script and
+:func:`~torchrl_csirl.tasks.make_env`, the run layer (:mod:`torchrl_csirl.run`), every script and
 the benchmark take it by name, as they take ``"merge"``.
 
 Worker processes (collectors, ``ParallelEnv``) are started with the spawn method and do not see

@@ -149,8 +149,8 @@ def _probe_checks(probe: LearnerProbe, expert_fraction: float, names: list[str] 
 
 def health_report(run: Any, method: str, *, episodes: int = 5, metrics_dir: str | None = None,
                   test: dict[str, Any] | None = None) -> HealthReport:
-    """The health report of a built CSIRL run (:class:`~torchrl_csirl.launch.assembly.Run` with
-    :class:`~torchrl_csirl.launch.csirl.CSIRLParts`), from its metrics and its networks as they are now.
+    """The health report of a built CSIRL run (:class:`~torchrl_csirl.run.assembly.Run` with
+    :class:`~torchrl_csirl.methods.csirl.CSIRLParts`), from its metrics and its networks as they are now.
 
     Args:
         run: the run.

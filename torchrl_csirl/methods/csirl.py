@@ -2,10 +2,10 @@
 schemas, presets, checks, trainer, finish) and its builders.
 
 The pieces every script shares (environments, collector, buffers, logging, evaluation,
-checkpoints, device, run directory, summary) live in :mod:`torchrl_csirl.launch.builders`' modules; this module
+checkpoints, device, run directory, summary) live in :mod:`torchrl_csirl.run.builders`' modules; this module
 adds the ``csirl`` section of the configuration and builds the ensemble-SAC learner, the reward network,
 the meta-gradient loss, the subgoal curriculum and the matching reward, then hands them to
-:func:`~torchrl_csirl.launch.assembly.assemble_trainer`. A driving scene is configured by
+:func:`~torchrl_csirl.run.assembly.assemble_trainer`. A driving scene is configured by
 :class:`CSIRLHighwayConfig`, any other task by :class:`CSIRLTaskConfig` (its family decides).
 
 Examples:
@@ -31,9 +31,11 @@ from torchrl.objectives import BCLoss
 from torchrl_csirl.curriculum import SubgoalCurriculum
 from torchrl_csirl.data import DemonstrationMixer, ExpertDemonstrations
 from torchrl_csirl.hyperparameters import CSIRLHyperparameters
-from torchrl_csirl.launch.assembly import Run, assemble_trainer, make_online_buffer, model_input_features
-from torchrl_csirl.launch.collection import check_collector_config
-from torchrl_csirl.launch.config import (
+from torchrl_csirl.modules import LearnerPrecision, PrecisionUnsupported, expert_reference_states
+from torchrl_csirl.objectives import ActorBehaviourCloning, CSIRLLearner, make_csirl_learner, pretrain_actor
+from torchrl_csirl.run.assembly import Run, assemble_trainer, make_online_buffer, model_input_features
+from torchrl_csirl.run.collection import check_collector_config
+from torchrl_csirl.run.config import (
     DEVICES,
     CheckpointConfig,
     CollectorConfig,
@@ -47,13 +49,11 @@ from torchrl_csirl.launch.config import (
     ReplayBufferConfig,
     option,
 )
-from torchrl_csirl.launch.experts import load_experts
-from torchrl_csirl.launch.final import final_summary
-from torchrl_csirl.launch.recipes import Recipe, register_recipe
-from torchrl_csirl.launch.robotics import RoboticsExpertConfig, RoboticsSections
-from torchrl_csirl.launch.run import ExpertDataError, resolve_device
-from torchrl_csirl.modules import LearnerPrecision, PrecisionUnsupported, expert_reference_states
-from torchrl_csirl.objectives import ActorBehaviourCloning, CSIRLLearner, make_csirl_learner, pretrain_actor
+from torchrl_csirl.run.experts import load_experts
+from torchrl_csirl.run.final import final_summary
+from torchrl_csirl.run.recipes import Recipe, register_recipe
+from torchrl_csirl.run.run import ExpertDataError, resolve_device
+from torchrl_csirl.run.task_schemas import RoboticsExpertConfig, RoboticsSections
 from torchrl_csirl.tasks import FAILURE_KEYS, SCENARIOS, ScenarioSpec, resolve_scenario  # noqa: F401 - SCENARIOS: used by tests
 from torchrl_csirl.trainers import MetaRewardUpdate, SACUpdate, SubgoalSelectionHook
 from torchrl_csirl.transforms import CombineRewards, GoalConditionedMatchingReward, IntrinsicReward, SubgoalMatchingReward
@@ -78,7 +78,7 @@ class CSIRLConfig(CSIRLHyperparameters):
 class CSIRLHighwayConfig:
     """``recipes/csirl_highway.py``: the default preset ("our cheaper procedure", docs/recipes.md)."""
 
-    preset: str = option("default", help="default | paper (config group torchrl_csirl/launch/config/csirl_highway/preset)")
+    preset: str = option("default", help="default | paper (config group torchrl_csirl/methods/config/csirl_highway/preset)")
     seed: int = option(0, minimum=0, help="random seed")
     device: str = option("cpu", choices=DEVICES, help="the learner's device (collection stays on the CPU)")
     env: EnvConfig = field(default_factory=EnvConfig)
@@ -98,7 +98,7 @@ class CSIRLTaskConfig(RoboticsSections, CSIRLHighwayConfig):
     """``recipes/csirl_highway.py`` on any task but the driving scenes (robotics, locomotion, ``env.gym_id``, yours):
     the driving defaults with the task sections (``env``, ``expert``, ``model``, ``collector``)."""
 
-    preset: str = option("default", help="default | paper (config group torchrl_csirl/launch/config/csirl_task/preset)")
+    preset: str = option("default", help="default | paper (config group torchrl_csirl/methods/config/csirl_task/preset)")
     expert: RoboticsExpertConfig = field(default_factory=RoboticsExpertConfig)
 
 
@@ -316,7 +316,7 @@ def make_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume_fra
 
 @dataclass
 class CSIRLParts:
-    """CSIRL's own pieces of a :class:`~torchrl_csirl.launch.assembly.Run` (``run.parts``)."""
+    """CSIRL's own pieces of a :class:`~torchrl_csirl.run.assembly.Run` (``run.parts``)."""
 
     modules: CSIRLLearner  #: actor, ensemble SAC loss, reward network, meta-loss
     optimizers: dict[str, torch.optim.Optimizer]  #: ``optim_sac``, ``optim_reward``

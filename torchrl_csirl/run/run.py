@@ -20,7 +20,7 @@ from typing import Any
 
 import torch
 
-from torchrl_csirl.launch.config import ConfigError
+from torchrl_csirl.run.config import ConfigError
 
 __all__ = [
     "ExpertDataError",
@@ -65,7 +65,7 @@ def make_run_dir(output_dir: str, exp_name: str | None, default_name: str, overw
         >>> make_run_dir(out, "merge-csirl-s0", "")  # doctest: +ELLIPSIS
         Traceback (most recent call last):
         ...
-        torchrl_csirl.launch.config.ConfigError: logger.exp_name=merge-csirl-s0: .../merge-csirl-s0 already holds a run; ...
+        torchrl_csirl.run.config.ConfigError: logger.exp_name=merge-csirl-s0: .../merge-csirl-s0 already holds a run; ...
     """
     if exp_name:
         run_dir = os.path.abspath(os.path.join(output_dir, exp_name))

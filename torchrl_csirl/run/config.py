@@ -23,7 +23,7 @@ Examples:
     >>> load_config(Demo, ["seed=abc"])
     Traceback (most recent call last):
     ...
-    torchrl_csirl.launch.config.ConfigError: seed=abc: must be an integer >= 0
+    torchrl_csirl.run.config.ConfigError: seed=abc: must be an integer >= 0
 """
 from __future__ import annotations
 

@@ -17,7 +17,7 @@ from torch import nn
 from torchrl.collectors import BaseCollector, Collector
 from torchrl.envs import EnvBase
 
-from torchrl_csirl.launch.config import ConfigError
+from torchrl_csirl.run.config import ConfigError
 from torchrl_csirl.tasks import SCENARIOS, ScenarioSpec, TaskSpec, env_factory, make_serial_env, resolve_scenario  # noqa: F401 - SCENARIOS: doctests
 from torchrl_csirl.tasks import make_env as make_scenario_env
 from torchrl_csirl.trainers import WorkerErrorLog, ignoring_interrupts, shutdown_collector, start_collector
@@ -37,7 +37,7 @@ def check_collector(collector: DictConfig) -> None:
 
 
 def check_collector_config(cfg: DictConfig) -> None:
-    """:func:`check_collector` on a recipe configuration's ``collector`` section (a :class:`~torchrl_csirl.launch.recipes.Recipe` check)."""
+    """:func:`check_collector` on a recipe configuration's ``collector`` section (a :class:`~torchrl_csirl.run.recipes.Recipe` check)."""
     check_collector(cfg.collector)
 
 
@@ -93,7 +93,7 @@ def check_whole_episodes(collector: DictConfig, spec: TaskSpec, k: int) -> None:
         >>> check_whole_episodes(c, SCENARIOS["merge"], 1)  # doctest: +ELLIPSIS
         Traceback (most recent call last):
         ...
-        torchrl_csirl.launch.config.ConfigError: collector.frames_per_batch=100: each of the 2 environments steps 50 ...
+        torchrl_csirl.run.config.ConfigError: collector.frames_per_batch=100: each of the 2 environments steps 50 ...
         >>> c.frames_per_batch = 120
         >>> check_whole_episodes(c, SCENARIOS["merge"], 1)
     """

@@ -7,7 +7,7 @@ from typing import Any
 
 from omegaconf import DictConfig
 
-from torchrl_csirl.launch.assembly import Run
+from torchrl_csirl.run.assembly import Run
 from torchrl_csirl.tasks import ScenarioSpec
 
 
@@ -52,8 +52,8 @@ def final_summary(run: Run, method: str, title: str) -> dict[str, Any]:
     (``run.keep_best``, :class:`~torchrl_csirl.trainers.KeepBestPolicy`) is tested and saved with
     those weights (``policy_from`` in the summary); its checkpoint keeps the last ones."""
     from torchrl_csirl.analysis.visualization import plot_learning_curve
-    from torchrl_csirl.launch.run import expert_accomplish_rate
     from torchrl_csirl.modules import save_policy
+    from torchrl_csirl.run.run import expert_accomplish_rate
 
     trainer, cfg = run.trainer, run.cfg
     run.checkpoint.save(trainer)
@@ -85,7 +85,7 @@ def final_summary(run: Run, method: str, title: str) -> dict[str, Any]:
     run.logger.log({"frames": trainer.frames, "updates": trainer.updates,
                     **{f"test_{k}": v for k, v in final.items()}})
     if cfg.eval.video:
-        from torchrl_csirl.launch.video import film_final_episode
+        from torchrl_csirl.run.video import film_final_episode
 
         summary["videos"] = film_final_episode(run)
     curve = plot_learning_curve(history, os.path.join(run.run_dir, "learning_curve.png"), title=title)

@@ -15,8 +15,8 @@ from typing import Optional
 
 from omegaconf import DictConfig, OmegaConf
 
-from torchrl_csirl.launch import config as config_lib  # noqa: F401 - doctests
-from torchrl_csirl.launch.config import (
+from torchrl_csirl.run import config as config_lib  # noqa: F401 - doctests
+from torchrl_csirl.run.config import (
     CollectorConfig,
     CommandLine,
     ConfigError,
@@ -162,7 +162,7 @@ def requested_task(overrides: list[str] | CommandLine | None, run_dir: str | Non
 
 def schema_family(task: str) -> str:
     """``"driving"`` for a driving scene, ``"task"`` for any other registered task: which of a recipe's two
-    schemas configures it (:class:`~torchrl_csirl.launch.recipes.Recipe`).
+    schemas configures it (:class:`~torchrl_csirl.run.recipes.Recipe`).
 
     Raises:
         ConfigError: an unknown task, with the known ones and how to bring one's own.
@@ -173,7 +173,7 @@ def schema_family(task: str) -> str:
         >>> schema_family("mergee")  # doctest: +ELLIPSIS
         Traceback (most recent call last):
         ...
-        torchrl_csirl.launch.config.ConfigError: env.task=mergee: unknown task (did you mean merge?); one of ...
+        torchrl_csirl.run.config.ConfigError: env.task=mergee: unknown task (did you mean merge?); one of ...
     """
     try:
         family = resolve_scenario(task).family

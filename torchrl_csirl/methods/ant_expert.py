@@ -1,14 +1,15 @@
 """The schema and finish of ``recipes/train_ant_expert.py``: SAC on the ant's goal-reaching task
 (``ant-goal``), the run that trains the AntMaze expert's walking policy, tested at the end as the walker of the
-AntMaze waypoint expert (its recipe: :data:`~torchrl_csirl.launch.expert_training.ANT_EXPERT_RECIPE`).
+AntMaze waypoint expert (its recipe: :data:`~torchrl_csirl.methods.expert.ANT_EXPERT_RECIPE`).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from typing import Optional
 
-from torchrl_csirl.launch.assembly import Run
-from torchrl_csirl.launch.config import (
+from torchrl_csirl.objectives._imitation import SACHyperparameters
+from torchrl_csirl.run.assembly import Run
+from torchrl_csirl.run.config import (
     DEVICES,
     CheckpointConfig,
     CollectorConfig,
@@ -18,8 +19,7 @@ from torchrl_csirl.launch.config import (
     UpdateRatioConfig,
     option,
 )
-from torchrl_csirl.launch.final import final_summary
-from torchrl_csirl.objectives._imitation import SACHyperparameters
+from torchrl_csirl.run.final import final_summary
 
 __all__ = ["AntExpertConfig", "TASK", "evaluate_waypoint_expert", "finish"]
 

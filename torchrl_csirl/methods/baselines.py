@@ -31,7 +31,7 @@ Examples:
     >>> load_config(["method=gibberish"])  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    torchrl_csirl.launch.config.ConfigError: method=gibberish: must be one of sac, bc, ..., random, expert or null
+    torchrl_csirl.run.config.ConfigError: method=gibberish: must be one of sac, bc, ..., random, expert or null
 """
 from __future__ import annotations
 
@@ -50,9 +50,12 @@ from torchrl.envs.utils import RandomPolicy
 from torchrl.objectives import BCLoss, SoftUpdate
 
 from torchrl_csirl.data import DemonstrationMixer, ExpertDemonstrations
-from torchrl_csirl.launch.assembly import Run, assemble_trainer, make_logger, make_online_buffer, model_input_features
-from torchrl_csirl.launch.collection import check_collector_config, make_eval_env
-from torchrl_csirl.launch.config import (
+from torchrl_csirl.methods.csirl import CSIRL_RECIPE
+from torchrl_csirl.modules import make_actor, make_qvalue, with_standardization
+from torchrl_csirl.objectives._imitation import SACHyperparameters, make_sac_learner
+from torchrl_csirl.run.assembly import Run, assemble_trainer, make_logger, make_online_buffer, model_input_features
+from torchrl_csirl.run.collection import check_collector_config, make_eval_env
+from torchrl_csirl.run.config import (
     DEVICES,
     CheckpointConfig,
     CollectorConfig,
@@ -68,14 +71,11 @@ from torchrl_csirl.launch.config import (
     option,
     parse_command_line,
 )
-from torchrl_csirl.launch.csirl import CSIRL_RECIPE
-from torchrl_csirl.launch.experts import load_experts
-from torchrl_csirl.launch.final import evaluation_summary, final_summary
-from torchrl_csirl.launch.recipes import Recipe, register_recipe
-from torchrl_csirl.launch.robotics import RoboticsSections
-from torchrl_csirl.launch.run import expert_accomplish_rate, resolve_device
-from torchrl_csirl.modules import make_actor, make_qvalue, with_standardization
-from torchrl_csirl.objectives._imitation import SACHyperparameters, make_sac_learner
+from torchrl_csirl.run.experts import load_experts
+from torchrl_csirl.run.final import evaluation_summary, final_summary
+from torchrl_csirl.run.recipes import Recipe, register_recipe
+from torchrl_csirl.run.run import expert_accomplish_rate, resolve_device
+from torchrl_csirl.run.task_schemas import RoboticsSections
 from torchrl_csirl.tasks import ScenarioSpec, TaskSpec, resolve_scenario
 from torchrl_csirl.trainers import BCUpdate, SACUpdate, evaluate_policy
 from torchrl_csirl.trainers.imitation import (
@@ -272,7 +272,7 @@ METHOD_BUILDERS = {"sac": make_sac, "bc": make_bc, **{name: make_loss_method for
 
 def method_input_features(cfg: DictConfig, spec: TaskSpec, demos: ExpertDemonstrations) -> nn.Module | None:
     """The input map of the method's networks: the ``model`` section's
-    (:func:`~torchrl_csirl.launch.assembly.model_input_features`), after a standardisation fitted to the
+    (:func:`~torchrl_csirl.run.assembly.model_input_features`), after a standardisation fitted to the
     demonstrations' observations where the method's section asks for it (``valuedice.normalize_states``)."""
     features = model_input_features(cfg.model, spec)
     section = cfg.get(cfg.method)
@@ -316,7 +316,7 @@ def make_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume_fra
 
 @dataclass
 class ImitationParts:
-    """A baseline's own pieces of a :class:`~torchrl_csirl.launch.assembly.Run` (``run.parts``)."""
+    """A baseline's own pieces of a :class:`~torchrl_csirl.run.assembly.Run` (``run.parts``)."""
 
     method: ImitationMethod  #: the method's losses, policy, update step and transforms
     expert_buffer: TensorDictReplayBuffer  #: the demonstrations' transitions (with the method's expert transforms)

@@ -1,16 +1,16 @@
 """The builders every recipe shares, by concern (this module gathers their names):
 
-* :mod:`torchrl_csirl.launch.experts`: the demonstrations (``expert`` section);
-* :mod:`torchrl_csirl.launch.collection`: environments, collector, the CPU policy mirror (``collector``);
-* :mod:`torchrl_csirl.launch.assembly`: input map, online buffer, logger, :class:`Run`, :func:`assemble_trainer`;
-* :mod:`torchrl_csirl.launch.lifecycle`: start, resume, training, a recipe's whole command line (:func:`run_recipe`);
-* :mod:`torchrl_csirl.launch.final`: the final test, ``policy.pt``, plots and summary fields.
+* :mod:`torchrl_csirl.run.experts`: the demonstrations (``expert`` section);
+* :mod:`torchrl_csirl.run.collection`: environments, collector, the CPU policy mirror (``collector``);
+* :mod:`torchrl_csirl.run.assembly`: input map, online buffer, logger, :class:`Run`, :func:`assemble_trainer`;
+* :mod:`torchrl_csirl.run.lifecycle`: start, resume, training, a recipe's whole command line (:func:`run_recipe`);
+* :mod:`torchrl_csirl.run.final`: the final test, ``policy.pt``, plots and summary fields.
 
-Each ``make_*`` takes sections of the typed configuration (:mod:`torchrl_csirl.launch.config`) and returns one
+Each ``make_*`` takes sections of the typed configuration (:mod:`torchrl_csirl.run.config`) and returns one
 TorchRL / torchrl-csirl piece; library code below the run layer takes plain arguments.
 """
-from torchrl_csirl.launch.assembly import Run, assemble_trainer, make_logger, make_online_buffer, model_input_features
-from torchrl_csirl.launch.collection import (
+from torchrl_csirl.run.assembly import Run, assemble_trainer, make_logger, make_online_buffer, model_input_features
+from torchrl_csirl.run.collection import (
     PolicyMirror,
     check_collector,
     check_collector_config,
@@ -20,9 +20,9 @@ from torchrl_csirl.launch.collection import (
     make_eval_env,
     make_worker_env_fn,
 )
-from torchrl_csirl.launch.experts import curriculum_first, load_experts, recorded_in_traffic
-from torchrl_csirl.launch.final import evaluation_summary, final_summary
-from torchrl_csirl.launch.lifecycle import (
+from torchrl_csirl.run.experts import curriculum_first, load_experts, recorded_in_traffic
+from torchrl_csirl.run.final import evaluation_summary, final_summary
+from torchrl_csirl.run.lifecycle import (
     open_configured_run,
     record_resumed_settings,
     resume_run,

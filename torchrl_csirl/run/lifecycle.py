@@ -12,11 +12,11 @@ from typing import TYPE_CHECKING, Any, Callable
 
 from omegaconf import DictConfig, OmegaConf
 
-from torchrl_csirl.launch.assembly import Run
-from torchrl_csirl.launch.collection import use_main_threads
-from torchrl_csirl.launch.config import CommandLine, flatten_config
-from torchrl_csirl.launch.provenance import record_resume_provenance, write_provenance
-from torchrl_csirl.launch.run import (
+from torchrl_csirl.run.assembly import Run
+from torchrl_csirl.run.collection import use_main_threads
+from torchrl_csirl.run.config import CommandLine, flatten_config
+from torchrl_csirl.run.provenance import record_resume_provenance, write_provenance
+from torchrl_csirl.run.run import (
     default_run_name,
     make_run_dir,
     resolve_resume,
@@ -26,13 +26,13 @@ from torchrl_csirl.launch.run import (
 from torchrl_csirl.trainers import CollectorWorkerError, shutdown_collector
 
 if TYPE_CHECKING:
-    from torchrl_csirl.launch.recipes import Recipe
+    from torchrl_csirl.run.recipes import Recipe
 
 
 # ---------------------------------------------------------------------------------------- starting and resuming
 def start_run(cfg: DictConfig, method: str, build: Callable[[DictConfig, str], Any]) -> Any:
     """A new run: its directory (``logger.*``) with ``config.yaml`` and ``provenance.json`` (the code, packages and
-    machine it runs on, :mod:`torchrl_csirl.launch.provenance`), then ``build(cfg, run_dir)``.
+    machine it runs on, :mod:`torchrl_csirl.run.provenance`), then ``build(cfg, run_dir)``.
 
     If ``build`` fails (e.g. a bad expert file) the new directory, which holds no run, is removed.
     """
@@ -106,7 +106,7 @@ def record_resumed_settings(cfg: DictConfig, run_dir: str, frames: int) -> dict[
 def open_configured_run(cfg: DictConfig, method: Callable[[DictConfig], str], make_trainer: Callable[..., Run]) -> Run:
     """A new run (:func:`start_run`, its directory named by ``method(cfg)``), or the run of
     ``cfg.checkpoint.resume`` with its checkpoint restored (:func:`resume_run`); ``collector.main_threads`` holds
-    from the first step (:func:`~torchrl_csirl.launch.collection.use_main_threads`)."""
+    from the first step (:func:`~torchrl_csirl.run.collection.use_main_threads`)."""
     if "collector" in cfg:
         use_main_threads(cfg.collector)
     if cfg.checkpoint.resume is None:
@@ -119,7 +119,7 @@ def train(run: Run) -> None:
     """``run.trainer.train()``; on any exit the collector is shut down and the logs are kept.
 
     SIGTERM or Ctrl-C stops at the end of the current batch, writes a checkpoint there and exits
-    (130 / 143) with the command that resumes the run (:func:`torchrl_csirl.launch.run.stop_with_checkpoint`).
+    (130 / 143) with the command that resumes the run (:func:`torchrl_csirl.run.run.stop_with_checkpoint`).
     A collector worker that dies (an exception in its environment, a killed process) stops the run at
     once: the other workers are stopped, the last checkpoint is kept, and one line names the worker's error.
 
@@ -192,7 +192,7 @@ def timed_summary(produce: Callable[[], dict[str, Any]]) -> dict[str, Any]:
 
 def run_recipe(recipe: Recipe, argv: list[str] | CommandLine, *, default_task: str | None = None) -> dict[str, Any]:
     """A whole run from a command line (``key=value`` strings, or parsed once:
-    :func:`~torchrl_csirl.launch.config.parse_command_line`): the recipe's configuration (:meth:`Recipe.configure`:
+    :func:`~torchrl_csirl.run.config.parse_command_line`): the recipe's configuration (:meth:`Recipe.configure`:
     new, or resumed with ``checkpoint.resume=``),
     its trainer, training and finish (or, for a configuration that trains nothing, its evaluation), timed
     (:func:`timed_summary`)."""

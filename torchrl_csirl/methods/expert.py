@@ -15,7 +15,7 @@ from omegaconf import DictConfig, OmegaConf
 from torchrl.envs import ExplorationType, set_exploration_type
 from torchrl.objectives import SoftUpdate
 
-from torchrl_csirl.launch.ant_expert import (
+from torchrl_csirl.methods.ant_expert import (
     TASK,
     AntCheckpointConfig,
     AntCollectorConfig,
@@ -23,16 +23,16 @@ from torchrl_csirl.launch.ant_expert import (
     AntExpertConfig,
     AntReplayBufferConfig,
 )
-from torchrl_csirl.launch.ant_expert import finish as ant_finish
-from torchrl_csirl.launch.assembly import Run, assemble_trainer, make_online_buffer
-from torchrl_csirl.launch.collection import check_collector_config
-from torchrl_csirl.launch.config import DEVICES, LoggerConfig, UpdateRatioConfig, option
-from torchrl_csirl.launch.final import final_summary
-from torchrl_csirl.launch.recipes import Recipe, register_recipe
-from torchrl_csirl.launch.robotics import RoboticsEnvConfig
-from torchrl_csirl.launch.run import resolve_device
+from torchrl_csirl.methods.ant_expert import finish as ant_finish
 from torchrl_csirl.modules import make_actor, make_input_features, make_qvalue
 from torchrl_csirl.objectives import SACHyperparameters, make_sac_learner
+from torchrl_csirl.run.assembly import Run, assemble_trainer, make_online_buffer
+from torchrl_csirl.run.collection import check_collector_config
+from torchrl_csirl.run.config import DEVICES, LoggerConfig, UpdateRatioConfig, option
+from torchrl_csirl.run.final import final_summary
+from torchrl_csirl.run.recipes import Recipe, register_recipe
+from torchrl_csirl.run.run import resolve_device
+from torchrl_csirl.run.task_schemas import RoboticsEnvConfig
 from torchrl_csirl.tasks import resolve_scenario, task_names
 from torchrl_csirl.trainers import KeepBestPolicy, SACUpdate, StopAtTarget
 
@@ -143,7 +143,7 @@ def finish(run: Run) -> dict[str, object]:
 
 # ---------------------------------------------------------------------------------------- the recipes
 def check_device(cfg: DictConfig) -> None:
-    """The learner's device is usable (:func:`~torchrl_csirl.launch.run.resolve_device`)."""
+    """The learner's device is usable (:func:`~torchrl_csirl.run.run.resolve_device`)."""
     resolve_device(cfg.device)
 
 

@@ -14,7 +14,7 @@ from torchrl_csirl.data import (
     load_expert_demonstrations,
     load_minari_dataset,
 )
-from torchrl_csirl.launch.run import ExpertDataError
+from torchrl_csirl.run.run import ExpertDataError
 from torchrl_csirl.tasks import SCENARIOS, ScenarioSpec, TaskSpec  # noqa: F401 - SCENARIOS: doctests
 
 

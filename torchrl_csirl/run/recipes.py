@@ -4,8 +4,8 @@ A recipe names the methods it trains, its configuration schema (one for the driv
 every other task: the task's :attr:`~torchrl_csirl.tasks.TaskSpec.family` picks it), its presets, the
 checks a loaded configuration must pass, its trainer and its finish. Loading is the same for every
 recipe (:meth:`Recipe.configure`): the command line parsed once
-(:func:`~torchrl_csirl.launch.config.parse_command_line`), the task it names registered
-(``env.module``, ``env.gym_id``, :func:`~torchrl_csirl.launch.robotics.name_task`), its family choosing the
+(:func:`~torchrl_csirl.run.config.parse_command_line`), the task it names registered
+(``env.module``, ``env.gym_id``, :func:`~torchrl_csirl.run.task_schemas.name_task`), its family choosing the
 schema, one merge (new: defaults, the task's, the preset, the line; resumed: the saved run's, the line), then the
 validation and the checks. The run-level tools (``tools/summarize_runs.py``, the sweep, ``torchrl-csirl train``)
 look a recipe up by method name (:func:`recipe_for`).
@@ -30,16 +30,16 @@ from typing import Any
 
 from omegaconf import DictConfig
 
-from torchrl_csirl.launch import config as config_lib
-from torchrl_csirl.launch.config import CommandLine, ConfigError, parse_command_line
-from torchrl_csirl.launch.robotics import check_task_sections, name_task, schema_family
-from torchrl_csirl.launch.run import resolve_resume
+from torchrl_csirl.run import config as config_lib
+from torchrl_csirl.run.config import CommandLine, ConfigError, parse_command_line
+from torchrl_csirl.run.run import resolve_resume
+from torchrl_csirl.run.task_schemas import check_task_sections, name_task, schema_family
 
 __all__ = ["RECIPE_MODULES", "Recipe", "known_methods", "load_config_for", "recipe_for", "recipe_schemas", "registered_recipes",
            "register_recipe"]
 
 #: the run-layer modules that declare the recipes (imported on the first look-up)
-RECIPE_MODULES = ("torchrl_csirl.launch.csirl", "torchrl_csirl.launch.imitation", "torchrl_csirl.launch.expert_training")
+RECIPE_MODULES = ("torchrl_csirl.methods.csirl", "torchrl_csirl.methods.baselines", "torchrl_csirl.methods.expert")
 
 _RECIPES: dict[str, Recipe] = {}
 
@@ -57,9 +57,9 @@ class Recipe:
         config_dir: the folder of ``schema``'s presets and per-scene defaults (None: ``preset=default`` only).
         task_config_dir: the folder of ``task_schema``'s per-task defaults (``scene/<task>.yaml``; None: none).
         checks: ``check(cfg)`` for each configuration loaded (several keys at once, the device, ...);
-            each raises :class:`~torchrl_csirl.launch.config.ConfigError`.
+            each raises :class:`~torchrl_csirl.run.config.ConfigError`.
         command_check: ``check(command, resuming)`` on the parsed command line
-            (:class:`~torchrl_csirl.launch.config.CommandLine`) before loading (e.g. a method named).
+            (:class:`~torchrl_csirl.run.config.CommandLine`) before loading (e.g. a method named).
         method_overrides: ``method -> key=value strings`` that select a method of this recipe.
         trainer: ``trainer(cfg, run_dir, frames_done=, resume_frames=) -> Run``.
         finish: ``finish(run) -> summary`` (final evaluation, policy, plots).
@@ -102,7 +102,7 @@ class Recipe:
         (e.g. a larger ``collector.total_frames``), ``checkpoint.resume`` kept.
 
         Args:
-            argv: the command line (``key=value`` strings, or :func:`~torchrl_csirl.launch.config.parse_command_line`'s).
+            argv: the command line (``key=value`` strings, or :func:`~torchrl_csirl.run.config.parse_command_line`'s).
             default_task: a new run's task when the command line names none (None: the schema's default).
             run_dir: a run directory to resume (instead of ``checkpoint.resume``).
 

@@ -16,8 +16,8 @@ from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
 from torchrl.envs import Compose, EnvBase, Transform
 
 from torchrl_csirl.data import ExpertDemonstrations, FilledRowsCheckpointer
-from torchrl_csirl.launch.collection import PolicyMirror, make_collector, make_eval_env
 from torchrl_csirl.modules import make_input_features
+from torchrl_csirl.run.collection import PolicyMirror, make_collector, make_eval_env
 from torchrl_csirl.tasks import ScenarioSpec, TaskSpec
 from torchrl_csirl.trainers import (
     CheckpointHook,
@@ -72,7 +72,7 @@ P = TypeVar("P")
 @dataclass
 class Run(Generic[P]):
     """What every recipe's run holds; a method's own pieces are ``parts`` (e.g.
-    :class:`~torchrl_csirl.launch.csirl.CSIRLParts`, :class:`~torchrl_csirl.launch.imitation.ImitationParts`)."""
+    :class:`~torchrl_csirl.methods.csirl.CSIRLParts`, :class:`~torchrl_csirl.methods.baselines.ImitationParts`)."""
 
     cfg: DictConfig
     spec: TaskSpec
