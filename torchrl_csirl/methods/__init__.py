@@ -1,7 +1,7 @@
 """The methods a run trains, one module per family: its configuration sections, its builders, its finish and its
 recipe (:class:`~torchrl_csirl.run.recipes.Recipe`, registered on import).
 
-* :mod:`torchrl_csirl.methods.csirl`: CSIRL (and its ablations ``csirl-b``, ``csirl-nocur``, ...), a schema for the
+* :mod:`torchrl_csirl.methods.csirl`: CSIRL (``csirl``, ``csirl-b``), a schema for the
   driving scenes and one for every other task; its presets in ``methods/config/``.
 * :mod:`torchrl_csirl.methods.baselines`: the baselines (``bc``, ``gail``, ``dac``, ``valuedice``, ``sqil``,
   ``iqlearn``, ``sac``, the ``expert`` and ``random`` rows), one module as they share their builders.
