@@ -59,12 +59,16 @@ def test_the_old_import_forms_work():
         import torchrl_csirl.envs.driving as m
         import torchrl_csirl.run.config
         import torchrl_csirl.tasks
+        from torchrl_csirl.envs import driving as old_driving
         from torchrl_csirl.envs.spec import TaskSpec
+        from torchrl_csirl.launch import csirl as old_csirl
         from torchrl_csirl.launch.config import ConfigError
         from torchrl_csirl.tasks import driving
     assert m.__name__ == "torchrl_csirl.tasks.driving.driving"
     assert TaskSpec is torchrl_csirl.tasks.TaskSpec
     assert ConfigError is torchrl_csirl.run.config.ConfigError
+    assert old_driving.__name__ == "torchrl_csirl.tasks.driving.driving"  # the module, not the new package of that name
+    assert old_csirl.__name__ == "torchrl_csirl.methods.csirl"
     assert driving.__name__ == "torchrl_csirl.tasks.driving"  # the old submodule shadows nothing of the new package
 
 

@@ -78,6 +78,8 @@ def _forwarding_package(old: str, new: types.ModuleType) -> types.ModuleType:
     warned = []
 
     def forward(name: str):
+        if f"{old}.{name}" in MOVED:  # ``from <old package> import <old submodule>``: that submodule, wherever it is now
+            return importlib.import_module(f"{old}.{name}")
         if not warned:
             warned.append(name)
             _warn(old, new.__name__, 2)
