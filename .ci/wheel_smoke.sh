@@ -25,7 +25,7 @@ check='import json, sys; s = json.loads(sys.stdin.read()); assert s["frames"] >=
 "$work/venv/bin/python" - <<'PY'
 import torch
 from torchrl_csirl.data import record_demonstrations
-from torchrl_csirl.envs import make_gymnasium_task
+from torchrl_csirl.tasks import make_gymnasium_task
 
 make_gymnasium_task("MountainCarContinuous-v0", features="0")
 pump = lambda td: td.set("action", torch.where(td["observation"][..., 1:] >= 0, 1.0, -1.0))

@@ -8,7 +8,7 @@ each, batches alternating between the two so that both see the same machine load
 
 Two ways to use worker processes:
 
-* default, what the recipe does (``torchrl_csirl.launch.builders.make_collector``): TorchRL's
+* default, what the recipe does (``torchrl_csirl.run.builders.make_collector``): TorchRL's
   multi-process synchronous collector, ``Collector([env_fn] * W, policy, num_collectors=W,
   sync=True)``. Every worker holds its environments *and a copy of the policy* (weights in
   shared memory) and collects its share of the batch on its own; the main process only
@@ -47,8 +47,8 @@ from tensordict.nn import TensorDictModuleBase
 from torchrl.collectors import Collector
 from torchrl.envs import ParallelEnv
 
-from torchrl_csirl.envs import SCENARIOS, YieldingParallelEnv, make_serial_env
 from torchrl_csirl.modules import make_actor
+from torchrl_csirl.tasks import SCENARIOS, YieldingParallelEnv, make_serial_env
 from torchrl_csirl.trainers import shutdown_collector
 
 
@@ -103,7 +103,7 @@ def make_parallel_env(
     process *spin-polls* a shared done flag while the workers step (torchrl 0.14.1
     ``ParallelEnv._wait_for_workers``): it burns a full core, which on a 2-core machine is taken
     from the workers. ``use_buffers=False`` sends the data through the pipes and blocks on them.
-    By default the env is our :class:`~torchrl_csirl.envs.YieldingParallelEnv` (shared memory,
+    By default the env is our :class:`~torchrl_csirl.tasks.YieldingParallelEnv` (shared memory,
     but the main process sleeps between polls); ``spin=True`` measures TorchRL's own.
     """
     cls = ParallelEnv if spin else YieldingParallelEnv

@@ -5,7 +5,7 @@ random actions (uniform in [-1, 1]^2; episodes reset when done, resets included 
 
 * ``stock``: ``fast=False`` -- highway-env's pandas Kinematics observation and its
   deep-copying trajectory prediction (intersection traffic rules);
-* ``ours``: the default -- :class:`~torchrl_csirl.envs._observation.FastKinematicObservation`,
+* ``ours``: the default -- :class:`~torchrl_csirl.tasks.driving._observation.FastKinematicObservation`,
   copy-free ego prediction and once-per-pass predictions in the intersection.
 
 The two produce identical observations and trajectories (see tests/test_envs.py), so the
@@ -17,7 +17,7 @@ For the robotics tasks (``antmaze-umaze``, ``relocate``) the comparison is
   with the U-maze map, ``continuing_task=False``, no contact forces, our +-0.1 m start/goal noise;
   ``AdroitHandRelocate-v1``),
   with gymnasium's default wrappers (checker, order enforcing, time limit);
-* ``ours``: :func:`~torchrl_csirl.envs.make_gym_env` (flat observation, step limit and the
+* ``ours``: :func:`~torchrl_csirl.tasks.make_gym_env` (flat observation, step limit and the
   CSIRL info entries: route length, progress, success).
 
 Usage::
@@ -37,9 +37,9 @@ import time
 import numpy as np
 import torch
 
-from torchrl_csirl.envs import SCENARIOS, make_gym_env
-from torchrl_csirl.envs.robotics import ANTMAZE_UMAZE_MAP, ROBOTICS_TASKS
-from torchrl_csirl.envs.robotics.tasks import ANTMAZE_POSITION_NOISE, _remove_maze_xml
+from torchrl_csirl.tasks import SCENARIOS, make_gym_env
+from torchrl_csirl.tasks.robotics import ANTMAZE_UMAZE_MAP, ROBOTICS_TASKS
+from torchrl_csirl.tasks.robotics.tasks import ANTMAZE_POSITION_NOISE, _remove_maze_xml
 
 
 def run_steps(env, n_steps: int, seed: int) -> float:

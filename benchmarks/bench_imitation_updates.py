@@ -27,8 +27,8 @@ from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
 from torchrl.envs import Compose
 
 from torchrl_csirl.data import load_expert_demonstrations
-from torchrl_csirl.envs import SCENARIOS
 from torchrl_csirl.modules import EgoRelativeFeatures, make_actor, make_qvalue
+from torchrl_csirl.tasks import SCENARIOS
 from torchrl_csirl.trainers import IMITATION_METHODS, make_imitation_method
 
 

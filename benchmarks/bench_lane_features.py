@@ -13,8 +13,8 @@ import time
 import torch
 from tensordict import TensorDict
 
-from torchrl_csirl.envs import SCENARIOS
 from torchrl_csirl.modules import LaneFeatures, make_actor
+from torchrl_csirl.tasks import SCENARIOS
 
 
 def per_call_ms(fn, repeats: int) -> float:

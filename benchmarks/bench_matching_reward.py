@@ -54,9 +54,9 @@ def _time(fn, repeats: int, inner: int) -> float:
 def goal_conditioned_costs(batch: int, repeats: int) -> dict[str, float]:
     """Seconds per batch of the goal-conditioned and the plain matching reward on PointMaze U-maze's demonstrations
     (the recipe's builder, the subgoal a quarter of the way), on ``batch`` demonstrated transitions."""
-    from torchrl_csirl.envs import TASKS
-    from torchrl_csirl.launch import csirl
-    from torchrl_csirl.launch.robotics import prepare_task
+    from torchrl_csirl.methods import csirl
+    from torchrl_csirl.run.task_schemas import prepare_task
+    from torchrl_csirl.tasks import TASKS
 
     args = prepare_task(["env.gym_id=PointMaze_UMaze-v3"])
     spec = TASKS["PointMaze_UMaze-v3"]

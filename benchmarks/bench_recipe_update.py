@@ -31,8 +31,8 @@ import time
 
 import torch
 
-from torchrl_csirl.launch import csirl
-from torchrl_csirl.launch.run import resolve_device
+from torchrl_csirl.methods import csirl
+from torchrl_csirl.run.run import resolve_device
 
 
 def _fill(run, frames: int) -> None:

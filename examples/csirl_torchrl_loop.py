@@ -48,10 +48,10 @@ from torchrl.record.loggers.csv import CSVLogger
 
 from torchrl_csirl.curriculum import SubgoalCurriculum
 from torchrl_csirl.data import load_expert_demonstrations
-from torchrl_csirl.envs import SCENARIOS, make_serial_env, normalized_accomplish_rate
-from torchrl_csirl.launch.run import expert_accomplish_rate
 from torchrl_csirl.modules import make_input_features, make_reward_network
 from torchrl_csirl.objectives import EnsembleSACLoss, MetaRewardLoss
+from torchrl_csirl.run.run import expert_accomplish_rate
+from torchrl_csirl.tasks import SCENARIOS, make_serial_env, normalized_accomplish_rate
 from torchrl_csirl.trainers import evaluate_policy
 from torchrl_csirl.transforms import CombineRewards, IntrinsicReward, SubgoalMatchingReward
 

@@ -2,7 +2,7 @@
 
 It composes, with stock TorchRL machinery:
 
-* a :class:`~torchrl_csirl.envs.YieldingParallelEnv` of 2 workers stepping the ``merge`` scenario, driven by a
+* a :class:`~torchrl_csirl.tasks.YieldingParallelEnv` of 2 workers stepping the ``merge`` scenario, driven by a
   :class:`~torchrl.collectors.Collector` with the current policy;
 * a replay buffer whose transform recomputes the matching reward at sampling time
   (:class:`SubgoalMatchingReward`, for the current subgoal); the meta-loss adds ``r_w(s)`` itself,
@@ -37,9 +37,9 @@ from torchrl.objectives import SoftUpdate
 
 from torchrl_csirl.curriculum import SubgoalCurriculum
 from torchrl_csirl.data import load_expert_demonstrations
-from torchrl_csirl.envs import SCENARIOS, YieldingParallelEnv, accomplish_rate_from_rollout, make_env
 from torchrl_csirl.modules import make_actor, make_qvalue, make_reward_network
 from torchrl_csirl.objectives import EnsembleSACLoss, MetaRewardLoss
+from torchrl_csirl.tasks import SCENARIOS, YieldingParallelEnv, accomplish_rate_from_rollout, make_env
 from torchrl_csirl.transforms import SubgoalMatchingReward
 
 LOGGED_LOSSES = ("loss_qvalue", "loss_actor", "loss_meta", "loss_imitation")

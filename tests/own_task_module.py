@@ -1,9 +1,9 @@
 """A user's own task, as a module a run imports with ``env.module=own_task_module``: Pendulum-v1
-under another name, registered with :func:`torchrl_csirl.envs.register_task` (its factory is a
+under another name, registered with :func:`torchrl_csirl.tasks.register_task` (its factory is a
 top-level function, so spawned collector workers can import it)."""
 from __future__ import annotations
 
-from torchrl_csirl.envs import TASKS, TaskSpec, make_gymnasium_env, register_task
+from torchrl_csirl.tasks import TASKS, TaskSpec, make_gymnasium_env, register_task
 
 NAME = "own-pendulum"
 

@@ -35,7 +35,7 @@ import os
 import numpy as np
 
 from torchrl_csirl.data import ExpertDemonstrations, expert_dataset_path
-from torchrl_csirl.envs import SCENARIOS
+from torchrl_csirl.tasks import SCENARIOS
 
 PUBLISHED_SIZES = (1, 4, 5, 9, 10, 14, 15, 19, 20, 24, 25)
 PADDED_WIDTH = {"highway-fast": 75, "merge": 60, "roundabout": 55, "intersection": 65}

@@ -10,16 +10,18 @@ import pytest
 import torch
 from torchrl.envs.utils import check_env_specs
 
-from torchrl_csirl.envs import make_env, make_gym_env, resolve_scenario
-from torchrl_csirl.envs.expert import make_expert, rollout_expert
-from torchrl_csirl.envs.robotics import (
+from torchrl_csirl.modules import make_actor, save_policy
+from torchrl_csirl.scripts import generate_experts, train_ant_expert
+from torchrl_csirl.tasks import make_env, make_gym_env, resolve_scenario
+from torchrl_csirl.tasks.driving.expert import make_expert, rollout_expert
+from torchrl_csirl.tasks.robotics import (
     ANTMAZE_UMAZE_MAP,
     WaypointAntExpert,
     maze_cell_route,
     next_waypoint,
     pursuit_waypoint,
 )
-from torchrl_csirl.envs.robotics.ant_goal import (
+from torchrl_csirl.tasks.robotics.ant_goal import (
     ARRIVAL_BONUS,
     CHAIN_HOPS,
     GOAL_VECTOR_CLIP,
@@ -28,8 +30,6 @@ from torchrl_csirl.envs.robotics.ant_goal import (
     heading_of,
     is_flipped,
 )
-from torchrl_csirl.modules import make_actor, save_policy
-from torchrl_csirl.scripts import generate_experts, train_ant_expert
 
 
 def _yaw_quaternion(yaw: float) -> np.ndarray:

@@ -9,9 +9,9 @@ from tensordict import TensorDict
 from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
 from torchrl.envs import Compose
 
-from torchrl_csirl.envs import SCENARIOS, make_env
 from torchrl_csirl.modules import make_actor, make_qvalue, make_reward_network
 from torchrl_csirl.objectives import EnsembleSACLoss
+from torchrl_csirl.tasks import SCENARIOS, make_env
 from torchrl_csirl.transforms import CombineRewards, IntrinsicReward, SubgoalMatchingReward
 
 #: a 1-D road: the expert at x = 0, 1, ..., 9

@@ -6,9 +6,9 @@ import os
 import pytest
 from omegaconf import OmegaConf
 
-from torchrl_csirl.launch import config
-from torchrl_csirl.launch.csirl import CSIRL_RECIPE
-from torchrl_csirl.launch.imitation import IMITATION_RECIPE
+from torchrl_csirl.methods.baselines import IMITATION_RECIPE
+from torchrl_csirl.methods.csirl import CSIRL_RECIPE
+from torchrl_csirl.run import config
 
 
 class _Built(Exception):
@@ -25,8 +25,8 @@ def _count_parses(monkeypatch: pytest.MonkeyPatch) -> list[object]:
         return real(argv)
 
     monkeypatch.setattr(config, "parse_command_line", counted)
-    for module in ("recipes", "robotics", "imitation"):
-        monkeypatch.setattr(f"torchrl_csirl.launch.{module}.parse_command_line", counted)
+    for module in ("run.recipes", "run.task_schemas", "methods.baselines"):
+        monkeypatch.setattr(f"torchrl_csirl.{module}.parse_command_line", counted)
     monkeypatch.setattr("torchrl_csirl.scripts.csirl_highway.parse_command_line", counted)
     return calls
 

@@ -70,8 +70,8 @@ def test_compare_runs_sets_two_seed_sets_side_by_side_with_welchs_test(capsys):
     verdict and, for records made before provenance existed, ``provenance: unknown``."""
     import json
 
-    from torchrl_csirl.launch.summaries import find_summaries
-    from torchrl_csirl.launch.verdicts import compare_seeds
+    from torchrl_csirl.analysis.summaries import find_summaries
+    from torchrl_csirl.analysis.verdicts import compare_seeds
     from torchrl_csirl.scripts import compare
 
     runs = os.path.join(ROOT, "docs", "runs")
@@ -129,8 +129,8 @@ def test_plot_curves_draws_each_group_at_the_frames_all_its_seeds_evaluated(tmp_
     starts at the first round; each group's last point is its seeds' mean there."""
     import json
 
-    from torchrl_csirl.benchmark.results import eval_curve
     from torchrl_csirl.scripts import curves
+    from torchrl_csirl.sweep.results import eval_curve
 
     runs = os.path.join(ROOT, "docs", "runs")
     groups = {name: [os.path.join(runs, name, f"antmaze-umaze-csirl-s{s}") for s in range(3)]

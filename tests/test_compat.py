@@ -10,9 +10,9 @@ from torchrl.objectives import SACLoss
 from transitions import random_transitions
 
 from torchrl_csirl import _compat
-from torchrl_csirl.envs import SCENARIOS, make_env, make_serial_env
 from torchrl_csirl.modules import make_actor, make_qvalue
 from torchrl_csirl.objectives import EnsembleSACLoss
+from torchrl_csirl.tasks import SCENARIOS, make_env, make_serial_env
 from torchrl_csirl.trainers import shutdown_collector
 
 
@@ -126,7 +126,7 @@ def test_fused_actor_draws_and_scores_as_tanh_normal(dtype):
 
 def test_parallel_env_internals():
     _compat.check_parallel_env_internals()
-    from torchrl_csirl.envs import YieldingParallelEnv
+    from torchrl_csirl.tasks import YieldingParallelEnv
 
     env = YieldingParallelEnv(2, _merge_env)
     try:

@@ -11,7 +11,7 @@ import os
 import pytest
 import torch
 
-from torchrl_csirl.diagnostics import (
+from torchrl_csirl.analysis.diagnostics import (
     OFF_DEMONSTRATION_SD,
     action_saturation,
     critic_calibration,
@@ -27,10 +27,10 @@ from torchrl_csirl.diagnostics import (
     warm_start_kept,
     where_episodes_end,
 )
-from torchrl_csirl.envs import resolve_scenario
-from torchrl_csirl.launch import csirl
-from torchrl_csirl.launch.builders import load_experts
+from torchrl_csirl.methods import csirl
+from torchrl_csirl.run.builders import load_experts
 from torchrl_csirl.scripts import csirl_highway, diagnose
+from torchrl_csirl.tasks import resolve_scenario
 
 TINY = ["collector.frames_per_batch=100", "collector.cut_episodes=true", "collector.init_random_frames=100",
         "collector.num_workers=1", "collector.main_threads=1", "replay_buffer.warmup_frames=100",
@@ -241,7 +241,7 @@ def test_a_run_writes_its_report_and_diagnose_rewrites_it_without_touching_the_r
 
 
 def test_diagnose_refuses_a_folder_that_is_not_a_run(tmp_path):
-    from torchrl_csirl.launch.config import ConfigError
+    from torchrl_csirl.run.config import ConfigError
 
     with pytest.raises(ConfigError, match="not a run directory"):
         diagnose.diagnose(str(tmp_path))

@@ -16,8 +16,8 @@ import zlib
 import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-SUBPACKAGES = ("objectives", "transforms", "curriculum", "data", "envs", "envs.robotics", "modules",
-               "trainers", "visualization", "launch", "diagnostics")
+SUBPACKAGES = ("objectives", "transforms", "curriculum", "data", "tasks", "tasks.robotics", "modules",
+               "trainers", "analysis.visualization", "run", "analysis.diagnostics")
 pytest.importorskip("mkdocs", reason="the docs extra (pip install -e '.[docs]')")
 
 
@@ -52,8 +52,8 @@ def test_api_reference_has_every_public_name(site: str) -> None:
 
 
 def test_configuration_reference_lists_every_key(site: str) -> None:
-    from torchrl_csirl.launch import recipe_schemas
-    from torchrl_csirl.launch.config import describe_rows
+    from torchrl_csirl.run import recipe_schemas
+    from torchrl_csirl.run.config import describe_rows
 
     with open(os.path.join(ROOT, "docs", "configuration.md"), encoding="utf-8") as f:
         markers = re.findall(r"<!-- config-reference: ([\w.]+):(\w+) -->", f.read())

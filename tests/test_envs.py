@@ -14,7 +14,7 @@ from tensordict import TensorDict
 from torchrl.envs.utils import check_env_specs
 
 from torchrl_csirl._compat import gym_env_of
-from torchrl_csirl.envs import (
+from torchrl_csirl.tasks import (
     INFO_KEYS,
     SCENARIOS,
     accomplish_rate,
@@ -25,7 +25,7 @@ from torchrl_csirl.envs import (
     normalized_accomplish_rate,
     success_from_rollout,
 )
-from torchrl_csirl.envs._observation import FastKinematicObservation
+from torchrl_csirl.tasks.driving._observation import FastKinematicObservation
 
 NAMES = list(SCENARIOS)
 

@@ -8,7 +8,7 @@ import torch
 from tensordict import TensorDict
 from tensordict.nn import TensorDictModule
 
-from torchrl_csirl.envs import SCENARIOS, accomplish_rate_from_rollout, make_env, make_serial_env
+from torchrl_csirl.tasks import SCENARIOS, accomplish_rate_from_rollout, make_env, make_serial_env
 from torchrl_csirl.trainers import episode_metrics, evaluate_episodes, evaluate_policy
 
 

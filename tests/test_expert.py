@@ -16,8 +16,8 @@ from torchrl_csirl.data.shipped import (
     curriculum_trajectory,
     load_expert_demonstrations,
 )
-from torchrl_csirl.envs import SCENARIOS, make_gym_env
-from torchrl_csirl.envs.expert import (
+from torchrl_csirl.tasks import SCENARIOS, make_gym_env
+from torchrl_csirl.tasks.driving.expert import (
     ExpertDriver,
     clear_traffic,
     make_expert,
@@ -147,7 +147,7 @@ def test_overlaps_lane_counts_a_front_turned_into_the_lane():
     from highway_env.road.road import Road, RoadNetwork
     from highway_env.vehicle.kinematics import Vehicle
 
-    from torchrl_csirl.envs.expert_driver import _overlaps_lane
+    from torchrl_csirl.tasks.driving.expert_driver import _overlaps_lane
 
     network = RoadNetwork()
     lane = StraightLane([0.0, 0.0], [100.0, 0.0], width=4.0)
@@ -178,8 +178,8 @@ def test_make_expert_rejects_unknown_scenario_and_overrides_config():
 
 
 def test_the_driving_expert_knows_every_driving_scenario_of_the_registry():
-    from torchrl_csirl.envs import task_names
-    from torchrl_csirl.envs.expert import EXPERT_CONFIGS, expert_tasks
+    from torchrl_csirl.tasks import task_names
+    from torchrl_csirl.tasks.driving.expert import EXPERT_CONFIGS, expert_tasks
 
     assert sorted(EXPERT_CONFIGS) == list(task_names(family="driving")) == sorted(SCENARIO_NAMES)
     assert set(task_names(family="driving")) <= set(expert_tasks())

@@ -5,7 +5,6 @@ import pytest
 import torch
 from tensordict import TensorDict
 
-from torchrl_csirl.envs import SCENARIOS, make_gym_env
 from torchrl_csirl.modules import (
     EgoRelativeFeatures,
     load_policy,
@@ -15,6 +14,7 @@ from torchrl_csirl.modules import (
     save_policy,
 )
 from torchrl_csirl.objectives import EnsembleSACLoss, MetaRewardLoss
+from torchrl_csirl.tasks import SCENARIOS, make_gym_env
 
 
 @pytest.mark.parametrize("scenario", sorted(SCENARIOS))

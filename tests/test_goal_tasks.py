@@ -14,11 +14,11 @@ from tensordict import TensorDict
 from test_own_task import TINY
 
 from torchrl_csirl.data import load_expert_demonstrations, record_demonstrations
-from torchrl_csirl.envs import TASKS, make_env, make_gymnasium_task
-from torchrl_csirl.envs import registry as task_registry
-from torchrl_csirl.envs.expert_registry import make_expert
-from torchrl_csirl.launch.robotics import prepare_task
+from torchrl_csirl.run.task_schemas import prepare_task
 from torchrl_csirl.scripts import csirl_highway
+from torchrl_csirl.tasks import TASKS, make_env, make_gymnasium_task
+from torchrl_csirl.tasks import registry as task_registry
+from torchrl_csirl.tasks.experts import make_expert
 
 UMAZE, MEDIUM = "PointMaze_UMaze-v3", "PointMaze_Medium-v3"
 LAYOUT = {"observation": (0, 4), "achieved_goal": (4, 6), "desired_goal": (6, 8)}
@@ -41,7 +41,7 @@ def _unregister_the_mazes():
 
 def test_a_gymnasium_robotics_id_is_found_without_env_module():
     """A fresh interpreter: gymnasium_robotics is imported for the id, and recorded for the worker processes."""
-    code = ("import sys; from torchrl_csirl.launch.robotics import prepare_task; from torchrl_csirl.envs import registry\n"
+    code = ("import sys; from torchrl_csirl.run.task_schemas import prepare_task; from torchrl_csirl.tasks import registry\n"
             "assert 'gymnasium_robotics' not in sys.modules\n"
             f"print(prepare_task(['env.gym_id={UMAZE}'])[-1], list(registry._TASK_MODULES))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
@@ -128,7 +128,7 @@ def test_sac_from_demonstrations_mixes_the_experts_recorded_reward_into_each_bat
     quarter of each batch the demonstrations' transitions and their recorded environment reward."""
     from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
 
-    from torchrl_csirl.launch import imitation
+    from torchrl_csirl.methods import baselines as imitation
 
     args = prepare_task([f"env.gym_id={UMAZE}", "method=sac", "sac.expert_fraction=0.25", "sac.batch_size=64"])
     cfg = imitation.IMITATION_RECIPE.load_config(args)
@@ -161,7 +161,7 @@ def test_the_matching_reward_follows_the_demonstration_of_each_episodes_goal():
     """PointMaze's matching reward (``csirl.goal_conditioned`` null: on, the observation has a desired_goal): each
     transition is rewarded as the plain matching reward on the demonstration of its goal would, toward the
     curriculum's subgoal as the same share of that demonstration; ``false`` gives the first demonstration's."""
-    from torchrl_csirl.launch import csirl
+    from torchrl_csirl.methods import csirl
     from torchrl_csirl.transforms import GoalConditionedMatchingReward, SubgoalMatchingReward, subgoal_on_demonstration
 
     args = prepare_task([f"env.gym_id={UMAZE}"])
@@ -226,7 +226,7 @@ def test_the_actor_warm_start_clones_the_demonstrations_into_the_learners_actor(
     change); the SAC loss acts with the same parameters, and the default does nothing."""
     from torchrl.envs.utils import ExplorationType, set_exploration_type
 
-    from torchrl_csirl.launch import csirl
+    from torchrl_csirl.methods import csirl
 
     args = prepare_task([f"env.gym_id={UMAZE}", "csirl.num_qvalue_nets=2"])
     spec = TASKS[UMAZE]

@@ -9,7 +9,7 @@ import os
 import pytest
 import torch
 
-from torchrl_csirl.diagnostics import (
+from torchrl_csirl.analysis.diagnostics import (
     CALIBRATION,
     LearnerProbe,
     action_saturation,
@@ -28,8 +28,8 @@ from torchrl_csirl.diagnostics import (
     warm_start_kept,
     where_episodes_end,
 )
-from torchrl_csirl.diagnostics.calibration import current_values, frozen_values
-from torchrl_csirl.diagnostics.report import _metrics_checks, _probe_checks
+from torchrl_csirl.analysis.diagnostics.calibration import current_values, frozen_values
+from torchrl_csirl.analysis.diagnostics.report import _metrics_checks, _probe_checks
 
 ROOT = os.path.join(os.path.dirname(__file__), "..")
 #: the frozen thresholds (issue 110): change one only with the held-out runs made again

@@ -12,8 +12,8 @@ import termination_probe
 import torch
 from omegaconf import OmegaConf
 
-from torchrl_csirl.launch import imitation
-from torchrl_csirl.launch.run import run_script
+from torchrl_csirl.methods import baselines as imitation
+from torchrl_csirl.run.run import run_script
 from torchrl_csirl.scripts import benchmark, imitation_highway
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -86,7 +86,7 @@ def test_trained_baseline_end_to_end(method, tmp_path):
 def test_progress_reward_is_the_distance_gained_toward_the_finish():
     from tensordict import TensorDict
 
-    from torchrl_csirl.envs import SCENARIOS
+    from torchrl_csirl.tasks import SCENARIOS
     from torchrl_csirl.transforms import ProgressReward
 
     spec = SCENARIOS["roundabout"]  # (x, y) positions, features_range +-100 m
@@ -266,7 +266,7 @@ def test_benchmark_runs_csirl_ablations_and_tells_which_differences_exceed_seed_
 
 
 def test_help_lists_every_key_with_its_help(capsys):
-    from torchrl_csirl.launch.config import flatten_config
+    from torchrl_csirl.run.config import flatten_config
 
     assert imitation_highway.main(["--help"]) == {}
     keys = [line for line in capsys.readouterr().out.splitlines() if " = " in line]

@@ -10,12 +10,12 @@ import pytest
 import torch
 from robotics_budget import TINY_ROBOTICS_RUN
 
-from torchrl_csirl.envs import make_env, resolve_scenario
-from torchrl_csirl.envs.expert_policy import ExpertDriverPolicy
-from torchrl_csirl.launch import imitation
-from torchrl_csirl.launch.config import ConfigError
-from torchrl_csirl.launch.imitation import IMITATION_RECIPE
+from torchrl_csirl.methods import baselines as imitation
+from torchrl_csirl.methods.baselines import IMITATION_RECIPE
+from torchrl_csirl.run.config import ConfigError
 from torchrl_csirl.scripts import benchmark, imitation_robotics
+from torchrl_csirl.tasks import make_env, resolve_scenario
+from torchrl_csirl.tasks.expert_policy import ExpertDriverPolicy
 
 
 def load_robotics(overrides):

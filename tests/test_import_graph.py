@@ -13,8 +13,8 @@ module is a node. The graph is static, read with :mod:`ast`; its rules:
 * Importing a module also runs its enclosing packages' ``__init__``, so an import also reaches each
   enclosing package of its target, except the importing module's own enclosing packages: those are
   already loading when it runs, and reaching them is no new edge.
-* An explicit import of an enclosing package (``from torchrl_csirl.envs import X`` inside
-  ``torchrl_csirl.envs.foo``) is an edge like any other: that package's ``__init__`` is half-run at
+* An explicit import of an enclosing package (``from torchrl_csirl.tasks import X`` inside
+  ``torchrl_csirl.tasks.foo``) is an edge like any other: that package's ``__init__`` is half-run at
   that moment, so ``X`` exists only if the ``__init__`` bound it before importing ``foo``, a circle
   that works by the order of the lines. Import ``X`` from the module that defines it.
 
@@ -185,8 +185,8 @@ def describe_circle(graph: Graph, component: list[str]) -> str:
 def test_the_graph_sees_load_time_imports():
     graph = import_graph()
     assert "torchrl_csirl.objectives.ensemble_sac" in graph["torchrl_csirl.objectives.csirl_learner"]
-    assert "torchrl_csirl.envs" in graph["torchrl_csirl.launch.csirl"]  # from torchrl_csirl.envs import ...
-    assert "torchrl_csirl.envs.spec" in graph["torchrl_csirl.envs"]  # a package reaches what its __init__ imports
+    assert "torchrl_csirl.tasks" in graph["torchrl_csirl.methods.csirl"]  # from torchrl_csirl.tasks import ...
+    assert "torchrl_csirl.tasks.spec" in graph["torchrl_csirl.tasks"]  # a package reaches what its __init__ imports
 
 
 def _assert_no_circle(graph: Graph, what: str) -> None:

@@ -14,8 +14,8 @@ from torchrl.envs import Compose, SerialEnv, TransformedEnv
 from torchrl.envs.utils import check_env_specs
 
 from torchrl_csirl.data import load_expert_demonstrations
-from torchrl_csirl.envs import SCENARIOS, make_env
 from torchrl_csirl.modules import make_reward_network
+from torchrl_csirl.tasks import SCENARIOS, make_env
 from torchrl_csirl.transforms import (
     CombineRewards,
     IntrinsicReward,

@@ -71,7 +71,7 @@ def test_sigterm_in_the_first_round_checkpoints_and_prints_the_resume_command(tm
 
 
 def test_sigterm_to_a_sweep_checkpoints_its_running_cell_before_the_sweep_exits(tmp_path):
-    from torchrl_csirl.launch.processes import StopCellsOnSigterm, SweepBusyError, running_cells
+    from torchrl_csirl.run.processes import StopCellsOnSigterm, SweepBusyError, running_cells
     from torchrl_csirl.scripts import benchmark
 
     out = str(tmp_path / "bench")

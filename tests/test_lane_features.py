@@ -8,7 +8,6 @@ import torch
 from tensordict import TensorDict
 
 from torchrl_csirl.data import load_expert_demonstrations
-from torchrl_csirl.envs import SCENARIOS, make_gym_env, sample_lane_centres
 from torchrl_csirl.modules import (
     FeatureChain,
     LaneFeatures,
@@ -20,6 +19,7 @@ from torchrl_csirl.modules import (
     save_policy,
 )
 from torchrl_csirl.objectives import EnsembleSACLoss, MetaRewardLoss
+from torchrl_csirl.tasks import SCENARIOS, make_gym_env, sample_lane_centres
 
 
 def _observation_at(spec, x: float, y: float, heading: float) -> torch.Tensor:
@@ -98,7 +98,7 @@ def test_a_saved_policy_holds_its_chained_map_and_its_lane_points(tmp_path):
     # a policy saved with the scenario's name only (before the points were stored) takes them from the road
     lane["centres"] = None
     torch.save(payload, tmp_path / "by_name.pt")
-    with pytest.raises(ValueError, match="pass lane_centres=torchrl_csirl.envs.sample_lane_centres"):
+    with pytest.raises(ValueError, match="pass lane_centres=torchrl_csirl.tasks.sample_lane_centres"):
         load_policy(tmp_path / "by_name.pt")
     loaded = load_policy(tmp_path / "by_name.pt", lane_centres=sample_lane_centres)
     assert torch.equal(actor(td.clone())["loc"], loaded(td.clone())["loc"])

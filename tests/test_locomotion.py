@@ -13,12 +13,12 @@ import torch
 from tensordict import TensorDict
 
 from torchrl_csirl._compat import gym_env_of
-from torchrl_csirl.envs import TaskSpec, make_env, resolve_scenario
-from torchrl_csirl.envs.expert import make_expert
-from torchrl_csirl.launch.csirl import CSIRL_RECIPE
+from torchrl_csirl.methods.csirl import CSIRL_RECIPE
 from torchrl_csirl.modules import DropFeatures, load_policy, make_actor, make_input_features, save_policy
 from torchrl_csirl.modules.features import feature_map_from_config
 from torchrl_csirl.scripts import csirl_robotics, imitation_robotics, off_demos, train_expert
+from torchrl_csirl.tasks import TaskSpec, make_env, resolve_scenario
+from torchrl_csirl.tasks.driving.expert import make_expert
 
 TINY = [
     "collector.total_frames=400", "collector.frames_per_batch=200", "collector.cut_episodes=true",
@@ -97,9 +97,9 @@ def test_valuedice_standardised_states_measure_the_gradient_penalty_in_them():
 
 def test_valuedice_reads_standardised_states_where_asked_and_says_where_it_cannot(tmp_path):
     from torchrl_csirl.data import load_expert_demonstrations
-    from torchrl_csirl.launch import ConfigError
-    from torchrl_csirl.launch.imitation import load_config, make_trainer
+    from torchrl_csirl.methods.baselines import load_config, make_trainer
     from torchrl_csirl.modules import StandardizeFeatures, find_standardization
+    from torchrl_csirl.run import ConfigError
 
     cfg = load_config([
         "method=valuedice", "env.task=halfcheetah", "valuedice.normalize_states=true", "expert.num_trajectories=1", *TINY,
@@ -127,7 +127,7 @@ def test_the_hopper_cells_of_dac_and_valuedice_enter_the_papers_single_absorbing
     """The benchmark's Hopper cells run DAC and ValueDICE with the papers' placeholder (the expert never falls);
     ValueDICE's, on standardised states, is the raw observation its standardisation maps to zero, with its code's
     10 self-loops per learner termination."""
-    from torchrl_csirl.launch.imitation import load_config, make_trainer
+    from torchrl_csirl.methods.baselines import load_config, make_trainer
     from torchrl_csirl.modules import find_standardization
     from torchrl_csirl.scripts.benchmark import split_overrides, table_overrides
 
@@ -232,8 +232,8 @@ def test_an_expert_run_can_finish_with_its_best_evaluation(tmp_path):
 
 
 def test_the_collector_refuses_a_batch_that_cuts_a_locomotion_episode():
-    from torchrl_csirl.launch import ConfigError
-    from torchrl_csirl.launch.builders import check_whole_episodes
+    from torchrl_csirl.run import ConfigError
+    from torchrl_csirl.run.builders import check_whole_episodes
 
     cfg = CSIRL_RECIPE.load_config(["env.task=hopper"])  # the robotics scripts' 1 400 frames: 700 per worker
     with pytest.raises(ConfigError, match="frames_per_batch >= 2000"):
@@ -307,7 +307,7 @@ def test_the_shipped_expert_and_its_demonstrations(tmp_path, name, floor):
 
 
 def test_valuedice_exploration_noise_reaches_the_collector_not_the_evaluation(tmp_path):
-    from torchrl_csirl.launch.imitation import load_config, make_trainer
+    from torchrl_csirl.methods.baselines import load_config, make_trainer
     from torchrl_csirl.modules import MeanActionGaussianNoise
 
     cfg = load_config([

@@ -24,8 +24,8 @@ from collections import defaultdict
 from collections.abc import Callable, Iterator
 
 from torchrl_csirl.hyperparameters import CSIRL_DEFAULTS, CSIRLHyperparameters, CSIRLOptimHyperparameters
-from torchrl_csirl.launch.config import OptimConfig
-from torchrl_csirl.launch.csirl import CSIRLConfig
+from torchrl_csirl.methods.csirl import CSIRLConfig
+from torchrl_csirl.run.config import OptimConfig
 
 #: the modules whose public classes and functions take CSIRL's hyperparameters
 MODULES = (
@@ -35,7 +35,7 @@ MODULES = (
     "torchrl_csirl.objectives.meta_reward",
     "torchrl_csirl.trainers.updates",
     "torchrl_csirl.curriculum.subgoal",
-    "torchrl_csirl.launch.csirl",
+    "torchrl_csirl.methods.csirl",
 )
 #: the configuration sections (and so the library dataclasses they are)
 SECTIONS = {"csirl": CSIRLConfig, "optim": OptimConfig}

@@ -12,11 +12,11 @@ import pytest
 import torch
 
 from torchrl_csirl.data import record_demonstrations
-from torchrl_csirl.envs import make_gymnasium_task, register_task, resolve_scenario
-from torchrl_csirl.launch import ConfigError, ExpertDataError
-from torchrl_csirl.launch.csirl import CSIRL_RECIPE
-from torchrl_csirl.launch.robotics import prepare_task
+from torchrl_csirl.methods.csirl import CSIRL_RECIPE
+from torchrl_csirl.run import ConfigError, ExpertDataError
+from torchrl_csirl.run.task_schemas import prepare_task
 from torchrl_csirl.scripts import csirl_highway, csirl_robotics, imitation_robotics
+from torchrl_csirl.tasks import make_gymnasium_task, register_task, resolve_scenario
 
 MOUNTAIN_CAR = "MountainCarContinuous-v0"
 TINY = [
@@ -93,8 +93,8 @@ def test_every_task_is_built_by_its_factory_with_the_device_and_info_keys_it_tak
 
     from torchrl.envs import GymEnv
 
-    from torchrl_csirl.envs import TASKS
-    from torchrl_csirl.envs.registry import build_env, registered_factory
+    from torchrl_csirl.tasks import TASKS
+    from torchrl_csirl.tasks.registry import build_env, registered_factory
 
     assert all(registered_factory(name) is not None for name in TASKS)
     seen: dict = {}
@@ -109,7 +109,7 @@ def test_every_task_is_built_by_its_factory_with_the_device_and_info_keys_it_tak
     assert env.rollout(2)["observation"].shape == (2, 3)
     import own_task_module
 
-    from torchrl_csirl.envs import make_env
+    from torchrl_csirl.tasks import make_env
 
     assert make_env(own_task_module.NAME, seed=0, device="cpu").device == torch.device("cpu")
 
@@ -117,13 +117,13 @@ def test_every_task_is_built_by_its_factory_with_the_device_and_info_keys_it_tak
 def test_a_registered_task_names_its_expert():
     import own_task_module
 
-    from torchrl_csirl.envs import TASKS, TaskSpec
-    from torchrl_csirl.envs import registry as task_registry
-    from torchrl_csirl.envs.expert import expert_tasks, make_expert
+    from torchrl_csirl.tasks import TASKS, TaskSpec
+    from torchrl_csirl.tasks import registry as task_registry
+    from torchrl_csirl.tasks.driving.expert import expert_tasks, make_expert
 
     spec = TaskSpec(name="own-relocate-expert", obs_dim=3, action_dim=1, max_steps=200, finish_position=None,
                     ego_feature_indices=(0,), position_feature_indices=(0,), matching_scale=1.0,
-                    expert="torchrl_csirl.envs.robotics.expert:make_relocate_expert")
+                    expert="torchrl_csirl.tasks.robotics.expert:make_relocate_expert")
     register_task(spec, own_task_module.make_own_pendulum)
     try:
         assert expert_tasks()[-1] == spec.name and type(make_expert(spec.name)).__name__ == "DAPGRelocateExpert"
@@ -176,8 +176,8 @@ def test_the_own_task_page_runs_as_written(tmp_path, monkeypatch):
     """docs/own-task.md's Python blocks, in order, on a tiny budget (its ``budget`` line replaced)."""
     from markdown_examples import python_blocks
 
-    from torchrl_csirl.envs import TASKS
-    from torchrl_csirl.envs import registry as task_registry
+    from torchrl_csirl.tasks import TASKS
+    from torchrl_csirl.tasks import registry as task_registry
 
     blocks = python_blocks("docs/own-task.md")
     assert len(blocks) == 2 and 'budget = ["collector.total_frames=25000"' in blocks[1]
@@ -232,7 +232,7 @@ def test_train_expert_trains_sac_on_a_gymnasium_id_and_writes_its_demonstrations
     (["env.task=hopper"], "CSIRLTaskConfig"), (["env.task=roundabout"], "CSIRLHighwayConfig"), ([], "CSIRLHighwayConfig"),
 ])
 def test_the_csirl_script_configures_every_task_with_its_familys_schema(overrides, schema):
-    from torchrl_csirl.launch import csirl
+    from torchrl_csirl.methods import csirl
 
     cfg = csirl.load_config(overrides)
     assert ("gym_id" in cfg.env) == (schema == "CSIRLTaskConfig")
@@ -264,7 +264,7 @@ def test_the_console_command_trains_csirl_on_the_hopper(tmp_path):
 def test_the_benchmark_knows_the_tasks_an_env_module_override_registers(tmp_path):
     """A fresh interpreter: ``--scenarios own-pendulum`` is known once ``env.module=own_task_module`` (an
     override of the sweep) is imported, as the cells will import it; a module that cannot be imported is one line."""
-    code = ("import sys; from torchrl_csirl.benchmark.plan import plan_cells, BenchmarkError\n"
+    code = ("import sys; from torchrl_csirl.sweep.plan import plan_cells, BenchmarkError\n"
             f"todo, _ = plan_cells(['bc'], ['own-pendulum'], [0], {str(tmp_path)!r}, ['env.module=own_task_module'])\n"
             "print([c.name for c in todo], 'env.module=own_task_module' in todo[0].command)\n"
             "try:\n    plan_cells(['bc'], ['own-pendulum'], [0], '.', ['bc:env.module=no_such_module_here'])\n"

@@ -85,8 +85,8 @@ def find_cycle(graph: dict[str, dict[str, list[str]]]) -> list[str] | None:
 def test_the_import_graph_sees_the_known_dependencies():
     graph = import_graph()
     assert "objectives" in graph["trainers"]  # module level
-    assert "envs" in graph["data"]  # a function-level import
-    assert "modules" in graph["envs"]  # the experts drive with saved networks
+    assert "tasks" in graph["data"]  # a function-level import
+    assert "modules" in graph["tasks"]  # the experts drive with saved networks
 
 
 def test_the_subpackages_import_each_other_without_a_cycle():

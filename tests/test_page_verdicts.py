@@ -1,5 +1,5 @@
 """The pages' verdict words against their records: every verdict between two seed sets carries a marker, and the
-words after it are the rule's (``torchrl_csirl.launch.verdicts``), recomputed from the records it names.
+words after it are the rule's (``torchrl_csirl.analysis.verdicts``), recomputed from the records it names.
 
 A marker is an HTML comment (Markdown renders it to nothing) right before the verdict's wording::
 
@@ -8,7 +8,7 @@ A marker is an HTML comment (Markdown renders it to nothing) right before the ve
 
 ``a`` and ``b`` are globs relative to the repository root, one record (``summary.json``) a seed; the difference is
 ``mean(a) - mean(b)`` of ``metric``. The markers of one ``section`` on one page are one family: Holm's correction
-across them (:func:`~torchrl_csirl.launch.verdicts.compare_family`). ``verdict-family`` declares comparisons of the
+across them (:func:`~torchrl_csirl.analysis.verdicts.compare_family`). ``verdict-family`` declares comparisons of the
 family that the prose does not state one by one (a table's cells), and is not checked against the text.
 ``each=NAME:v1,v2`` (repeatable) makes one comparison for every combination of the values, ``{NAME}`` in the globs
 replaced by each value, in order (the last ``each`` varying fastest); a checked marker's text then holds their
@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import pytest
 
-from torchrl_csirl.launch.verdicts import BEYOND_NOISE, NO_DIFFERENCE, SeedComparison, compare_family
+from torchrl_csirl.analysis.verdicts import BEYOND_NOISE, NO_DIFFERENCE, SeedComparison, compare_family
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 #: the pages whose verdict words follow the rule

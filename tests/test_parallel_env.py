@@ -7,7 +7,7 @@ import pytest
 import torch
 from torchrl.envs import SerialEnv
 
-from torchrl_csirl.envs import YieldingParallelEnv, make_env
+from torchrl_csirl.tasks import YieldingParallelEnv, make_env
 
 
 def _rollout(env, steps: int = 12):

@@ -30,6 +30,6 @@ def test_a_comparison_without_records_on_a_side_says_so_and_needs_no_seed_count(
 
 
 def test_more_spread_asks_for_more_seeds():
-    from torchrl_csirl.launch.verdicts import seeds_needed
+    from torchrl_csirl.analysis.verdicts import seeds_needed
 
     assert seeds_needed(0.02, 0.02, 0.05) < seeds_needed(0.04, 0.04, 0.05) < seeds_needed(0.08, 0.08, 0.05)

@@ -9,7 +9,7 @@ from tensordict import TensorDict
 from torchrl.modules import MLP
 from torchrl.objectives import SoftUpdate
 
-from torchrl_csirl.launch import csirl
+from torchrl_csirl.methods import csirl
 from torchrl_csirl.modules import (
     LearnerPrecision,
     PrecisionUnsupported,

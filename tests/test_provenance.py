@@ -13,7 +13,7 @@ import pytest
 from omegaconf import OmegaConf
 from test_recipe import TINY
 
-from torchrl_csirl.launch import provenance
+from torchrl_csirl.run import provenance
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 #: test_record_runs.py's tiny budget: 2 rounds of 100 frames, 10 updates a batch

@@ -13,7 +13,8 @@ import pytest
 import torch
 from omegaconf import OmegaConf
 
-from torchrl_csirl.launch import assembly, builders, config, csirl, run
+from torchrl_csirl.methods import csirl
+from torchrl_csirl.run import assembly, builders, config, run
 from torchrl_csirl.trainers import (
     TrainingDivergedError,
     load_checkpoint,
@@ -120,8 +121,8 @@ def test_watch_films_the_final_evaluation_episodes(full_run, tmp_path):
 
 
 def test_saved_policy_rolls_out_in_two_lines(full_run):
-    from torchrl_csirl.envs import make_env
     from torchrl_csirl.modules import load_policy
+    from torchrl_csirl.tasks import make_env
 
     policy = load_policy(full_run["run_dir"])
     rollout = make_env(policy.metadata["scenario"], seed=0).rollout(10, policy)
@@ -239,7 +240,7 @@ def test_fixed_subgoal_switch_keeps_the_subgoal_at_the_last_curriculum_state(tmp
 
 
 def test_matching_scale_defaults_to_the_scenario_and_can_be_overridden(tmp_path):
-    from torchrl_csirl.envs import SCENARIOS
+    from torchrl_csirl.tasks import SCENARIOS
 
     spec = SCENARIOS["merge"]
     curriculum = torch.zeros(5, spec.obs_dim)
@@ -640,9 +641,9 @@ def test_meta_gradient_balance_of_a_trained_run(full_run):
 
 
 def test_policy_outcomes_reports_outcomes_and_speeds_and_splits_merge_by_the_traffic_ahead(tmp_path, capsys):
-    from torchrl_csirl.envs import SCENARIOS, make_env
     from torchrl_csirl.modules import make_actor, save_policy
     from torchrl_csirl.scripts import driving_outcomes
+    from torchrl_csirl.tasks import SCENARIOS, make_env
 
     def saved(scenario):
         spec = SCENARIOS[scenario]
@@ -770,7 +771,7 @@ def test_help_lists_every_key_with_what_it_accepts():
 
 
 def test_method_registry_reads_each_method_with_its_recipe_schema():
-    from torchrl_csirl.launch import known_methods, load_config_for
+    from torchrl_csirl.run import known_methods, load_config_for
 
     assert {"csirl", "csirl-b"} <= set(known_methods())
     cfg = load_config_for("csirl-b")(["preset=paper"])
@@ -781,7 +782,7 @@ def test_method_registry_reads_each_method_with_its_recipe_schema():
 def test_main_threads_hold_from_the_runs_first_step(tmp_path):
     """``collector.main_threads`` reaches the work before the collector starts (an actor's warm start): two runs
     sharing two cores with one thread each, but a warm start on torch's default threads, spin in OpenMP."""
-    from torchrl_csirl.launch import lifecycle
+    from torchrl_csirl.run import lifecycle
 
     cfg = csirl.load_config(["collector.main_threads=1", f"logger.output_dir={tmp_path}", "logger.exp_name=threads"])
     seen = []

@@ -1,4 +1,4 @@
-"""Every recipe is registered once (:mod:`torchrl_csirl.launch.recipes`) with its schemas, which describe every
+"""Every recipe is registered once (:mod:`torchrl_csirl.run.recipes`) with its schemas, which describe every
 key; each training script runs its registered recipe; the task's family picks the schema."""
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import os
 import pytest
 
 import torchrl_csirl.scripts
-from torchrl_csirl.launch import config, recipe_for, recipe_schemas, registered_recipes
+from torchrl_csirl.run import config, recipe_for, recipe_schemas, registered_recipes
 
 SCRIPTS = os.path.dirname(torchrl_csirl.scripts.__file__)
 
@@ -49,14 +49,14 @@ def test_a_method_belongs_to_one_recipe_and_an_unknown_one_is_named():
 
 
 def test_the_glue_finds_the_recipes_preset_config_group():
-    from torchrl_csirl.launch import csirl
+    from torchrl_csirl.methods import csirl
 
     assert config.preset_names(csirl.CONFIG_DIR) == ("default", "paper")
     assert csirl.load_config(["preset=paper"]).preset == "paper"
 
 
 def test_every_task_has_the_published_procedure_as_a_preset():
-    from torchrl_csirl.launch import csirl
+    from torchrl_csirl.methods import csirl
 
     assert config.preset_names(csirl.TASK_CONFIG_DIR) == ("default", "paper")
     load = recipe_for("csirl").load_config
@@ -77,7 +77,7 @@ def test_every_task_has_the_published_procedure_as_a_preset():
 
 
 def test_a_scenarios_own_defaults_go_under_the_preset_and_the_command_line(tmp_path):
-    from torchrl_csirl.launch import csirl
+    from torchrl_csirl.methods import csirl
 
     scenes = config.scene_defaults(csirl.CONFIG_DIR)
     assert "intersection" in scenes and "merge" not in scenes
@@ -102,8 +102,8 @@ def test_a_scenarios_own_defaults_go_under_the_preset_and_the_command_line(tmp_p
 def test_a_tasks_own_defaults_apply_to_that_task_alone_and_go_under_the_command_line():
     """``config/csirl_task/scene/<task>.yaml`` for the tasks outside the driving schema: the HalfCheetah trains
     without expert transitions (docs/studies/outside-driving.md), by either spelling of its name."""
-    from torchrl_csirl.launch import csirl
-    from torchrl_csirl.launch.recipes import recipe_for
+    from torchrl_csirl.methods import csirl
+    from torchrl_csirl.run.recipes import recipe_for
 
     tasks = config.scene_defaults(csirl.TASK_CONFIG_DIR)
     assert tasks["halfcheetah"] == {"replay_buffer.expert_fraction": 0.0}

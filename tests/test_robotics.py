@@ -8,17 +8,17 @@ import pytest
 import torch
 from torchrl.envs.utils import check_env_specs
 
-from torchrl_csirl.envs import TASKS, TaskSpec, make_env, make_gym_env, resolve_scenario
-from torchrl_csirl.envs.metrics import (
+from torchrl_csirl.tasks import TASKS, TaskSpec, make_env, make_gym_env, resolve_scenario
+from torchrl_csirl.tasks.metrics import (
     accomplish_rate_from_rollout,
     success_from_rollout,
 )
-from torchrl_csirl.envs.robotics import (
+from torchrl_csirl.tasks.robotics import (
     ROBOTICS_TASKS,
     maze_cell_route,
     route_remaining_length,
 )
-from torchrl_csirl.envs.robotics.tasks import AntMazeUMazeEnv, Route
+from torchrl_csirl.tasks.robotics.tasks import AntMazeUMazeEnv, Route
 
 ROBOTICS = ("antmaze-umaze", "relocate")
 
@@ -142,7 +142,7 @@ def test_headless_rendering():
 
 # ---------------------------------------------------------------------------------------------- DAPG expert
 def test_dapg_expert_solves_relocate_in_torchrl_rollouts():
-    from torchrl_csirl.envs.robotics.expert import DAPGRelocatePolicy
+    from torchrl_csirl.tasks.robotics.expert import DAPGRelocatePolicy
 
     policy = DAPGRelocatePolicy().as_tensordict_module()
     for seed in (10000, 10001):
@@ -156,7 +156,7 @@ def test_dapg_expert_solves_relocate_in_torchrl_rollouts():
 
 
 def test_dapg_weights_checked(tmp_path):
-    from torchrl_csirl.envs.robotics.expert import DAPG_POLICY_PATH, DAPGRelocatePolicy
+    from torchrl_csirl.tasks.robotics.expert import DAPG_POLICY_PATH, DAPGRelocatePolicy
 
     arrays = dict(np.load(DAPG_POLICY_PATH))
     arrays["w0"] = arrays["w0"][:, :20]

@@ -9,10 +9,10 @@ import torch
 from tensordict import TensorDict
 
 from torchrl_csirl._compat import gym_env_of
-from torchrl_csirl.envs import make_env
-from torchrl_csirl.envs.robotics import ROBOTICS_TASKS
 from torchrl_csirl.modules import make_actor, save_policy
 from torchrl_csirl.scripts import robotics_outcomes
+from torchrl_csirl.tasks import make_env
+from torchrl_csirl.tasks.robotics import ROBOTICS_TASKS
 
 
 def _saved(tmp_path, task: str) -> str:

@@ -9,12 +9,12 @@ import pytest
 from robotics_budget import TINY_ROBOTICS_RUN
 
 from torchrl_csirl.data import load_expert_demonstrations
-from torchrl_csirl.envs import resolve_scenario
-from torchrl_csirl.launch import builders
-from torchrl_csirl.launch.config import ConfigError
-from torchrl_csirl.launch.csirl import CSIRL_RECIPE
-from torchrl_csirl.launch.run import ExpertDataError
+from torchrl_csirl.methods.csirl import CSIRL_RECIPE
+from torchrl_csirl.run import builders
+from torchrl_csirl.run.config import ConfigError
+from torchrl_csirl.run.run import ExpertDataError
 from torchrl_csirl.scripts import csirl_robotics
+from torchrl_csirl.tasks import resolve_scenario
 
 
 def load_robotics(overrides):

@@ -17,7 +17,7 @@ import pytest
 import torch
 from run_logs import metrics_rows
 
-from torchrl_csirl.launch.processes import run_cell_process, running_cells
+from torchrl_csirl.run.processes import run_cell_process, running_cells
 from torchrl_csirl.scripts import benchmark
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -74,7 +74,7 @@ def test_a_cell_runs_in_a_session_of_its_own(tmp_path):
 # first SIGTERM ("stop at once" on a second stop signal, as a recipe does) and the driver waits for it
 FAKE_SWEEP = textwrap.dedent("""
     import os, signal, sys, time
-    from torchrl_csirl.launch.processes import StopCellsOnSigterm, run_cell_process
+    from torchrl_csirl.run.processes import StopCellsOnSigterm, run_cell_process
     out = sys.argv[1]
     cell = ("import signal, sys, time\\n"
             "got = []\\n"

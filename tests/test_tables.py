@@ -1,7 +1,7 @@
 """The results tables of docs/benchmark.md and README.md against their records in docs/runs.
 
 Every cell is recomputed with the benchmark's own report code (``torchrl_csirl.scripts.benchmark``:
-``read_runs``, ``table_rows``, Welch's t and the verdict rule of ``torchrl_csirl.launch.verdicts``) and compared
+``read_runs``, ``table_rows``, Welch's t and the verdict rule of ``torchrl_csirl.analysis.verdicts``) and compared
 at the precision the page prints, so a figure cannot drift from the records it quotes.
 """
 from __future__ import annotations
@@ -36,7 +36,7 @@ def agrees(shown: tuple[float, float], value: float | None) -> bool:
 
 
 def difference_agrees(cell: str, row: dict) -> bool:
-    """A difference cell against its row (the verdict rule, ``torchrl_csirl.launch.verdicts``): ``d (t x)`` in bold
+    """A difference cell against its row (the verdict rule, ``torchrl_csirl.analysis.verdicts``): ``d (t x)`` in bold
     beyond seed noise, else ``d (t x; detectable m)`` with the minimum detectable difference."""
     shown = numbers(cell)
     if cell.startswith("**") != row["vs_csirl_beyond_noise"] or len(shown) != (2 if row["vs_csirl_beyond_noise"] else 3):

@@ -380,7 +380,7 @@ def test_matching_reward_reads_the_subgoal_of_its_owner():
 
 def test_path_rule_measures_progress_along_the_route_and_does_not_pay_cutting_a_corner():
     from torchrl_csirl.data import curriculum_trajectory
-    from torchrl_csirl.envs import SCENARIOS
+    from torchrl_csirl.tasks import SCENARIOS
 
     # a straight route: the same reward as "final"
     line = torch.arange(6.0).unsqueeze(-1)
@@ -444,7 +444,7 @@ def test_a_failed_termination_pays_back_the_progress_made():
 
 def test_a_crash_in_highway_fast_pays_back_the_progress_in_the_env():
     from torchrl_csirl.data import curriculum_trajectory
-    from torchrl_csirl.envs import FAILURE_KEYS, SCENARIOS, make_env
+    from torchrl_csirl.tasks import FAILURE_KEYS, SCENARIOS, make_env
 
     spec = SCENARIOS["highway-fast"]
     expert = curriculum_trajectory("highway-fast")["observation"]

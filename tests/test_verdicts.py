@@ -1,4 +1,4 @@
-"""torchrl_csirl.launch.verdicts: the one rule for verdict words, against values computed once independently.
+"""torchrl_csirl.analysis.verdicts: the one rule for verdict words, against values computed once independently.
 
 SciPy is not a dependency; the reference values below were computed once with mpmath at 30 digits (the t
 distribution's CDF as the regularized incomplete beta function, quantiles by root finding), the values
@@ -10,7 +10,7 @@ import math
 
 import pytest
 
-from torchrl_csirl.launch.verdicts import (
+from torchrl_csirl.analysis.verdicts import (
     BEYOND_NOISE,
     NO_DIFFERENCE,
     compare_family,

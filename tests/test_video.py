@@ -12,17 +12,17 @@ import torch
 from omegaconf import OmegaConf
 from PIL import Image
 
-from torchrl_csirl.launch.config import ConfigError
-from torchrl_csirl.launch.csirl import CSIRL_RECIPE
-from torchrl_csirl.modules import make_actor, save_policy
-from torchrl_csirl.scripts import watch
-from torchrl_csirl.visualization import VideoError, write_video
-from torchrl_csirl.visualization.filmstrip import PANEL_PX, filmstrip_steps
-from torchrl_csirl.visualization.video import (
+from torchrl_csirl.analysis.visualization import VideoError, write_video
+from torchrl_csirl.analysis.visualization.filmstrip import PANEL_PX, filmstrip_steps
+from torchrl_csirl.analysis.visualization.video import (
     frame_stride,
     make_render_env,
     video_format_available,
 )
+from torchrl_csirl.methods.csirl import CSIRL_RECIPE
+from torchrl_csirl.modules import make_actor, save_policy
+from torchrl_csirl.run.config import ConfigError
+from torchrl_csirl.scripts import watch
 
 RECIPES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "recipes")
 
@@ -55,7 +55,7 @@ def test_bad_frames_and_formats_are_refused(tmp_path):
 
 
 def test_a_machine_that_cannot_render_says_what_to_install(monkeypatch):
-    import torchrl_csirl.envs as envs
+    import torchrl_csirl.tasks as envs
 
     def no_gl(*args, **kwargs):
         raise AttributeError("'NoneType' object has no attribute 'eglQueryString'")
@@ -69,7 +69,7 @@ def _pendulum_without_render_mode(**overrides):
     """A user's env factory that takes no ``render_mode`` (what a plain ``gym.Env`` subclass often is)."""
     if overrides:
         raise TypeError(f"_pendulum_without_render_mode() got an unexpected keyword argument {next(iter(overrides))!r}")
-    from torchrl_csirl.envs import make_gymnasium_env
+    from torchrl_csirl.tasks import make_gymnasium_env
 
     return make_gymnasium_env("Pendulum-v1", "none")
 
@@ -77,8 +77,8 @@ def _pendulum_without_render_mode(**overrides):
 def test_an_env_without_render_mode_is_named_as_the_cause_and_its_run_has_videos_off(tmp_path, capsys):
     from types import SimpleNamespace
 
-    from torchrl_csirl.envs import TaskSpec, register_task
-    from torchrl_csirl.launch.video import film_final_episode
+    from torchrl_csirl.run.video import film_final_episode
+    from torchrl_csirl.tasks import TaskSpec, register_task
 
     spec = TaskSpec(name="pendulum-no-render", obs_dim=3, action_dim=1, max_steps=200, finish_position=None,
                     ego_feature_indices=(0, 1, 2), position_feature_indices=(0, 1), matching_scale=1.0)
@@ -102,7 +102,7 @@ def _run_dir(tmp_path, task="relocate", policy=True):
     cfg = CSIRL_RECIPE.load_config([f"env.task={task}", "eval.seed=7"])
     OmegaConf.save(cfg, run_dir / "config.yaml")
     if policy:
-        from torchrl_csirl.envs import resolve_scenario
+        from torchrl_csirl.tasks import resolve_scenario
 
         spec = resolve_scenario(task)
         torch.manual_seed(0)
@@ -152,7 +152,7 @@ def test_locomotion_pictures_follow_the_body():
     model's ``track`` camera."""
     import mujoco
 
-    from torchrl_csirl.envs import make_env
+    from torchrl_csirl.tasks import make_env
 
     env = make_env("halfcheetah", render_mode="rgb_array")
     renderer = env._env.unwrapped.mujoco_renderer
@@ -187,7 +187,7 @@ def test_headless_pictures_draw_without_an_sdl_error():
     ``error: XDG_RUNTIME_DIR is invalid``): the package picks SDL's offscreen driver."""
     env = {k: v for k, v in os.environ.items()
            if k not in ("DISPLAY", "WAYLAND_DISPLAY", "SDL_VIDEODRIVER", "XDG_RUNTIME_DIR")}
-    code = ("from torchrl_csirl.envs import make_env; "
+    code = ("from torchrl_csirl.tasks import make_env; "
             "env = make_env('merge', render_mode='rgb_array'); env.reset(); "
             "image = env.render(); print(image.shape, float(image.std()))")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=False,

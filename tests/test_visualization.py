@@ -1,4 +1,4 @@
-"""Tests of torchrl_csirl.visualization: PNGs written, sizes, headless scene and its pixel mapping."""
+"""Tests of torchrl_csirl.analysis.visualization: PNGs written, sizes, headless scene and its pixel mapping."""
 from __future__ import annotations
 
 import matplotlib
@@ -7,21 +7,21 @@ import pytest
 import torch
 from PIL import Image
 
-from torchrl_csirl.curriculum import scan_subgoal
-from torchrl_csirl.data import load_expert_demonstrations
-from torchrl_csirl.envs import SCENARIOS, make_gym_env
-from torchrl_csirl.visualization import (
+from torchrl_csirl.analysis.visualization import (
     plot_learning_curve,
     plot_method_curves,
     plot_subgoal_curriculum,
     render_curriculum,
 )
-from torchrl_csirl.visualization.scene import (
+from torchrl_csirl.analysis.visualization.scene import (
     EGO_COLOR,
     ego_positions,
     render_scene,
     world_to_pixel,
 )
+from torchrl_csirl.curriculum import scan_subgoal
+from torchrl_csirl.data import load_expert_demonstrations
+from torchrl_csirl.tasks import SCENARIOS, make_gym_env
 
 
 def _png_size(path) -> tuple[int, int]:
@@ -67,7 +67,7 @@ def test_learning_curve_leaves_the_backend_alone(tmp_path):
 @pytest.mark.parametrize("with_curve", [True, False], ids=["curve", "references-only"])
 def test_method_curves_frame_axis(tmp_path, monkeypatch, with_curve):
     """Reference lines alone (records without evaluation logs) get no frame axis to misread."""
-    import torchrl_csirl.visualization.curves as curves_module
+    import torchrl_csirl.analysis.visualization.curves as curves_module
 
     figures = []
     save_png = curves_module.save_png
@@ -86,7 +86,7 @@ def test_method_curves_frame_axis(tmp_path, monkeypatch, with_curve):
 def test_return_curves_keep_their_values_and_references_in_view(tmp_path, monkeypatch):
     """``rate=False`` (returns): the axis follows the data, the reference lines included (a reference loop
     variable once shadowed ``rate`` and clipped every return figure with references to [0, 1])."""
-    import torchrl_csirl.visualization.curves as curves_module
+    import torchrl_csirl.analysis.visualization.curves as curves_module
 
     figures = []
     save_png = curves_module.save_png
@@ -205,7 +205,7 @@ def test_render_curriculum_without_subgoals_and_bad_index(tmp_path):
 
 def test_a_method_keeps_its_colour_from_figure_to_figure(tmp_path, monkeypatch):
     """With ``method_order`` a method's colour is its place in that order, whichever other methods a figure holds."""
-    import torchrl_csirl.visualization.curves as curves_module
+    import torchrl_csirl.analysis.visualization.curves as curves_module
 
     figures = []
     save_png = curves_module.save_png

@@ -19,7 +19,7 @@ import pytest
 import torch
 
 from torchrl_csirl.data import record_demonstrations
-from torchrl_csirl.envs import make_gymnasium_task
+from torchrl_csirl.tasks import make_gymnasium_task
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RECIPE = os.path.join(REPO, "recipes", "imitation_robotics.py")
@@ -189,7 +189,7 @@ def test_a_worker_failing_to_start_stops_the_run_in_one_line(user_dir):
 
 def test_env_factory_imports_the_task_modules_in_a_worker(user_dir, monkeypatch):
     """What a spawned worker runs: the module that registers the gymnasium id imported before the build."""
-    from torchrl_csirl.envs import env_factory, import_task_module, registry
+    from torchrl_csirl.tasks import env_factory, import_task_module, registry
 
     monkeypatch.chdir(user_dir)
     monkeypatch.setattr(registry, "_TASK_MODULES", {})

@@ -167,7 +167,7 @@ _PARALLEL_ENV_STARTED_NAMES = ("_use_buffers", "_shm_done_flags", "_worker_indic
 
 
 def check_parallel_env_internals(env: ParallelEnv | None = None) -> None:
-    """The ParallelEnv internals :class:`~torchrl_csirl.envs.YieldingParallelEnv` relies on.
+    """The ParallelEnv internals :class:`~torchrl_csirl.tasks.YieldingParallelEnv` relies on.
 
     Class level (checked at import): ``_wait_for_workers(workers_range)``, ``_shutdown_workers``.
     With a started ``env``: ``_use_buffers``, ``_shm_done_flags`` (one flag per worker, set by a
@@ -187,7 +187,7 @@ def gym_env_of(env: EnvBase) -> Any:
     """The gymnasium env a TorchRL ``GymEnv`` / ``GymWrapper`` wraps (no public accessor in 0.14.1).
 
     Examples:
-        >>> from torchrl_csirl.envs import make_env
+        >>> from torchrl_csirl.tasks import make_env
         >>> env = make_env("merge")
         >>> type(gym_env_of(env).unwrapped).__name__
         'CSIRLMergeEnv'

@@ -1,6 +1,6 @@
 """A hyperparameter declared once: its default, the values it accepts and a one-line help.
 
-:func:`option` is how a dataclass field of the configuration (:mod:`torchrl_csirl.launch.config`)
+:func:`option` is how a dataclass field of the configuration (:mod:`torchrl_csirl.run.config`)
 or of a learner's hyperparameters (:mod:`torchrl_csirl.hyperparameters`) is declared. This module
 imports nothing of the package, so that both can use it.
 """
@@ -14,7 +14,7 @@ __all__ = ["option"]
 
 def option(default: Any, *, choices: tuple | None = None, minimum: float | None = None,
            above: float | None = None, below: float | None = None, help: str = "") -> Any:
-    """A schema leaf: its default and what values :func:`~torchrl_csirl.launch.config.validate` accepts.
+    """A schema leaf: its default and what values :func:`~torchrl_csirl.run.config.validate` accepts.
 
     Args:
         default: the default value (its type comes from the field's annotation).
@@ -23,7 +23,7 @@ def option(default: Any, *, choices: tuple | None = None, minimum: float | None 
         minimum: the smallest allowed value (inclusive).
         above: values must be strictly greater.
         below: values must be strictly smaller.
-        help: one line shown by :func:`~torchrl_csirl.launch.config.describe` (``--help``).
+        help: one line shown by :func:`~torchrl_csirl.run.config.describe` (``--help``).
 
     Examples:
         >>> from dataclasses import dataclass, fields

@@ -15,4 +15,4 @@ __all__ = ["EXPERTS_DIR"]
 EXPERTS_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "data", "experts")
 """Folder of the shipped expert files: demonstrations (``<task>/<curriculum>_25.npz``,
 :mod:`torchrl_csirl.data.shipped`) and the robotics experts' weights (``relocate/``,
-``antmaze-umaze/``, :mod:`torchrl_csirl.envs.robotics`)."""
+``antmaze-umaze/``, :mod:`torchrl_csirl.tasks.robotics`)."""

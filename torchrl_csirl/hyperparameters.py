@@ -1,10 +1,10 @@
 """CSIRL's hyperparameters, each declared once: its default, the values it accepts, what it does.
 
 * :class:`CSIRLHyperparameters` (:data:`CSIRL_DEFAULTS`): the method's own settings, the ``csirl``
-  section of the recipes' configuration (:class:`torchrl_csirl.launch.csirl.CSIRLConfig` is this
+  section of the recipes' configuration (:class:`torchrl_csirl.methods.csirl.CSIRLConfig` is this
   dataclass, as the baselines' ``sac`` section is :class:`~torchrl_csirl.objectives.SACHyperparameters`).
 * :class:`CSIRLOptimHyperparameters` (:data:`CSIRL_OPTIM_DEFAULTS`): how it is optimised, the ``optim``
-  section (:class:`torchrl_csirl.launch.config.OptimConfig`).
+  section (:class:`torchrl_csirl.run.config.OptimConfig`).
 
 The building blocks read their keyword defaults from here: :func:`~torchrl_csirl.objectives.make_csirl_learner`,
 :class:`~torchrl_csirl.objectives.EnsembleSACLoss`, :class:`~torchrl_csirl.objectives.MetaRewardLoss`

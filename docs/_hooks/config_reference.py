@@ -2,16 +2,16 @@
 
 A page asks for a schema's table with a marker on a line of its own::
 
-    <!-- config-reference: torchrl_csirl.launch.csirl:CSIRLHighwayConfig -->
+    <!-- config-reference: torchrl_csirl.methods.csirl:CSIRLHighwayConfig -->
 
-``module:Class`` is imported (the schemas live in :mod:`torchrl_csirl.launch`) and replaced by a
+``module:Class`` is imported (the schemas live in :mod:`torchrl_csirl.run`) and replaced by a
 table of every key: its type and allowed values, its default and its help, read from the
-dataclasses by ``torchrl_csirl.launch.config.describe_rows`` — the same
+dataclasses by ``torchrl_csirl.run.config.describe_rows`` — the same
 function behind every script's ``--help``, so the page can never drift from the code.
 
-``<!-- scene-defaults: torchrl_csirl.launch.csirl -->`` is replaced by the table of the scenarios' own defaults
+``<!-- scene-defaults: torchrl_csirl.methods.csirl -->`` is replaced by the table of the scenarios' own defaults
 (``scene/<scenario>.yaml`` under that module's ``CONFIG_DIR``, or under another folder it names:
-``torchrl_csirl.launch.csirl:TASK_CONFIG_DIR``), read by ``torchrl_csirl.launch.config.scene_defaults``.
+``torchrl_csirl.methods.csirl:TASK_CONFIG_DIR``), read by ``torchrl_csirl.run.config.scene_defaults``.
 """
 from __future__ import annotations
 
@@ -33,7 +33,7 @@ def _import(module: str):
 def config_table(module: str, name: str) -> str:
     """The Markdown table of every key of ``module:name``."""
     schema = getattr(_import(module), name)
-    from torchrl_csirl.launch.config import describe_rows
+    from torchrl_csirl.run.config import describe_rows
 
     rows = ["| key | default | accepts | meaning |", "|---|---|---|---|"]
     for row in describe_rows(schema):
@@ -43,7 +43,7 @@ def config_table(module: str, name: str) -> str:
 
 def scene_table(module: str, folder: str | None = None) -> str:
     """The Markdown table of the scenario defaults under ``module.CONFIG_DIR`` (or ``module.<folder>``)."""
-    from torchrl_csirl.launch.config import scene_defaults
+    from torchrl_csirl.run.config import scene_defaults
 
     rows = ["| scenario | its defaults |", "|---|---|"]
     for scenario, values in scene_defaults(getattr(_import(module), folder or "CONFIG_DIR")).items():

@@ -64,7 +64,7 @@ def _minari_root(root: str | os.PathLike | None) -> Iterator[None]:
 
 
 def _task_dims(task: Any) -> tuple[str, int, int]:
-    from torchrl_csirl.envs import resolve_scenario
+    from torchrl_csirl.tasks import resolve_scenario
 
     spec = resolve_scenario(task)
     return spec.name, spec.obs_dim, spec.action_dim
@@ -154,8 +154,8 @@ def save_minari_dataset(
     env_spec = None
     if task is not None:
         check_dimensions(demos.observation_dim, demos.action_dim, task, "the demonstrations")
-        from torchrl_csirl.envs import resolve_scenario
-        from torchrl_csirl.envs.scenarios import register_scenarios
+        from torchrl_csirl.tasks import resolve_scenario
+        from torchrl_csirl.tasks.catalog import register_scenarios
 
         register_scenarios()
         env_spec = _task_env_spec(resolve_scenario(task))
@@ -191,7 +191,7 @@ def _task_env_spec(spec: Any) -> Any:
 
     import gymnasium as gym
 
-    from torchrl_csirl.envs.locomotion import LOCOMOTION_GYM_IDS, LOCOMOTION_MAKE_KWARGS
+    from torchrl_csirl.tasks.locomotion import LOCOMOTION_GYM_IDS, LOCOMOTION_MAKE_KWARGS
 
     if spec.gym_id:
         return gym.spec(spec.gym_id)

@@ -200,14 +200,14 @@ class _SceneTermination:
     """
 
     def __init__(self, scenario: str) -> None:
-        from torchrl_csirl.envs import resolve_scenario
+        from torchrl_csirl.tasks import resolve_scenario
 
         self.spec = resolve_scenario(scenario)
         self._env = None
 
     def _road_env(self) -> Any:
         if self._env is None:
-            from torchrl_csirl.envs import make_gym_env
+            from torchrl_csirl.tasks import make_gym_env
 
             env = make_gym_env(self.spec.name)
             env.reset(seed=0)

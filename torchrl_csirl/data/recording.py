@@ -21,7 +21,7 @@ def record_demonstrations(task: str, policy: Callable[[TensorDictBase], TensorDi
 
     Args:
         task: a task name (built-in, registered, or a gymnasium id registered by
-            :func:`~torchrl_csirl.envs.make_gymnasium_task`).
+            :func:`~torchrl_csirl.tasks.make_gymnasium_task`).
         policy: ``policy(tensordict) -> tensordict`` writing ``"action"`` in ``[-1, 1]`` (a TorchRL
             actor, or a function of ``tensordict["observation"]``).
         episodes: how many to record (positive).
@@ -39,7 +39,7 @@ def record_demonstrations(task: str, policy: Callable[[TensorDictBase], TensorDi
         ValueError: ``episodes`` not positive, or too few episodes kept.
 
     Examples:
-        >>> from torchrl_csirl.envs import make_gymnasium_task
+        >>> from torchrl_csirl.tasks import make_gymnasium_task
         >>> _ = make_gymnasium_task("MountainCarContinuous-v0", features="0")
         >>> def pump(td):  # push the way the car moves: swings up to the flag
         ...     td["action"] = torch.where(td["observation"][..., 1:] >= 0, 1.0, -1.0)
@@ -52,7 +52,7 @@ def record_demonstrations(task: str, policy: Callable[[TensorDictBase], TensorDi
         ...
         ValueError: MountainCarContinuous-v0: only 0 of 1 episodes earned at least 1000.0 in 10 tries.
     """
-    from torchrl_csirl.envs import episode_success, make_env, resolve_scenario
+    from torchrl_csirl.tasks import episode_success, make_env, resolve_scenario
 
     if episodes < 1:
         raise ValueError(f"episodes must be positive, got {episodes}.")

@@ -54,8 +54,8 @@ def task_curricula() -> dict[str, tuple[str, ...]]:
         >>> task_curricula()["merge"], task_curricula()["relocate"]
         (('empty', 'traffic'), ('expert',))
     """
-    from torchrl_csirl.envs.expert_registry import expert_tasks
-    from torchrl_csirl.envs.registry import task_names
+    from torchrl_csirl.tasks.experts import expert_tasks
+    from torchrl_csirl.tasks.registry import task_names
 
     driving = task_names(family="driving")
     return {**{name: CURRICULA for name in driving}, **{name: ("expert",) for name in expert_tasks() if name not in driving}}
@@ -63,7 +63,7 @@ def task_curricula() -> dict[str, tuple[str, ...]]:
 
 def available_expert_datasets() -> dict[str, list[str]]:
     """Task -> curricula for which a shipped file exists (a gymnasium id's, PointMaze's, once it is a task:
-    :func:`~torchrl_csirl.envs.make_gymnasium_task`).
+    :func:`~torchrl_csirl.tasks.make_gymnasium_task`).
 
     Examples:
         >>> datasets = available_expert_datasets()

@@ -66,7 +66,7 @@ def load_policy(path: str | os.PathLike,
 
     ``lane_centres(scenario)`` supplies the road's lane points to a policy whose
     :class:`~torchrl_csirl.modules.LaneFeatures` were saved by scenario name only (saved before the
-    points were stored with them): pass :func:`torchrl_csirl.envs.sample_lane_centres`.
+    points were stored with them): pass :func:`torchrl_csirl.tasks.sample_lane_centres`.
 
     Raises:
         FileNotFoundError: no policy file at ``path``.

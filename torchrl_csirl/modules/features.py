@@ -87,13 +87,13 @@ class EgoRelativeFeatures(nn.Module):
     @classmethod
     def from_scenario(cls, spec: Any, reference: Mapping[str, float] = RELATIVE_REFERENCE,
                       clip: float = 5.0) -> EgoRelativeFeatures:
-        """The module for a scenario's observation layout (a :class:`~torchrl_csirl.envs.ScenarioSpec`).
+        """The module for a scenario's observation layout (a :class:`~torchrl_csirl.tasks.ScenarioSpec`).
 
         The gain of feature ``f`` turns its normalised unit (half its range) into units of
         ``reference[f]``, and is never below 1.
 
         Examples:
-            >>> from torchrl_csirl.envs import SCENARIOS
+            >>> from torchrl_csirl.tasks import SCENARIOS
             >>> feats = EgoRelativeFeatures.from_scenario(SCENARIOS["merge"])
             >>> feats.gains, feats.out_features
             ((25.0, 1.0, 8.0, 8.0), 41)
@@ -257,7 +257,7 @@ class FeatureChain(nn.Sequential):
     """Parameter-free input maps applied one after the other.
 
     Examples:
-        >>> from torchrl_csirl.envs import SCENARIOS
+        >>> from torchrl_csirl.tasks import SCENARIOS
         >>> chain = make_input_features(SCENARIOS["roundabout"], ego_relative=True, lane=True)
         >>> type(chain).__name__, chain.in_features, chain.out_features
         ('FeatureChain', 35, 54)
@@ -281,12 +281,12 @@ def make_input_features(spec: Any, ego_relative: bool = True, lane: bool = False
     where the task hides entries (``spec.hidden_feature_indices``); ``None`` for none of them.
 
     Examples:
-        >>> from torchrl_csirl.envs import SCENARIOS
+        >>> from torchrl_csirl.tasks import SCENARIOS
         >>> make_input_features(SCENARIOS["merge"], ego_relative=False) is None
         True
         >>> make_input_features(SCENARIOS["merge"], ego_relative=False, lane=True).out_features  # + lateral offset
         26
-        >>> from torchrl_csirl.envs import resolve_scenario
+        >>> from torchrl_csirl.tasks import resolve_scenario
         >>> make_input_features(resolve_scenario("hopper"), ego_relative=False)  # x hidden
         DropFeatures(in_features=12, hidden=[0])
     """

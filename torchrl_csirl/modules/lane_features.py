@@ -8,7 +8,7 @@ the road"). :class:`LaneFeatures` appends what a driver sees directly: the signe
 from the nearest lane centre line of the scene, in half lane widths, and, where the observation
 has the ego's heading, the heading relative to that lane. The road of each scenario is fixed, so
 the centre lines are sampled once from highway-env's road network
-(:func:`torchrl_csirl.envs.sample_lane_centres`, through the scenario's spec) and saved with the
+(:func:`torchrl_csirl.tasks.sample_lane_centres`, through the scenario's spec) and saved with the
 module; the module has no parameters and reads only the observation (demonstrations need nothing new).
 """
 from __future__ import annotations
@@ -35,7 +35,7 @@ class LaneFeatures(nn.Module):
 
     Args:
         centres: ``(P, 4)`` centre-line points: x, y, heading, half width
-            (:func:`torchrl_csirl.envs.sample_lane_centres`).
+            (:func:`torchrl_csirl.tasks.sample_lane_centres`).
         obs_dim (int): size of the observation (the input's first entries).
         x_index (int): the ego's normalised x in the observation.
         y_index (int): the ego's normalised y in the observation.
@@ -91,12 +91,12 @@ class LaneFeatures(nn.Module):
 
     @classmethod
     def from_scenario(cls, spec: Any, in_features: int | None = None, clip: float = 3.0) -> LaneFeatures:
-        """The module for a driving scenario (a :class:`~torchrl_csirl.envs.ScenarioSpec`): its road's centre lines
+        """The module for a driving scenario (a :class:`~torchrl_csirl.tasks.ScenarioSpec`): its road's centre lines
         (``spec.lane_centres()``) and its observation layout (the heading where the scenario observes
         ``cos_h``, ``sin_h``).
 
         Examples:
-            >>> from torchrl_csirl.envs import SCENARIOS
+            >>> from torchrl_csirl.tasks import SCENARIOS
             >>> feats = LaneFeatures.from_scenario(SCENARIOS["roundabout"])
             >>> feats.in_features, feats.out_features
             (35, 38)
@@ -134,7 +134,7 @@ class LaneFeatures(nn.Module):
 
         A config saved with the scenario's name and no points (policies saved before the points
         were stored) takes them from ``lane_centres(scenario)``, e.g.
-        :func:`torchrl_csirl.envs.sample_lane_centres`.
+        :func:`torchrl_csirl.tasks.sample_lane_centres`.
 
         Raises:
             ValueError: no points in ``config`` and no ``lane_centres``.
@@ -144,7 +144,7 @@ class LaneFeatures(nn.Module):
             if lane_centres is None:
                 raise ValueError(
                     f"these lane features were saved with the name of their scenario ({config.get('scenario')}) "
-                    "and not their points; pass lane_centres=torchrl_csirl.envs.sample_lane_centres to rebuild them.")
+                    "and not their points; pass lane_centres=torchrl_csirl.tasks.sample_lane_centres to rebuild them.")
             config["centres"] = lane_centres(config["scenario"])
         return cls(**config)
 

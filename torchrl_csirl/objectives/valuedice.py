@@ -79,7 +79,7 @@ class ValueDICEHyperparameters(AbsorbingStateSettings):
             standard deviation (+ 1e-3), and the gradient penalty is measured in them: the authors'
             code's default (on MuJoCo). Off by default: the driving observations come scaled to
             [-1, 1] by highway-env and are read through maps of the raw rows; the locomotion cells
-            turn it on (``TASK_OVERRIDES`` of :mod:`torchrl_csirl.benchmark.plan`). Read by the recipes' network
+            turn it on (``TASK_OVERRIDES`` of :mod:`torchrl_csirl.sweep.plan`). Read by the recipes' network
             builder (:func:`~torchrl_csirl.modules.with_standardization`).
         max_grad_norm: gradient-norm clipping (None: none).
         exploration_noise: how the collector acts. None (default): it samples from the policy, as every

@@ -18,8 +18,8 @@ import torch
 from tensordict import TensorDictBase
 from torchrl.envs import EnvBase, ExplorationType, set_exploration_type
 
-from torchrl_csirl.envs import make_env, resolve_scenario, sample_lane_centres
 from torchrl_csirl.modules import load_policy, make_actor, make_input_features
+from torchrl_csirl.tasks import make_env, resolve_scenario, sample_lane_centres
 
 __all__ = ["first_crash_step", "format_cell", "load_actor", "load_test_policy", "mean_or_none", "policy_episodes",
            "roll_test_episodes"]
@@ -81,6 +81,7 @@ def roll_test_episodes(policy, task: str, episodes: int, seed: int, max_steps: i
 
     Examples:
         >>> from torchrl_csirl.modules import make_actor
+        >>> _ = torch.manual_seed(0)  # the actor's initial weights
         >>> [r.shape[-1] for _, r, _ in roll_test_episodes(make_actor(25, 2), "merge", 2, 0, max_steps=3)]
         [3, 3]
     """

@@ -20,7 +20,7 @@ existing Ray cluster (``ray start --head`` on it first); ``--max-concurrent`` an
 ``--cpus-per-trial`` size the trials. Ctrl-C or SIGTERM to the sweep (its pid: ``<output-dir>/logs/sweep.pid``)
 stops it without losing work: each running cell gets SIGTERM (it checkpoints at its next batch boundary) and the
 sweep exits (status 130, 143) once they have, naming the command that continues it: the same one (local Ray, Linux:
-:mod:`torchrl_csirl.launch.processes`).
+:mod:`torchrl_csirl.run.processes`).
 
 Write the table (method rows x scenario columns, expert-normalised accomplish rate mean +- std over
 seeds, the paper's Table I beside it; on the robotics tasks the test return, the paper's metric
@@ -29,7 +29,7 @@ Figures 6 and 7)::
 
     python recipes/benchmark.py report runs/benchmark [more folders or run dirs] [--out runs/benchmark/report]
 
-See docs/benchmark.md. The parts, one concern a module, are :mod:`torchrl_csirl.benchmark`'s (published numbers,
+See docs/benchmark.md. The parts, one concern a module, are :mod:`torchrl_csirl.sweep`'s (published numbers,
 plan, runner, results, report, curves); this module is the command line and keeps their names importable from here.
 """
 from __future__ import annotations
@@ -39,8 +39,9 @@ import json
 import os
 import sys
 
-from torchrl_csirl.benchmark.curves import LEARNER_ORDER, curve_kinds, evaluation_schedule, learning_curve_figures
-from torchrl_csirl.benchmark.plan import (
+from torchrl_csirl.run.processes import SweepBusyError
+from torchrl_csirl.sweep.curves import LEARNER_ORDER, curve_kinds, evaluation_schedule, learning_curve_figures
+from torchrl_csirl.sweep.plan import (
     ABLATIONS,
     CSIRL_METHODS,
     CSIRL_RECIPE,
@@ -72,14 +73,14 @@ from torchrl_csirl.benchmark.plan import (
     split_overrides,
     table_overrides,
 )
-from torchrl_csirl.benchmark.published import (
+from torchrl_csirl.sweep.published import (
     PAPER_TABLE,
     PUBLISHED_EXPERTS,
     PUBLISHED_GAP,
     PUBLISHED_LOCOMOTION,
     published_gap,
 )
-from torchrl_csirl.benchmark.report import (
+from torchrl_csirl.sweep.report import (
     budget_caption,
     driving_tables,
     locomotion_tables,
@@ -88,7 +89,7 @@ from torchrl_csirl.benchmark.report import (
     robotics_tables,
     write_csv,
 )
-from torchrl_csirl.benchmark.results import (
+from torchrl_csirl.sweep.results import (
     add_comparison_to_csirl,
     add_normalized_returns,
     best_evaluation,
@@ -98,10 +99,9 @@ from torchrl_csirl.benchmark.results import (
     read_runs,
     table_rows,
 )
-from torchrl_csirl.benchmark.runner import run_cell, run_sweep, sweep_command
-from torchrl_csirl.launch.processes import SweepBusyError
+from torchrl_csirl.sweep.runner import run_cell, run_sweep, sweep_command
 
-#: the script's own functions, then the names of :mod:`torchrl_csirl.benchmark` it re-exports (tests, tools and
+#: the script's own functions, then the names of :mod:`torchrl_csirl.sweep` it re-exports (tests, tools and
 #: docs import them from here)
 __all__ = [
     "main", "report_main", "sweep_main",

@@ -79,9 +79,9 @@ def _script(name: str) -> Any:
 
 
 def _train(argv: list[str]) -> None:
-    from torchrl_csirl.launch.config import ConfigError
-    from torchrl_csirl.launch.recipes import known_methods, recipe_for
-    from torchrl_csirl.launch.run import run_script
+    from torchrl_csirl.run.config import ConfigError
+    from torchrl_csirl.run.recipes import known_methods, recipe_for
+    from torchrl_csirl.run.run import run_script
 
     method, rest = split_method(argv)
     try:
@@ -98,7 +98,7 @@ def _raise(error: BaseException) -> None:
 
 
 def _expert(argv: list[str]) -> None:
-    from torchrl_csirl.launch.run import run_script
+    from torchrl_csirl.run.run import run_script
 
     if argv[:1] == ["demos"]:
         _script("generate_experts").main(argv[1:])
@@ -113,14 +113,14 @@ def _benchmark(argv: list[str]) -> None:
 
 
 def _watch(argv: list[str]) -> None:
-    from torchrl_csirl.launch.run import run_script
-    from torchrl_csirl.visualization.video import VideoError
+    from torchrl_csirl.analysis.visualization.video import VideoError
+    from torchrl_csirl.run.run import run_script
 
     run_script(partial(_script("watch").main, argv), known_errors=(VideoError,))
 
 
 def _diagnose(argv: list[str]) -> None:
-    from torchrl_csirl.launch.run import run_script
+    from torchrl_csirl.run.run import run_script
 
     run_script(partial(_script("diagnose").main, argv))
 
@@ -133,7 +133,7 @@ def _exit_status(main: Callable[[list[str]], Any], argv: list[str]) -> None:
 
 def _analysis(argv: list[str], name: str) -> None:
     """A command reading runs or records (``record``, ``compare``, ...): errors in one line, as the others'."""
-    from torchrl_csirl.launch.run import run_script
+    from torchrl_csirl.run.run import run_script
 
     run_script(partial(_exit_status, _script(name.replace("-", "_")).main, argv))
 

@@ -3,7 +3,7 @@ and every difference of configuration and code between and within the two sets.
 
 For a change that should not move the results (``optim.precision=bf16`` against float32, a refactor)
 or that should (an ablation, another method): each side's runs are grouped by scenario, and each
-metric is compared seed set against seed set (second - first) with the rule of ``torchrl_csirl.launch.verdicts``:
+metric is compared seed set against seed set (second - first) with the rule of ``torchrl_csirl.analysis.verdicts``:
 "beyond seed noise" when Holm's correction across the metric's comparisons (``--comparisons``: the study section's
 count, when it holds more) leaves p < 0.05, else "no difference detected" with the smallest difference the test
 could have detected. Below the table, every configuration key (``config.yaml``) whose values differ between the two
@@ -40,10 +40,10 @@ from typing import Any
 
 from omegaconf import OmegaConf
 
-from torchrl_csirl.launch.config import flatten_config
-from torchrl_csirl.launch.provenance import code_fields, machine_fields, read_provenance
-from torchrl_csirl.launch.summaries import find_summaries, mean_std
-from torchrl_csirl.launch.verdicts import compare_family, compare_seeds, describe
+from torchrl_csirl.analysis.summaries import find_summaries, mean_std
+from torchrl_csirl.analysis.verdicts import compare_family, compare_seeds, describe
+from torchrl_csirl.run.config import flatten_config
+from torchrl_csirl.run.provenance import code_fields, machine_fields, read_provenance
 
 __all__ = ["compare", "differences", "main", "markdown", "one_change_refusal", "run_fields", "what_differs"]
 
@@ -71,7 +71,7 @@ def _methods(summaries: list[dict]) -> str:
 def compare(first: list[dict], second: list[dict], metrics: tuple[str, ...] = METRICS,
             by_scenario: bool = True, comparisons: int | None = None) -> list[dict]:
     """One row per (scenario, metric) both sides have: each side's methods, mean and std; the test of second - first
-    (``test``: :class:`~torchrl_csirl.launch.verdicts.SeedComparison`'s fields, None with fewer than two seeds on a
+    (``test``: :class:`~torchrl_csirl.analysis.verdicts.SeedComparison`'s fields, None with fewer than two seeds on a
     side), Holm's correction across the metric's rows, or, with ``comparisons`` larger than their number (the
     section's count), Holm's first step at that count.
 
@@ -106,10 +106,10 @@ def _cell(stats: dict[str, float]) -> str:
 
 
 def _verdict(test: dict | None) -> str:
-    """The row's test in the pages' words (:func:`~torchrl_csirl.launch.verdicts.describe`), ``—`` without one."""
+    """The row's test in the pages' words (:func:`~torchrl_csirl.analysis.verdicts.describe`), ``—`` without one."""
     if test is None:
         return "— (fewer than 2 seeds on a side)"
-    from torchrl_csirl.launch.verdicts import SeedComparison
+    from torchrl_csirl.analysis.verdicts import SeedComparison
 
     fields = {k: test[k] for k in ("difference", "t", "dof", "p", "p_holm", "comparisons", "detectable")}
     return describe(SeedComparison(**fields, n=tuple(test["n"])), fmt="+.3g")
@@ -129,7 +129,7 @@ def markdown(rows: list[dict], labels: tuple[str, str]) -> str:
 # ---------------------------------------------------------------------------------------- what differs
 def run_fields(run_dir: str, ignore: tuple[str, ...] = ()) -> dict[str, dict[str, Any] | None]:
     """A run's ``configuration`` (flat ``config.yaml``, :data:`NOT_A_CHANGE` and ``ignore`` left out), ``code``
-    (:func:`~torchrl_csirl.launch.provenance.code_fields`) and ``machine``; None where the run has no such file."""
+    (:func:`~torchrl_csirl.run.provenance.code_fields`) and ``machine``; None where the run has no such file."""
     skip = (*NOT_A_CHANGE, *ignore)
     config_path = os.path.join(run_dir, "config.yaml")
     configuration = None

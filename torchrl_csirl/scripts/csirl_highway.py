@@ -21,10 +21,10 @@ from __future__ import annotations
 
 import sys
 
-from torchrl_csirl.launch.config import help_requested, parse_command_line
-from torchrl_csirl.launch.csirl import CSIRL_RECIPE, CSIRLHighwayConfig  # noqa: F401 - the schema, for the docs
-from torchrl_csirl.launch.lifecycle import run_recipe
-from torchrl_csirl.launch.run import run_script, write_summary
+from torchrl_csirl.methods.csirl import CSIRL_RECIPE, CSIRLHighwayConfig  # noqa: F401 - the schema, for the docs
+from torchrl_csirl.run.config import help_requested, parse_command_line
+from torchrl_csirl.run.lifecycle import run_recipe
+from torchrl_csirl.run.run import run_script, write_summary
 
 __all__ = ["main"]
 

@@ -23,8 +23,8 @@ import argparse
 import json
 import sys
 
-from torchrl_csirl.benchmark.results import eval_curve
-from torchrl_csirl.visualization import plot_method_curves
+from torchrl_csirl.analysis.visualization import plot_method_curves
+from torchrl_csirl.sweep.results import eval_curve
 
 __all__ = ["common_frames", "group_curves", "main", "parse_reference"]
 

@@ -1,6 +1,6 @@
 """Why a run failed: ``python -m torchrl_csirl.scripts.diagnose <run dir> [--episodes 5]`` (``torchrl-csirl diagnose``).
 
-Writes the run's health report (:mod:`torchrl_csirl.diagnostics`) into its directory, ``health.json`` and
+Writes the run's health report (:mod:`torchrl_csirl.analysis.diagnostics`) into its directory, ``health.json`` and
 ``health.png``, and prints one line per check: ``FLAG`` (out of range, with what it means), ``ok``, or ``--``
 (the run gives too little to say). A CSIRL run is rebuilt from a copy of its configuration and last checkpoint
 (the run itself is not changed, nor resumed) and its networks probed: the critics against Monte Carlo
@@ -20,8 +20,8 @@ import tempfile
 
 from omegaconf import OmegaConf
 
-from torchrl_csirl.launch.config import ConfigError
-from torchrl_csirl.launch.run import run_script
+from torchrl_csirl.run.config import ConfigError
+from torchrl_csirl.run.run import run_script
 
 __all__ = ["diagnose", "main"]
 
@@ -32,7 +32,7 @@ def _is_csirl(run_dir: str) -> bool:
 
 def _action_dim(cfg) -> int | None:
     """The action size of a saved run's task (None: a task this process cannot resolve, e.g. an unimported module's)."""
-    from torchrl_csirl.envs import resolve_scenario
+    from torchrl_csirl.tasks import resolve_scenario
 
     try:
         return resolve_scenario(cfg.env.task).action_dim
@@ -55,8 +55,8 @@ def _final_test(run_dir: str) -> dict | None:
 
 def _rebuilt(run_dir: str, workdir: str):
     """The CSIRL run rebuilt from a copy of its configuration and last checkpoint (one in-process collector)."""
-    from torchrl_csirl.launch.csirl import CSIRL_RECIPE
-    from torchrl_csirl.launch.lifecycle import resume_run
+    from torchrl_csirl.methods.csirl import CSIRL_RECIPE
+    from torchrl_csirl.run.lifecycle import resume_run
 
     copy = os.path.join(workdir, "run")
     os.makedirs(copy)
@@ -73,7 +73,7 @@ def diagnose(run_dir: str, episodes: int = 5) -> dict[str, object]:
     Raises:
         ConfigError: one line, for a folder that is not a run (no ``config.yaml``) or a CSIRL run without a checkpoint.
     """
-    from torchrl_csirl.diagnostics import (
+    from torchrl_csirl.analysis.diagnostics import (
         HealthReport,
         check_line,
         policy_entropy,
@@ -97,7 +97,7 @@ def diagnose(run_dir: str, episodes: int = 5) -> dict[str, object]:
         return report.as_dict() | {"lines": report.lines()}
     if not os.path.isfile(os.path.join(run_dir, "checkpoints", "last", "state.pt")):
         raise ConfigError(f"diagnose {run_dir}: no checkpoint to probe (checkpoints/last/state.pt)")
-    from torchrl_csirl.launch.csirl import write_health
+    from torchrl_csirl.methods.csirl import write_health
 
     with tempfile.TemporaryDirectory() as workdir:
         run = _rebuilt(run_dir, workdir)

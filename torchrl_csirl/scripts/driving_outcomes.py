@@ -30,8 +30,8 @@ from collections import Counter, defaultdict
 import torch
 from torchrl.envs import EnvBase
 
-from torchrl_csirl.envs import SCENARIOS, ScenarioSpec, accomplish_rate_from_rollout, gym_env_of, success_from_rollout
 from torchrl_csirl.scripts._policy_rollouts import format_cell, load_test_policy, mean_or_none, roll_test_episodes
+from torchrl_csirl.tasks import SCENARIOS, ScenarioSpec, accomplish_rate_from_rollout, gym_env_of, success_from_rollout
 
 __all__ = ["OUTCOMES", "classify_episodes", "main", "report", "summarize"]
 

@@ -62,7 +62,7 @@ ACTION_UNITS = {
 
 def shipped_scenarios() -> tuple[str, ...]:
     """The scenarios of ``--shipped`` (empty-road and traffic curricula): the driving scenes of the task registry."""
-    from torchrl_csirl.envs.registry import task_names
+    from torchrl_csirl.tasks.registry import task_names
 
     return task_names(family="driving")
 
@@ -76,8 +76,8 @@ def expert_options(scenario: str, ant_policy: str | None) -> dict[str, Any]:
 def expert_metadata(scenario: str, **options: Any) -> dict[str, Any]:
     """The ``generator`` (the expert's class) and ``action_units`` entries of a task's datasets, and
     ``expert_settings`` for an expert that has ``settings`` (the AntMaze controller's)."""
-    from torchrl_csirl.envs import resolve_scenario
-    from torchrl_csirl.envs.expert_registry import make_expert
+    from torchrl_csirl.tasks import resolve_scenario
+    from torchrl_csirl.tasks.experts import make_expert
 
     expert = make_expert(scenario, **options)
     expert_class = type(expert)
@@ -113,17 +113,17 @@ def roll_episodes(
 ) -> tuple[list[dict], list[dict]]:
     """Roll expert episodes with seeds ``seed, seed + 1, ...`` (``expert_kwargs``: ``make_expert``'s options;
     ``action_noise``, ``record_expert_action``: Gaussian noise on the executed actions, and which action
-    is recorded, see :func:`~torchrl_csirl.envs.expert_rollout.rollout_expert`).
+    is recorded, see :func:`~torchrl_csirl.tasks.expert_rollout.rollout_expert`).
 
     With ``end_at_arrival`` (used when recording), each episode ends at the ego's arrival (see
-    :func:`~torchrl_csirl.envs.expert_rollout.rollout_expert`); otherwise it runs until the env ends it.
+    :func:`~torchrl_csirl.tasks.expert_rollout.rollout_expert`); otherwise it runs until the env ends it.
 
     With ``only_successful``, rolls until ``episodes`` successful ones are collected (at most
     ``max_attempts`` episodes, default ``4 * episodes``). Returns (kept episodes, all episodes).
     """
-    from torchrl_csirl.envs import make_gym_env, resolve_scenario
-    from torchrl_csirl.envs.expert_registry import make_expert
-    from torchrl_csirl.envs.expert_rollout import rollout_expert
+    from torchrl_csirl.tasks import make_gym_env, resolve_scenario
+    from torchrl_csirl.tasks.expert_rollout import rollout_expert
+    from torchrl_csirl.tasks.experts import make_expert
 
     end_at_arrival = end_at_arrival and resolve_scenario(scenario).episode_ends_at_goal
     env = make_gym_env(scenario)
@@ -243,7 +243,7 @@ def generate_shipped(scenario: str, out_dir: str, seed: int = SHIPPED_SEED) -> d
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    from torchrl_csirl.envs.expert_registry import expert_tasks
+    from torchrl_csirl.tasks.experts import expert_tasks
 
     parser.add_argument("--scenario", required=True, choices=list(expert_tasks()))
     parser.add_argument("--episodes", type=int, default=25, help="episodes to roll (kept ones with --only-successful)")

@@ -16,7 +16,7 @@ The default bar, 0.6, puts every recorded run the pages call a failure below it 
 one demonstration, seed 0: 0.52, "a failed run" on the own-task page) and the goal-conditioned runs on PointMaze
 Medium, at BC's level (0.64), at or above it, apart from CSIRL-B's seed 0 (0.58).
 
-``--held-out`` leaves out the runs that set a threshold (:func:`torchrl_csirl.diagnostics.calibration_runs`): the
+``--held-out`` leaves out the runs that set a threshold (:func:`torchrl_csirl.analysis.diagnostics.calibration_runs`): the
 table of runs the report was not tuned on. The last line is JSON; the Markdown tables go to stderr.
 """
 from __future__ import annotations
@@ -28,7 +28,7 @@ import os
 import sys
 from typing import Any
 
-from torchrl_csirl.diagnostics import HEALTH_FILE, calibration_runs
+from torchrl_csirl.analysis.diagnostics import HEALTH_FILE, calibration_runs
 
 __all__ = ["flag_counts", "flag_table", "main", "read_record", "run_score", "runs_table"]
 

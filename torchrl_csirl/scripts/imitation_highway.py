@@ -7,7 +7,7 @@ outputs. Methods: ``sac`` (SAC on the true reward: the driving scenes' distance 
 own reward), ``bc`` (behavioural cloning), ``gail``, ``dac``, ``valuedice``, ``sqil``, ``iqlearn``, and
 ``random`` and ``expert`` (reference rows, no training); CSIRL itself is ``recipes/csirl_highway.py``.
 The task is named as for CSIRL (``env.task``, ``env.gym_id``, ``env.module``) and its
-family picks the schema (:class:`~torchrl_csirl.launch.imitation.ImitationTaskConfig` for every task but
+family picks the schema (:class:`~torchrl_csirl.methods.baselines.ImitationTaskConfig` for every task but
 the driving scenes). ``--help`` lists every key. See docs/benchmark.md.
 
 The run directory (``logger.output_dir``/<name>) receives ``config.yaml``, ``metrics.jsonl``,
@@ -23,10 +23,10 @@ from __future__ import annotations
 
 import sys
 
-from torchrl_csirl.launch.config import help_requested, parse_command_line
-from torchrl_csirl.launch.imitation import IMITATION_RECIPE, ImitationHighwayConfig  # noqa: F401 - the schema, for the docs
-from torchrl_csirl.launch.lifecycle import run_recipe
-from torchrl_csirl.launch.run import run_script, write_summary
+from torchrl_csirl.methods.baselines import IMITATION_RECIPE, ImitationHighwayConfig  # noqa: F401 - the schema, for the docs
+from torchrl_csirl.run.config import help_requested, parse_command_line
+from torchrl_csirl.run.lifecycle import run_recipe
+from torchrl_csirl.run.run import run_script, write_summary
 
 __all__ = ["main"]
 

@@ -4,7 +4,7 @@
 
 For each run (any method: its ``policy.pt``, else the actor of its last checkpoint) it rolls the deterministic policy
 for ``--episodes`` episodes seeded from the run's ``eval.seed`` (the test's first episodes) and sets its states against
-the run's demonstrations (:func:`torchrl_csirl.diagnostics.states_off_the_demonstrations`: per observation entry the
+the run's demonstrations (:func:`torchrl_csirl.analysis.diagnostics.states_off_the_demonstrations`: per observation entry the
 matching reward does not read, the mean gap to the nearest demonstration state in the demonstrations' standard
 deviations, read per episode, the worst one reported). With ``--holdout`` it sets the run's last five demonstrations
 (at most all but one) against the others instead of a policy: the figure an expert gets. One line per run, then the
@@ -28,11 +28,11 @@ import sys
 import torch
 from omegaconf import OmegaConf
 
-from torchrl_csirl.diagnostics import check_line, flat_observations, states_off_the_demonstrations
-from torchrl_csirl.envs import resolve_scenario
-from torchrl_csirl.launch.builders import load_experts
-from torchrl_csirl.launch.robotics import prepare_task
+from torchrl_csirl.analysis.diagnostics import check_line, flat_observations, states_off_the_demonstrations
+from torchrl_csirl.run.builders import load_experts
+from torchrl_csirl.run.task_schemas import prepare_task
 from torchrl_csirl.scripts._policy_rollouts import first_crash_step, policy_episodes
+from torchrl_csirl.tasks import resolve_scenario
 
 __all__ = ["check_run", "main", "policy_states"]
 

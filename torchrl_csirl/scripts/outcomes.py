@@ -18,9 +18,9 @@ from __future__ import annotations
 
 from types import ModuleType
 
-from torchrl_csirl.envs import SCENARIOS
 from torchrl_csirl.scripts import driving_outcomes, robotics_outcomes
 from torchrl_csirl.scripts._policy_rollouts import load_test_policy
+from torchrl_csirl.tasks import SCENARIOS
 
 __all__ = ["FAMILIES", "main"]
 

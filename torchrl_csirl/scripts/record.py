@@ -4,7 +4,7 @@ A record is what a table, its curves and the figures quoted about a run's traini
 (``docs/runs/README.md``):
 
 * the run's ``summary.json``, ``config.yaml``, ``provenance.json`` (the commit, dirty flag and diff hash, package
-  versions, CPU and threads it ran with: ``torchrl_csirl.launch.provenance``) and ``health.json`` (its health report),
+  versions, CPU and threads it ran with: ``torchrl_csirl.run.provenance``) and ``health.json`` (its health report),
   and its ``resumes.jsonl`` where the run was resumed with changed settings; a run made before runs wrote it has no
   ``provenance.json``, and its record says ``provenance: unknown`` when it is made;
 * ``metrics.jsonl`` trimmed to the evaluation rows (``frames``, ``updates``, ``round`` and the ``eval_*``
@@ -40,7 +40,7 @@ import os
 import shutil
 import sys
 
-from torchrl_csirl.launch.provenance import PROVENANCE_FILE
+from torchrl_csirl.run.provenance import PROVENANCE_FILE
 
 __all__ = ["RecordError", "evaluation_rows", "main", "read_metrics", "read_rounds", "record_run", "round_rows",
            "write_rounds"]

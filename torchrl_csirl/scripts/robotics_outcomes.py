@@ -31,9 +31,9 @@ from collections import Counter, defaultdict
 
 import numpy as np
 
-from torchrl_csirl.envs import accomplish_rate_from_rollout, gym_env_of
-from torchrl_csirl.envs.robotics import ROBOTICS_TASKS
 from torchrl_csirl.scripts._policy_rollouts import first_crash_step, format_cell, load_test_policy, mean_or_none, roll_test_episodes
+from torchrl_csirl.tasks import accomplish_rate_from_rollout, gym_env_of
+from torchrl_csirl.tasks.robotics import ROBOTICS_TASKS
 
 __all__ = ["OUTCOMES", "classify_episodes", "main", "print_table", "report", "summarize"]
 

@@ -29,10 +29,10 @@ from collections import Counter, defaultdict
 
 from omegaconf import OmegaConf
 
-from torchrl_csirl.launch.config import ConfigError, flatten_config, format_override
-from torchrl_csirl.launch.provenance import processes, read_provenance
-from torchrl_csirl.launch.recipes import load_config_for
-from torchrl_csirl.launch.summaries import find_summaries, mean_std
+from torchrl_csirl.analysis.summaries import find_summaries, mean_std
+from torchrl_csirl.run.config import ConfigError, flatten_config, format_override
+from torchrl_csirl.run.provenance import processes, read_provenance
+from torchrl_csirl.run.recipes import load_config_for
 
 __all__ = ["code_of", "main", "markdown_table", "summarize", "variant"]
 

@@ -2,14 +2,14 @@
 
 TorchRL's SAC (the baselines' learner: :func:`~torchrl_csirl.objectives._imitation.make_sac_learner`,
 published SAC defaults, two critics, 256 x 256 networks) on the ``ant-goal`` task
-(:class:`~torchrl_csirl.envs.robotics.AntGoalEnv`: chains of 4 goals, each 0.9-6.3 m on, in the U-maze,
+(:class:`~torchrl_csirl.tasks.robotics.AntGoalEnv`: chains of 4 goals, each 0.9-6.3 m on, in the U-maze,
 reward = speed toward the goal, +10 on arrival), with the shared recipe machinery: collector
 workers, checkpoints every ``checkpoint.every_rounds`` rounds with the replay buffer (exact resume
 with ``checkpoint.resume=<run dir>``; the run takes hours on 2 cores), metrics CSV/JSONL, wandb
 offline, a learning curve of the chain success (all 4 goals reached), ``policy.pt`` and ``summary.json``.
 
 At the end, the trained policy drives the ant through the U-maze as
-:class:`~torchrl_csirl.envs.robotics.WaypointAntExpert` on ``expert_eval.episodes`` AntMaze
+:class:`~torchrl_csirl.tasks.robotics.WaypointAntExpert` on ``expert_eval.episodes`` AntMaze
 episodes from seed ``expert_eval.seed`` (unseen: the training task draws its own hops), and the
 summary reports that success rate (the expert's acceptance figure, docs/studies/robotics.md) beside the
 chain success (``hop_success_rate``: the share of test episodes that reached all 4 goals).
@@ -26,11 +26,11 @@ from __future__ import annotations
 
 import sys
 
-from torchrl_csirl.launch import config as config_lib
-from torchrl_csirl.launch.ant_expert import AntExpertConfig  # noqa: F401 - the schema, for the docs
-from torchrl_csirl.launch.expert_training import ANT_EXPERT_RECIPE
-from torchrl_csirl.launch.lifecycle import run_recipe
-from torchrl_csirl.launch.run import run_script, write_summary
+from torchrl_csirl.methods.ant_expert import AntExpertConfig  # noqa: F401 - the schema, for the docs
+from torchrl_csirl.methods.expert import ANT_EXPERT_RECIPE
+from torchrl_csirl.run import config as config_lib
+from torchrl_csirl.run.lifecycle import run_recipe
+from torchrl_csirl.run.run import run_script, write_summary
 
 __all__ = ["main"]
 

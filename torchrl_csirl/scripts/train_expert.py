@@ -22,10 +22,10 @@ from __future__ import annotations
 
 import sys
 
-from torchrl_csirl.launch import config as config_lib
-from torchrl_csirl.launch.expert_training import EXPERT_RECIPE, ExpertTrainingConfig  # noqa: F401 - the schema, for the docs
-from torchrl_csirl.launch.lifecycle import run_recipe
-from torchrl_csirl.launch.run import run_script, write_summary
+from torchrl_csirl.methods.expert import EXPERT_RECIPE, ExpertTrainingConfig  # noqa: F401 - the schema, for the docs
+from torchrl_csirl.run import config as config_lib
+from torchrl_csirl.run.lifecycle import run_recipe
+from torchrl_csirl.run.run import run_script, write_summary
 
 __all__ = ["main"]
 

@@ -2,7 +2,7 @@
 
 Films the run's policy (``policy.pt``) on the recipe's test episodes: episode ``i`` seeded with the
 run's ``eval.seed + i``, deterministic actions, stopped at the episode's end, exactly as the final
-evaluation plays them (:func:`~torchrl_csirl.visualization.film_test_episodes`). Works for a driving
+evaluation plays them (:func:`~torchrl_csirl.analysis.visualization.film_test_episodes`). Works for a driving
 run (``csirl_highway.py``, ``imitation_highway.py``), a robotics or locomotion run (``csirl_robotics.py``,
 ``imitation_robotics.py``, ``train_expert.py``; MuJoCo renders headless through EGL). Writes
 ``<run dir>/videos/test-episode-<i>.<format>`` (``--out`` elsewhere) and prints one line per episode.
@@ -18,13 +18,13 @@ from __future__ import annotations
 import argparse
 import os
 
-from torchrl_csirl.launch.config import ConfigError
-from torchrl_csirl.launch.run import run_script
-from torchrl_csirl.visualization.video import (
+from torchrl_csirl.analysis.visualization.video import (
     VIDEO_FORMATS,
     VideoError,
     default_video_format,
 )
+from torchrl_csirl.run.config import ConfigError
+from torchrl_csirl.run.run import run_script
 
 __all__ = ["main", "read_run"]
 
@@ -63,8 +63,8 @@ def main(argv: list[str] | None = None) -> list[str]:
     """Films the episodes; returns the paths written."""
     import torch
 
-    from torchrl_csirl.visualization import film_test_episodes
-    from torchrl_csirl.visualization.video import describe_rollout
+    from torchrl_csirl.analysis.visualization import film_test_episodes
+    from torchrl_csirl.analysis.visualization.video import describe_rollout
 
     parser = argparse.ArgumentParser(description="Videos of a trained run's deterministic test episodes.")
     parser.add_argument("run_dir", help="a run directory (with config.yaml and policy.pt)")

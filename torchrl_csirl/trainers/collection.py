@@ -42,7 +42,7 @@ def shutdown_collector(collector: BaseCollector) -> None:
 
     Examples:
         >>> from torchrl.collectors import Collector
-        >>> from torchrl_csirl.envs import SCENARIOS, make_env
+        >>> from torchrl_csirl.tasks import SCENARIOS, make_env
         >>> from torchrl_csirl.modules import make_actor
         >>> spec = SCENARIOS["merge"]
         >>> collector = Collector(make_env("merge"), make_actor(spec.obs_dim, spec.action_dim),
@@ -115,7 +115,7 @@ class WorkerErrorLog:
     worker, its error, or the signal that killed it.
 
     Examples:
-        >>> from torchrl_csirl.envs import env_factory
+        >>> from torchrl_csirl.tasks import env_factory
         >>> log = WorkerErrorLog()
         >>> env = log.wrap(env_factory("merge"))()  # in a worker process, as the collector calls it
         >>> env.rollout(2, break_when_any_done=False)["observation"].shape

@@ -18,7 +18,7 @@ from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 from torchrl.envs import EnvBase, ExplorationType, set_exploration_type
 
-from torchrl_csirl.envs.metrics import _first_episode_mask, accomplish_rate_from_rollout, episode_success
+from torchrl_csirl.tasks.metrics import _first_episode_mask, accomplish_rate_from_rollout, episode_success
 
 __all__ = ["episode_metrics", "evaluate_episodes", "evaluate_policy"]
 
@@ -130,14 +130,14 @@ def evaluate_episodes(
     """Plays ``episodes`` seeded episodes and returns the paper's metrics of each one.
 
     Episode ``i`` is seeded with ``seed + i``. A single environment plays them one after the other;
-    a batched one (batch size ``[N]``, e.g. :func:`~torchrl_csirl.envs.make_serial_env` or a
+    a batched one (batch size ``[N]``, e.g. :func:`~torchrl_csirl.tasks.make_serial_env` or a
     :class:`~torchrl.envs.ParallelEnv`) ``N`` at a time: copy ``j`` of round ``r`` plays episode
     ``r * N + j``, the rollout runs with ``break_when_any_done=False`` for ``max_steps`` steps, and
     each copy's first episode (up to its first ``done``) is kept (:func:`episode_metrics`). The
     numbers are those of the single environment, episode by episode.
 
     Args:
-        env: a task's environment (:func:`~torchrl_csirl.envs.make_env`), single or batched.
+        env: a task's environment (:func:`~torchrl_csirl.tasks.make_env`), single or batched.
         policy: the actor.
         episodes: number of episodes.
         max_steps: episode limit (the scenario's ``max_steps``).
@@ -152,7 +152,7 @@ def evaluate_episodes(
         ValueError: for a batch of more than one dimension, or copies that cannot be seeded one by one.
 
     Examples:
-        >>> from torchrl_csirl.envs import SCENARIOS, make_serial_env
+        >>> from torchrl_csirl.tasks import SCENARIOS, make_serial_env
         >>> from torchrl_csirl.modules import make_actor
         >>> spec = SCENARIOS["merge"]
         >>> env = make_serial_env("merge", 2)
@@ -196,7 +196,7 @@ def evaluate_policy(
     (:func:`evaluate_episodes`).
 
     Args:
-        env: a task's environment (:func:`~torchrl_csirl.envs.make_env`), single or batched.
+        env: a task's environment (:func:`~torchrl_csirl.tasks.make_env`), single or batched.
         policy: the actor.
         episodes: number of episodes.
         max_steps: episode limit (the scenario's ``max_steps``).
@@ -209,7 +209,7 @@ def evaluate_policy(
         reference only). Without ``"distance_to_finish"`` the accomplish rate is the success rate.
 
     Examples:
-        >>> from torchrl_csirl.envs import SCENARIOS, make_env
+        >>> from torchrl_csirl.tasks import SCENARIOS, make_env
         >>> from torchrl_csirl.modules import make_actor
         >>> spec = SCENARIOS["merge"]
         >>> env = make_env("merge")

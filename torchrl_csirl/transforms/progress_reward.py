@@ -66,7 +66,7 @@ class ProgressReward(TransitionRewardTransform):
 
     Examples:
         >>> from tensordict import TensorDict
-        >>> from torchrl_csirl.envs import SCENARIOS
+        >>> from torchrl_csirl.tasks import SCENARIOS
         >>> t = ProgressReward.from_scenario(SCENARIOS["merge"])  # finish x = 400 m, i.e. 0.8
         >>> obs = torch.zeros(1, 25)
         >>> next_obs = obs.clone()

@@ -22,7 +22,7 @@ import sys
 import torch
 import yaml
 
-from torchrl_csirl.diagnostics import critic_calibration
+from torchrl_csirl.analysis.diagnostics import critic_calibration
 from torchrl_csirl.scripts.record import read_rounds
 
 

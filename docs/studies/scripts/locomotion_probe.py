@@ -25,13 +25,13 @@ import os
 import torch
 from omegaconf import OmegaConf
 
+from torchrl_csirl.analysis.diagnostics import discounted_returns
 from torchrl_csirl.data.shipped import load_expert_demonstrations
-from torchrl_csirl.diagnostics import discounted_returns
-from torchrl_csirl.envs import resolve_scenario
-from torchrl_csirl.launch.builders import load_experts
-from torchrl_csirl.launch.csirl import make_matching
+from torchrl_csirl.methods.csirl import make_matching
 from torchrl_csirl.modules import make_input_features, make_qvalue
+from torchrl_csirl.run.builders import load_experts
 from torchrl_csirl.scripts._policy_rollouts import policy_episodes
+from torchrl_csirl.tasks import resolve_scenario
 
 CRITIC_PREFIX = "qvalue_network_params.module."
 #: the expert states at which the critic probe reports Q
@@ -95,7 +95,7 @@ def plot_critic(path: str, title: str, q_expert: torch.Tensor, q_policy: torch.T
                 known: tuple[str, torch.Tensor] | None) -> str:
     """Two panels: ``Q`` along the expert's demonstration (mean and range over the critics, the return to go
     of the known reward beside it), and along the policy's episode; written as PNG."""
-    from torchrl_csirl.visualization._figure import new_figure, save_png
+    from torchrl_csirl.analysis.visualization._figure import new_figure, save_png
 
     fig = new_figure(1000, 360)
     fig.suptitle(title, fontsize=10)

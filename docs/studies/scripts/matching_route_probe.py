@@ -23,11 +23,11 @@ import sys
 
 import torch
 
-from torchrl_csirl.diagnostics import discounted_returns, route_opening
-from torchrl_csirl.envs import resolve_scenario
-from torchrl_csirl.launch.builders import load_experts
-from torchrl_csirl.launch.csirl import make_matching
-from torchrl_csirl.launch.recipes import load_config_for
+from torchrl_csirl.analysis.diagnostics import discounted_returns, route_opening
+from torchrl_csirl.methods.csirl import make_matching
+from torchrl_csirl.run.builders import load_experts
+from torchrl_csirl.run.recipes import load_config_for
+from torchrl_csirl.tasks import resolve_scenario
 
 RULES = ("final", "next", "path")
 

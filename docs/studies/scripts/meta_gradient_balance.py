@@ -25,11 +25,11 @@ import os
 import torch
 from tensordict import TensorDict
 
-from torchrl_csirl.envs import SCENARIOS, make_env
-from torchrl_csirl.launch.csirl import CSIRL_RECIPE, make_loss_modules, make_matching
-from torchrl_csirl.launch.experts import load_experts
-from torchrl_csirl.launch.run import resolve_resume
+from torchrl_csirl.methods.csirl import CSIRL_RECIPE, make_loss_modules, make_matching
 from torchrl_csirl.objectives import MetaRewardLoss
+from torchrl_csirl.run.experts import load_experts
+from torchrl_csirl.run.run import resolve_resume
+from torchrl_csirl.tasks import SCENARIOS, make_env
 
 
 def load_trained(modules, checkpoint: str) -> None:

@@ -1,7 +1,7 @@
 """PointMaze's expert (the waypoint controller): its success rate, and the shipped demonstrations.
 
 ``python docs/studies/scripts/point_maze_experts.py [--episodes 50] [--seed 1000] [--ids PointMaze_UMaze-v3 PointMaze_Medium-v3]``
-rolls the expert (:mod:`torchrl_csirl.envs.robotics.point_maze_expert`) for ``--episodes`` seeded episodes
+rolls the expert (:mod:`torchrl_csirl.tasks.robotics.point_maze_expert`) for ``--episodes`` seeded episodes
 (seeds ``--seed, --seed + 1, ...``) of each gymnasium task and prints one JSON line: per id, the success rate
 (the ball within 0.45 m of the goal, ``info["success"]``) and the mean and longest episode length.
 
@@ -19,8 +19,8 @@ import numpy as np
 
 from torchrl_csirl._paths import EXPERTS_DIR
 from torchrl_csirl.data import ExpertDemonstrations, record_demonstrations
-from torchrl_csirl.envs import import_task_module, make_gymnasium_task
-from torchrl_csirl.envs.expert_registry import make_expert
+from torchrl_csirl.tasks import import_task_module, make_gymnasium_task
+from torchrl_csirl.tasks.experts import make_expert
 
 POINT_MAZE_IDS = ("PointMaze_UMaze-v3", "PointMaze_Medium-v3")
 SHIPPED_TRAJECTORIES = 25

@@ -4,9 +4,9 @@
 
 For each comparison of :data:`COMPARISONS` (two seed sets of recorded runs, ``docs/runs/<group>/<cell>``), the
 table gives the seeds a side, the difference of means, the smallest difference Welch's test could detect at that
-n and those spreads (two-sided 5 %, power 0.8: :func:`torchrl_csirl.launch.verdicts.detectable_difference`) and
+n and those spreads (two-sided 5 %, power 0.8: :func:`torchrl_csirl.analysis.verdicts.detectable_difference`) and
 the seeds a side it would take to detect ``--delta`` of the expert with the spreads seen so far
-(:func:`~torchrl_csirl.launch.verdicts.seeds_needed`). Scores are expert-normalised: the driving scenes' accomplish
+(:func:`~torchrl_csirl.analysis.verdicts.seeds_needed`). Scores are expert-normalised: the driving scenes' accomplish
 rate over the expert's, PointMaze's success rate (the share of test episodes reaching the goal), the HalfCheetah's
 test return over its expert record's. The Markdown table goes to stdout (``docs/studies/power.md`` holds it, and
 ``tests/test_power_table.py`` checks that it is the current one); the last line is JSON.
@@ -21,8 +21,8 @@ import statistics
 import sys
 from dataclasses import dataclass
 
-from torchrl_csirl.launch.provenance import read_provenance
-from torchrl_csirl.launch.verdicts import compare_seeds, detectable_difference, seeds_needed
+from torchrl_csirl.analysis.verdicts import compare_seeds, detectable_difference, seeds_needed
+from torchrl_csirl.run.provenance import read_provenance
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
 #: the difference of interest, a share of the expert's score

@@ -5,7 +5,7 @@
 A record's ``health.json`` (``torchrl-csirl record`` keeps it) holds the last subgoal's share of the curriculum
 trajectory (``subgoal_progress``) and where the policy's probe episodes end along the demonstration
 (``where_episodes_end``, median). Reports written before ``where_episodes_end`` read the subgoal do not say when the
-curriculum moved on without the policy (:func:`torchrl_csirl.diagnostics.curriculum_moved_on`); this reads it from
+curriculum moved on without the policy (:func:`torchrl_csirl.analysis.diagnostics.curriculum_moved_on`); this reads it from
 their figures. A run probed by the current report says it itself: ``torchrl-csirl diagnose <run dir>``.
 
 The last line is JSON; a Markdown table goes to stderr.
@@ -17,7 +17,7 @@ import json
 import os
 import sys
 
-from torchrl_csirl.diagnostics import HEALTH_FILE, curriculum_moved_on
+from torchrl_csirl.analysis.diagnostics import HEALTH_FILE, curriculum_moved_on
 
 
 def read_record(record: str) -> dict[str, object] | None:

@@ -36,10 +36,10 @@ import tempfile
 import torch
 from tensordict import TensorDictBase
 
-from torchrl_csirl.launch.builders import resume_run
-from torchrl_csirl.launch.config import ConfigError
-from torchrl_csirl.launch.imitation import IMITATION_RECIPE, make_trainer
-from torchrl_csirl.launch.run import run_script
+from torchrl_csirl.methods.baselines import IMITATION_RECIPE, make_trainer
+from torchrl_csirl.run.builders import resume_run
+from torchrl_csirl.run.config import ConfigError
+from torchrl_csirl.run.run import run_script
 from torchrl_csirl.transforms import absorbing_self_loops
 
 PROBED_METHODS = ("sac", "sqil", "gail", "dac", "iqlearn", "valuedice")

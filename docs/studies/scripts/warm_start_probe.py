@@ -22,12 +22,12 @@ import tempfile
 
 import torch
 
-from torchrl_csirl.envs import resolve_scenario
-from torchrl_csirl.launch.builders import load_experts
-from torchrl_csirl.launch.csirl import make_loss_modules, warm_start_actor
-from torchrl_csirl.launch.recipes import load_config_for
+from torchrl_csirl.methods.csirl import make_loss_modules, warm_start_actor
 from torchrl_csirl.modules import load_policy, save_policy
+from torchrl_csirl.run.builders import load_experts
+from torchrl_csirl.run.recipes import load_config_for
 from torchrl_csirl.scripts.robotics_outcomes import OUTCOMES, classify_episodes, print_table, summarize
+from torchrl_csirl.tasks import resolve_scenario
 
 
 def warm_started_policy(task: str, updates: int, seed: int, overrides: list[str], out_dir: str) -> str:
