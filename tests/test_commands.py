@@ -222,3 +222,22 @@ def test_health_flag_table_counts_flags_on_failed_and_succeeded_records(capsys):
     held_out = health_table.main([*cheetahs, maze, "--held-out"])
     assert held_out["records"] == 0 and len(held_out["left_out"]) == 4
     assert health_table.main([maze, "--bar", "0.5"])["succeeded"] == 1  # the bar decides
+
+
+def test_the_own_task_page_holds_the_held_out_table_its_records_give():
+    import re
+
+    from torchrl_csirl.scripts import health_table
+
+    with open(os.path.join(ROOT, "docs", "own-task.md"), encoding="utf-8") as f:
+        page = f.read()
+    marker = re.search(r"<!-- held-out-table: (.*?) -->\n(.*?)\n<!-- /held-out-table -->", page, re.S)
+    assert marker, "docs/own-task.md: no held-out table"
+    cwd = os.getcwd()
+    try:
+        os.chdir(ROOT)
+        table = health_table.held_out_table(marker.group(1).split())
+    finally:
+        os.chdir(cwd)
+    assert marker.group(2) == table, "regenerate: the records give\n" + table
+    assert int(re.search(r"flags failed runs \((\d+)\)", table).group(1)) > 0

@@ -21,5 +21,8 @@ $B --methods csirl-b --scenarios merge --seeds 3 4 5 --output-dir runs/q-merge -
 for m in csirl csirl-nocur; do for sc in merge roundabout; do
 $B --methods $m --scenarios $sc --seeds 10 --output-dir runs/q-short -- collector.total_frames=6000 $COMMON
 done; done
+for sc in intersection highway-fast; do
+$B --methods csirl --scenarios $sc --seeds 10 --output-dir runs/q-short -- collector.total_frames=6000 $COMMON
+done
 $B --methods csirl --scenarios PointMaze_Medium-v3 --seeds 3 --output-dir runs/q-pm-nogoal -- $PM csirl.goal_conditioned=false $COMMON
 echo QUEUE DONE

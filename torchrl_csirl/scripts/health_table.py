@@ -142,6 +142,20 @@ def _in_calibration(record: str, calibration: set[str]) -> bool:
     return "/".join(parts[-2:]) in calibration
 
 
+def held_out_table(patterns: list[str], bar: float = BAR) -> str:
+    """The flag table of the records that ``patterns`` (globs, e.g. ``docs/runs/health-*/*``) match, the calibration
+    set left out: the table the own-task page prints under ``<!-- held-out-table: patterns -->``.
+
+    Examples:
+        >>> held_out_table(["/nowhere/*/*"]).splitlines()[0]
+        '| check | flags failed runs (0) | flags succeeded runs (0, score >= 0.6) | too little to say, or not made |'
+    """
+    calibration = set(calibration_runs())
+    records = sorted({r for pattern in patterns for r in glob.glob(pattern)})
+    rows = [row for row in (read_record(r, bar) for r in records if not _in_calibration(r, calibration)) if row]
+    return flag_table(flag_counts(rows), rows, bar)
+
+
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     """Reads each record; prints the tables (stderr) and the JSON line; returns what the JSON line holds."""
     parser = argparse.ArgumentParser(prog="torchrl-csirl health-table", description=__doc__.splitlines()[0])
