@@ -162,7 +162,7 @@ class WorkerErrorLog:
                 time.sleep(0.05)
                 dead = _dead_workers(collector)
         written = self.errors()
-        for index, pid, code in dead:
+        for index, pid, code in sorted(dead, key=lambda worker: _failure_rank(worker, written)):
             if pid in written:
                 return f"collector worker {index} (pid {pid}) failed: {written[pid]}"
             if code < 0:
@@ -179,6 +179,17 @@ class WorkerErrorLog:
     def close(self) -> None:
         """Removes the folder."""
         shutil.rmtree(self.folder, ignore_errors=True)
+
+
+def _failure_rank(worker: tuple[int, int, int], written: dict[int, str]) -> int:
+    """The order in which dead workers are described: the one that failed first, not the ones the teardown then
+    stopped (SIGTERM): an error of its own, then a signal, then an exit status, then SIGTERM."""
+    _, pid, code = worker
+    if pid in written:
+        return 0
+    if code < 0:
+        return 3 if -code == signal.SIGTERM else 1
+    return 2
 
 
 _BROKEN_PIPE_ERRORS = (EOFError, ConnectionError)  # ConnectionResetError, BrokenPipeError among them
