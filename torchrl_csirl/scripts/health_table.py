@@ -30,7 +30,7 @@ from typing import Any
 
 from torchrl_csirl.analysis.diagnostics import HEALTH_FILE, calibration_runs
 
-__all__ = ["flag_counts", "flag_table", "main", "read_record", "run_score", "runs_table"]
+__all__ = ["flag_counts", "flag_table", "held_out_table", "main", "read_record", "read_records", "run_score", "runs_table"]
 
 #: the score from which a run counts as succeeded (see the module's docstring)
 BAR = 0.6
@@ -150,10 +150,18 @@ def held_out_table(patterns: list[str], bar: float = BAR) -> str:
         >>> held_out_table(["/nowhere/*/*"]).splitlines()[0]
         '| check | flags failed runs (0) | flags succeeded runs (0, score >= 0.6) | too little to say, or not made |'
     """
-    calibration = set(calibration_runs())
     records = sorted({r for pattern in patterns for r in glob.glob(pattern)})
-    rows = [row for row in (read_record(r, bar) for r in records if not _in_calibration(r, calibration)) if row]
+    rows, _ = read_records(records, bar, held_out=True)
     return flag_table(flag_counts(rows), rows, bar)
+
+
+def read_records(records: list[str], bar: float = BAR, held_out: bool = False) -> tuple[list[dict[str, Any]], list[str]]:
+    """:func:`read_record` of each record with a report (the calibration set left out where ``held_out``), and the
+    records left out."""
+    calibration = set(calibration_runs()) if held_out else set()
+    left_out = [r for r in records if _in_calibration(r, calibration)]
+    rows = [row for row in (read_record(r, bar) for r in records if r not in left_out) if row is not None]
+    return rows, left_out
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
@@ -164,9 +172,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     parser.add_argument("--held-out", action="store_true", help="leave out the runs that set a threshold")
     parser.add_argument("--runs", action="store_true", help="also print one line per run")
     args = parser.parse_args(argv)
-    calibration = set(calibration_runs())
-    left_out = [r for r in args.records if args.held_out and _in_calibration(r, calibration)]
-    rows = [row for row in (read_record(r, args.bar) for r in args.records if r not in left_out) if row is not None]
+    rows, left_out = read_records(args.records, args.bar, args.held_out)
     counts = flag_counts(rows)
     print(flag_table(counts, rows, args.bar), file=sys.stderr)
     if left_out:
