@@ -4,6 +4,8 @@ equal their frozen calibration (issue 110: a change after the held-out runs show
 has a record."""
 from __future__ import annotations
 
+import glob
+import json
 import os
 
 import pytest
@@ -163,6 +165,37 @@ def test_where_episodes_end_tells_an_end_off_every_demonstration_and_offers_the_
     # the most common end is named, with its count
     mixed = where_episodes_end(torch.tensor([[10.0, 7.3], [5.0, 8.0], [1.0, 0.0]]), LINE)
     assert mixed.figures["episode_ends"] == ["off", "off", "short"] and "2 of 3 end off" in mixed.message
+
+
+def test_reward_tracks_the_task_tells_a_short_run_from_a_reward_paying_for_something_else():
+    """Flagged either way; the line names the budget while the learner is paid less than the demonstration."""
+    rows = _rows((0.1, 0.2, 0.9), (0.0, 0.0, 0.0), frames=(1000, 2000, 3000))
+    short = reward_tracks_the_task(rows, demonstration_reward=2.0)
+    assert short.ok is False and "collector.total_frames" in short.message and "3000 frames" in short.message
+    assert "0.9 against 2" in short.message and not short.message.startswith("reward hacking")
+    hacked = reward_tracks_the_task(rows, demonstration_reward=0.5)
+    assert hacked.ok is False and hacked.message.startswith("reward hacking") and "collector.total_frames" not in hacked.message
+    assert "paid 0.9 per step, the demonstration 0.5" in hacked.message
+
+
+def test_the_short_held_out_runs_are_told_to_train_longer():
+    """The held-out runs at a tenth of the budget (docs/runs/health-short), from their recorded figures (the first
+    and last thirds of their rounds): each is flagged, and each line points at the budget, as every one of their
+    learners is paid less than its demonstration."""
+    keys = ("matching_reward", "success", "accomplish", "env_return")
+    columns = ("matching_reward_mean", "eval_success_rate", "eval_accomplish_rate", "eval_env_return")
+    runs = sorted(glob.glob(os.path.join(ROOT, "docs/runs/health-short/*")))
+    assert len(runs) >= 6
+    for run_dir in runs:
+        with open(os.path.join(run_dir, "health.json"), encoding="utf-8") as f:
+            recorded = next(c for c in json.load(f)["checks"] if c["name"] == "reward_tracks_the_task")
+        fig = recorded["figures"]
+        first, last = ({c: fig[f"{k}_{when}"] for k, c in zip(keys, columns) if fig[f"{k}_{when}"] is not None}
+                       for when in ("first", "last"))
+        rows = [{"frames": 6000, **first}, {**first}, {"frames": 6000, **last}]
+        check = reward_tracks_the_task(rows, demonstration_reward=fig["demonstration_reward"])
+        assert check.ok is recorded["ok"] is False, run_dir
+        assert "train longer (collector.total_frames)" in check.message, run_dir
 
 
 def test_the_thresholds_are_frozen_at_their_calibration():

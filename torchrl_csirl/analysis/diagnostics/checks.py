@@ -132,6 +132,32 @@ HACKING_RISE_SHARE = 0.25
 TASK_FLAT_SHARE = 0.05
 
 
+def _hacking_line(rows: Sequence[dict], matching: tuple[float, float], success: tuple[float, float],
+                  env_return: tuple[float, float], demonstration_reward: float | None) -> str:
+    """The flagged line of :func:`reward_tracks_the_task`, with its likely cause where the report can tell.
+
+    A learner paid less per step than the demonstration has not outdone the demonstrations on their own reward: a
+    run still short of what it needs (a small budget gives this) is as likely as a reward paying for something else,
+    and more frames is the cheaper test. A learner paid as much as the demonstration without its success is paid
+    for something the task does not count.
+    """
+    (m0, m1), (s0, s1), (e0, e1) = matching, success, env_return
+    frames = rows[-1].get("frames")
+    seen = (f"the matching reward per step rose from {m0:.3g} to {m1:.3g} while the evaluations' success went from "
+            f"{s0:.2f} to {s1:.2f} and the environment's return from {e0:.3g} to {e1:.3g} (first and last third of the "
+            f"run{f', {int(frames)} frames' if frames is not None else ''})")
+    if demonstration_reward is not None and m1 < demonstration_reward:
+        return (f"the task did not follow the reward: {seen}; the learner is still paid less per step than the "
+                f"demonstration ({m1:.3g} against {demonstration_reward:.3g}), so the run may be too short to reach "
+                "the task rather than paid for something else: train longer (collector.total_frames) first; if the "
+                "task stays flat once the learner is paid as much as the demonstration, the matching features "
+                "(env.features, the task's position_feature_indices) reward something the task does not")
+    paid = (f"; the learner is paid {m1:.3g} per step, the demonstration {demonstration_reward:.3g}"
+            if demonstration_reward is not None else "")
+    return (f"reward hacking: {seen}{paid}; the matching features (env.features, the task's "
+            "position_feature_indices) reward something the task does not")
+
+
 def reward_tracks_the_task(rows: Sequence[dict], test: Mapping[str, Any] | None = None,
                            demonstration_reward: float | None = None) -> HealthCheck:
     """Reward hacking: the matching reward the learner collects rises while the task's success and return stay flat
@@ -178,11 +204,7 @@ def reward_tracks_the_task(rows: Sequence[dict], test: Mapping[str, Any] | None 
     figures["test_success"] = max(tested) if tested else None
     solved = any(not math.isnan(v) and v >= SOLVED for v in (s1, a1, *tested))  # flat at the top is not hacking
     if reward_rose and task_flat and not solved:
-        return HealthCheck(name, False, (
-            f"reward hacking: the matching reward per step rose from {m0:.3g} to {m1:.3g} while the evaluations' "
-            f"success went from {s0:.2f} to {s1:.2f} and the environment's return from {e0:.3g} to {e1:.3g} (first "
-            "and last third of the run); the matching features "
-            "(env.features, the task's position_feature_indices) reward something the task does not"), figures)
+        return HealthCheck(name, False, _hacking_line(rows, (m0, m1), (s0, s1), (e0, e1), demonstration_reward), figures)
     if rose_relative and not reward_rose:
         return HealthCheck(name, True, (
             f"the matching reward per step went from {m0:.3g} to {m1:.3g}, a rise below {HACKING_RISE_FLOOR:.0%} of "
