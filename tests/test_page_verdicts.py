@@ -6,7 +6,8 @@ A marker is an HTML comment (Markdown renders it to nothing) right before the ve
     <!-- verdict section=pointmaze a=docs/runs/pointmaze-fixed/*/summary.json
          b=docs/runs/pointmaze/PointMaze_UMaze-v3-csirl-s*/summary.json metric=accomplish_rate -->
 
-``a`` and ``b`` are globs relative to the repository root, one record (``summary.json``) a seed; the difference is
+``a`` and ``b`` are globs relative to the repository root (several joined by ``|``: one side drawn from two record
+groups), one record (``summary.json``) a seed; the difference is
 ``mean(a) - mean(b)`` of ``metric``. The markers of one ``section`` on one page are one family: Holm's correction
 across them (:func:`~torchrl_csirl.analysis.verdicts.compare_family`). ``verdict-family`` declares comparisons of the
 family that the prose does not state one by one (a table's cells), and is not checked against the text.
@@ -118,7 +119,8 @@ def markers(page: str) -> list[Marker]:
 
 
 def records(pattern: str) -> list[str]:
-    return sorted(glob.glob(os.path.join(ROOT, pattern)))
+    """The records a side names: one glob, or several joined by ``|`` (each record once)."""
+    return sorted({p for part in pattern.split("|") for p in glob.glob(os.path.join(ROOT, part))})
 
 
 def _scores(paths: tuple[str, ...], metric: str) -> list[float]:

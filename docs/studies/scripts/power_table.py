@@ -52,7 +52,7 @@ COMPARISONS = (
                ("docs/runs/power-merge/merge-csirl-nocur-s*",), "normalized_accomplish_rate"),
     Comparison("merge: CSIRL against CSIRL-B",
                ("docs/runs/csirl/merge-csirl-s*", "docs/runs/power-merge/merge-csirl-s*"),
-               ("docs/runs/csirl-b/merge-b-s*",), "normalized_accomplish_rate"),
+               ("docs/runs/csirl-b/merge-b-s*", "docs/runs/power-merge/merge-csirl-b-s*"), "normalized_accomplish_rate"),
     Comparison("PointMaze Medium: CSIRL against CSIRL without the curriculum", _medium("csirl"), _medium("csirl-nocur"),
                "success_rate"),
     Comparison("PointMaze Medium: CSIRL against CSIRL-B", _medium("csirl"), _medium("csirl-b"), "success_rate"),
@@ -96,8 +96,8 @@ def power_row(comparison: Comparison, delta: float = DELTA, root: str = ROOT) ->
 
     Examples:
         >>> row = power_row(COMPARISONS[1])
-        >>> row["seeds"][1], row["needed"] <= row["seeds"][0] or row["needed"] > 2
-        (3, True)
+        >>> row["seeds"][1] >= 3, row["needed"] <= row["seeds"][0] or row["needed"] > 2
+        (True, True)
     """
     a, b = seed_scores(comparison.a, comparison.metric, root), seed_scores(comparison.b, comparison.metric, root)
     row = {"comparison": comparison.name, "seeds": (len(a), len(b)), "difference": None, "detectable": None,
