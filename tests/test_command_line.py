@@ -1,4 +1,4 @@
-"""The command line parsed once per run, and ``env.scenario`` read as ``env.task`` (issue 111)."""
+"""The command line parsed once per run, and ``env.scenario`` read as ``env.task``."""
 from __future__ import annotations
 
 import os

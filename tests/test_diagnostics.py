@@ -1,5 +1,5 @@
 """The health report names what is wrong with a run: planted failures on a real merge learner (a sign-flipped
-matching reward, critics with an inflated bias), each check on its own figures, and the report written at the
+matching reward, critics with an inflated bias, an actor pinned at its bounds), each check on its own figures, and the report written at the
 end of a run and by ``torchrl-csirl diagnose`` without touching the run."""
 from __future__ import annotations
 
@@ -86,6 +86,22 @@ def test_critics_with_an_inflated_bias_are_named_over_valued(merge_run):
     assert check.ok is False and "over-value the expert's states" in check.message
     assert check.figures["value_mean"] > 1e4 - 10
     assert report.check("critic_calibration_policy").ok is False
+
+
+def test_an_actor_pinned_at_its_bounds_is_named_saturated(merge_run):
+    """The actor's output layer shifted far positive: its squashed actions sit at +1, which no recorded run shows."""
+    control = health_report(merge_run, "csirl", episodes=1).check("action_saturation")
+    assert control.ok is True
+    params = merge_run.parts.modules.sac.actor_network_params
+    out_bias = [t for key, t in params.items(True, True) if key[-1] == "bias"][-1]
+    with torch.no_grad():
+        out_bias += 1e3
+    try:
+        check = health_report(merge_run, "csirl", episodes=1).check("action_saturation")
+    finally:
+        with torch.no_grad():
+            out_bias -= 1e3
+    assert check.ok is False and "sit at a bound" in check.message and check.figures["saturated_share"] > 0.9
 
 
 def test_the_critics_are_read_against_the_return_they_estimate_with_the_entropy_bonus(merge_run):
