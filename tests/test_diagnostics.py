@@ -1,5 +1,5 @@
 """The health report names what is wrong with a run: planted failures on a real merge learner (a sign-flipped
-matching reward, critics with an inflated bias, an actor pinned at its bounds), each check on its own figures, and the report written at the
+matching reward, critics with an inflated bias, an actor pinned at its bounds, a curriculum that cannot move), each check on its own figures, and the report written at the
 end of a run and by ``torchrl-csirl diagnose`` without touching the run."""
 from __future__ import annotations
 
@@ -254,6 +254,17 @@ def test_a_run_writes_its_report_and_diagnose_rewrites_it_without_touching_the_r
     assert {c["name"] for c in report["checks"]} == {c["name"] for c in written["checks"]}
     assert before == {name: os.path.getmtime(os.path.join(run_dir, name)) for name in before}
     assert not os.path.exists(os.path.join(run_dir, "resumes.jsonl"))
+
+
+def test_a_curriculum_that_cannot_move_is_named_in_a_real_run(tmp_path):
+    """``csirl.delta=1e12``: no ratio of the critics' dispersion along the demonstration crosses it, so the subgoal
+    stays where it starts, which no recorded run shows; the run's own report flags it."""
+    summary = csirl_highway.main([*TINY, "collector.total_frames=400", "csirl.delta=1e12", "logger.backend=csv",
+                                  f"logger.output_dir={tmp_path}"])
+    with open(os.path.join(summary["run_dir"], "health.json")) as f:
+        check = next(c for c in json.load(f)["checks"] if c["name"] == "subgoal_progress")
+    assert check["ok"] is False and "never moved" in check["message"], check
+    assert len(set(check["figures"]["subgoals"])) == 1 and len(check["figures"]["subgoals"]) >= 3
 
 
 def test_diagnose_refuses_a_folder_that_is_not_a_run(tmp_path):
