@@ -1,6 +1,6 @@
 """The health report names what is wrong with a run: planted failures on a real merge learner (a sign-flipped
-matching reward, critics with an inflated bias, an actor pinned at its bounds, a curriculum that cannot move), each check on its own figures, and the report written at the
-end of a run and by ``torchrl-csirl diagnose`` without touching the run."""
+matching reward, critics with an inflated bias, an actor pinned at its bounds, a curriculum that cannot move), each
+check on its own figures, and the report written at the end of a run and by ``torchrl-csirl diagnose`` without touching the run."""
 from __future__ import annotations
 
 import csv
