@@ -8,7 +8,7 @@ set -x
 $B --methods bc --scenarios PointMaze_Medium-v3 --seeds 3 4 5 6 7 8 9 --output-dir runs/q-pm -- $PM $COMMON
 $B --methods csirl --scenarios merge --seeds 3 4 --output-dir runs/q-merge -- $COMMON
 $B --methods csirl --scenarios merge --seeds 3 4 --output-dir runs/q-merge-bf16 -- optim.precision=bf16 $COMMON
-$B --methods csirl-nocur --scenarios merge --seeds 0 1 2 3 4 --output-dir runs/q-merge -- $COMMON
+$B --methods csirl-nocur --scenarios merge --seeds 0 1 2 3 4 5 --output-dir runs/q-merge -- $COMMON
 $B --methods csirl --scenarios roundabout --seeds 3 4 --output-dir runs/q-round -- collector.total_frames=60000 $COMMON
 $B --methods csirl --scenarios roundabout --seeds 3 4 --output-dir runs/q-round-bf16 -- collector.total_frames=60000 optim.precision=bf16 $COMMON
 $B --methods csirl csirl-nocur --scenarios PointMaze_Medium-v3 --seeds 3 4 5 6 7 8 9 --output-dir runs/q-pm -- $PM $COMMON
