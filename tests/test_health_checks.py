@@ -189,13 +189,15 @@ def test_the_short_held_out_runs_are_told_to_train_longer():
     for run_dir in runs:
         with open(os.path.join(run_dir, "health.json"), encoding="utf-8") as f:
             recorded = next(c for c in json.load(f)["checks"] if c["name"] == "reward_tracks_the_task")
+        with open(os.path.join(run_dir, "summary.json"), encoding="utf-8") as f:
+            frames = json.load(f)["frames"]
         fig = recorded["figures"]
         first, last = ({c: fig[f"{k}_{when}"] for k, c in zip(keys, columns) if fig[f"{k}_{when}"] is not None}
                        for when in ("first", "last"))
-        rows = [{"frames": 6000, **first}, {**first}, {"frames": 6000, **last}]
+        rows = [{"frames": frames, **first}, {**first}, {"frames": frames, **last}]
         check = reward_tracks_the_task(rows, demonstration_reward=fig["demonstration_reward"])
         assert check.ok is recorded["ok"] is False, run_dir
-        assert "train longer (collector.total_frames)" in check.message, run_dir
+        assert "train longer (collector.total_frames)" in check.message and f"{frames} frames" in check.message, run_dir
 
 
 def test_the_thresholds_are_frozen_at_their_calibration():

@@ -132,6 +132,11 @@ HACKING_RISE_SHARE = 0.25
 TASK_FLAT_SHARE = 0.05
 
 
+#: the cause :func:`reward_tracks_the_task` names where the learner is paid for something the task does not count
+_FEATURES_PAY_ELSEWHERE = ("the matching features (env.features, the task's position_feature_indices) reward something "
+                           "the task does not")
+
+
 def _hacking_line(rows: Sequence[dict], matching: tuple[float, float], success: tuple[float, float],
                   env_return: tuple[float, float], demonstration_reward: float | None) -> str:
     """The flagged line of :func:`reward_tracks_the_task`, with its likely cause where the report can tell.
@@ -150,12 +155,10 @@ def _hacking_line(rows: Sequence[dict], matching: tuple[float, float], success: 
         return (f"the task did not follow the reward: {seen}; the learner is still paid less per step than the "
                 f"demonstration ({m1:.3g} against {demonstration_reward:.3g}), so the run may be too short to reach "
                 "the task rather than paid for something else: train longer (collector.total_frames) first; if the "
-                "task stays flat once the learner is paid as much as the demonstration, the matching features "
-                "(env.features, the task's position_feature_indices) reward something the task does not")
+                f"task stays flat once the learner is paid as much as the demonstration, {_FEATURES_PAY_ELSEWHERE}")
     paid = (f"; the learner is paid {m1:.3g} per step, the demonstration {demonstration_reward:.3g}"
             if demonstration_reward is not None else "")
-    return (f"reward hacking: {seen}{paid}; the matching features (env.features, the task's "
-            "position_feature_indices) reward something the task does not")
+    return f"reward hacking: {seen}{paid}; {_FEATURES_PAY_ELSEWHERE}"
 
 
 def reward_tracks_the_task(rows: Sequence[dict], test: Mapping[str, Any] | None = None,
