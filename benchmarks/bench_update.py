@@ -43,10 +43,9 @@ import time
 
 import torch
 from tensordict import TensorDict
-from torchrl.objectives import SoftUpdate
 
 from torchrl_csirl.modules import LearnerPrecision, make_actor, make_qvalue, make_reward_network
-from torchrl_csirl.objectives import EnsembleSACLoss, MetaRewardLoss
+from torchrl_csirl.objectives import EnsembleSACLoss, FusedSoftUpdate, MetaRewardLoss
 
 OBS_DIM, ACTION_DIM, EXPERT_BATCH = 25, 2, 32
 
@@ -85,7 +84,7 @@ class _Learner:
         self.sac = sac = EnsembleSACLoss(
             make_actor(OBS_DIM, ACTION_DIM), make_qvalue(OBS_DIM, ACTION_DIM), fused_qvalue=fused_qvalue, fused=fused
         ).to(device)
-        self.updater = SoftUpdate(sac, tau=0.005)
+        self.updater = FusedSoftUpdate(sac, tau=0.005)
         self.reward_net = make_reward_network(OBS_DIM).to(device)
         self.meta = MetaRewardLoss(sac, self.reward_net, meta_gradient=meta_gradient)
         self.joint = MetaRewardLoss(sac, self.reward_net, joint_sac_update=True, meta_gradient=meta_gradient)

@@ -21,6 +21,7 @@ from tensordict import TensorDictBase
 from torchrl.envs import EnvBase, ParallelEnv
 from torchrl.modules.distributions.utils import safetanh_noeps as _safetanh_noeps
 from torchrl.objectives import SACLoss
+from torchrl.objectives.utils import TargetNetUpdater
 
 __all__ = [
     "check_parallel_env_internals",
@@ -36,6 +37,7 @@ __all__ = [
     "safe_tanh",
     "sampling_replay_buffer",
     "set_qvalue_ensemble_evaluator",
+    "soft_update_leaves",
     "vmap_qvalue_networks",
 ]
 
@@ -105,6 +107,28 @@ def sac_reduce_loss(loss: SACLoss, value: torch.Tensor, tensordict: TensorDictBa
     """A per-sample loss reduced as SACLoss's losses reduce theirs (priority weights, masks, reduction)."""
     weights = loss._maybe_get_priority_weight(tensordict)
     return loss._reduce_loss(value, tensordict=tensordict, weights=weights)
+
+
+def soft_update_leaves(updater: TargetNetUpdater) -> tuple[list[torch.Tensor], list[torch.Tensor]]:
+    """The target and source parameter tensors a target-network updater blends, paired in one order.
+
+    TorchRL 0.14.1's :class:`~torchrl.objectives.TargetNetUpdater` keeps them (after ``init_()``) as two
+    TensorDicts, ``_targets`` (keys ``target_<name>``) and ``_sources`` (keys ``<name>``), each holding the
+    loss module's own tensors; its ``step`` walks them pair by pair.
+    """
+    _require(hasattr(updater, "_sources") and hasattr(updater, "_targets"),
+             "TargetNetUpdater no longer keeps _sources/_targets")
+    targets, sources = [], []
+    for name, source in updater._sources.items():
+        target = updater._targets.get(f"target_{name}")
+        if isinstance(source, torch.Tensor):
+            sources.append(source)
+            targets.append(target)
+            continue
+        keys = list(source.keys(True, True))
+        sources.extend(source.get(k) for k in keys)
+        targets.extend(target.get(k) for k in keys)
+    return targets, sources
 
 
 def safe_tanh(x: torch.Tensor) -> torch.Tensor:

@@ -47,12 +47,13 @@ from torch import nn
 from torchrl.data import TensorDictReplayBuffer
 from torchrl.envs import Compose
 from torchrl.envs.utils import RandomPolicy
-from torchrl.objectives import BCLoss, SoftUpdate
+from torchrl.objectives import BCLoss
 
 from torchrl_csirl.data import DemonstrationMixer, ExpertDemonstrations
 from torchrl_csirl.methods.csirl import CSIRL_RECIPE
 from torchrl_csirl.modules import make_actor, make_qvalue, with_standardization
 from torchrl_csirl.objectives._imitation import SACHyperparameters, make_sac_learner
+from torchrl_csirl.objectives.target_update import FusedSoftUpdate
 from torchrl_csirl.run.assembly import Run, assemble_trainer, make_logger, make_online_buffer, model_input_features
 from torchrl_csirl.run.collection import check_collector_config, make_eval_env
 from torchrl_csirl.run.config import (
@@ -223,7 +224,7 @@ def make_sac(cfg: DictConfig, spec: TaskSpec, device: torch.device, features: nn
     actor = make_actor(spec.obs_dim, spec.action_dim, input_features=features)
     loss = make_sac_learner(actor, make_qvalue(spec.obs_dim, spec.action_dim, input_features=features), hp).to(device)
     optimizer = torch.optim.Adam([p for p in loss.parameters() if p.requires_grad], lr=hp.lr)
-    target_updater = SoftUpdate(loss, tau=hp.tau)
+    target_updater = FusedSoftUpdate(loss, tau=hp.tau)
 
     def make_update_step(online, expert) -> SACUpdate:
         sample = None

@@ -13,7 +13,6 @@ from typing import Optional
 import torch
 from omegaconf import DictConfig, OmegaConf
 from torchrl.envs import ExplorationType, set_exploration_type
-from torchrl.objectives import SoftUpdate
 
 from torchrl_csirl.methods.ant_expert import (
     TASK,
@@ -25,7 +24,7 @@ from torchrl_csirl.methods.ant_expert import (
 )
 from torchrl_csirl.methods.ant_expert import finish as ant_finish
 from torchrl_csirl.modules import make_actor, make_input_features, make_qvalue
-from torchrl_csirl.objectives import SACHyperparameters, make_sac_learner
+from torchrl_csirl.objectives import FusedSoftUpdate, SACHyperparameters, make_sac_learner
 from torchrl_csirl.run.assembly import Run, assemble_trainer, make_online_buffer
 from torchrl_csirl.run.collection import check_collector_config
 from torchrl_csirl.run.config import DEVICES, LoggerConfig, UpdateRatioConfig, option
@@ -99,7 +98,7 @@ def make_sac_trainer(cfg: DictConfig, run_dir: str, frames_done: int = 0, resume
     online = make_online_buffer(cfg.replay_buffer.size, hp.batch_size, [], device)
     run = assemble_trainer(
         cfg, spec, run_dir, device=device, demos=None, policy=actor, online_buffer=online,
-        update_step=SACUpdate(loss, optimizer, SoftUpdate(loss, tau=hp.tau), hp.max_grad_norm),
+        update_step=SACUpdate(loss, optimizer, FusedSoftUpdate(loss, tau=hp.tau), hp.max_grad_norm),
         total_frames=cfg.collector.total_frames, updates_per_round=cfg.updates_per_round,
         states={"loss": loss, "optim_sac": optimizer}, frames_done=frames_done, resume_frames=resume_frames,
     )

@@ -22,6 +22,7 @@ from torchrl_csirl.objectives.gail import GAILHyperparameters, gail_discriminato
 from torchrl_csirl.objectives.iq_learn import IQLearnHyperparameters, IQLearnLoss, inverse_soft_q_objective
 from torchrl_csirl.objectives.meta_reward import MetaRewardLoss
 from torchrl_csirl.objectives.sqil import SQILHyperparameters, sqil_batch, sqil_reward_labels
+from torchrl_csirl.objectives.target_update import FusedSoftUpdate
 from torchrl_csirl.objectives.valuedice import (
     ValueDICEHyperparameters,
     ValueDICELoss,
@@ -38,6 +39,7 @@ __all__ = [
     "DACDiscriminatorLoss",
     "DACHyperparameters",
     "EnsembleSACLoss",
+    "FusedSoftUpdate",
     "GAILHyperparameters",
     "IQLearnHyperparameters",
     "IQLearnLoss",

@@ -25,6 +25,7 @@ from torchrl_csirl.modules import (
 )
 from torchrl_csirl.objectives.ensemble_sac import EnsembleSACLoss, _first_time
 from torchrl_csirl.objectives.meta_reward import MetaRewardLoss
+from torchrl_csirl.objectives.target_update import FusedSoftUpdate
 
 __all__ = ["CSIRL_DEFAULTS", "CSIRLHyperparameters", "CSIRLLearner", "make_csirl_learner"]
 
@@ -78,6 +79,7 @@ def make_csirl_learner(
     reward_l1_coef: float = CSIRL_DEFAULTS.reward_l1_coef,
     gradient_balance: str = CSIRL_DEFAULTS.gradient_balance,
     meta_gradient: str = CSIRL_DEFAULTS.meta_gradient,
+    fused_target_update: bool = True,
     device: torch.device | str = "cpu",
 ) -> CSIRLLearner:
     """Builds CSIRL's actor, ensemble-SAC loss, target updater, reward network and meta-gradient loss.
@@ -120,6 +122,9 @@ def make_csirl_learner(
             (:class:`~torchrl_csirl.objectives.MetaRewardLoss`). Defaults to ``"sum"``.
         meta_gradient (str): ``"double_backward"`` or ``"jvp"`` (the inner critic step in closed
             form; :class:`~torchrl_csirl.objectives.MetaRewardLoss`). Defaults to ``"double_backward"``.
+        fused_target_update (bool): blend the target critics in one fused call
+            (:class:`~torchrl_csirl.objectives.FusedSoftUpdate`, bit-identical); ``False``: TorchRL's
+            :class:`~torchrl.objectives.SoftUpdate`. Defaults to ``True``.
         device: where the losses and networks live. Defaults to ``"cpu"``.
 
     Returns:
@@ -148,7 +153,7 @@ def make_csirl_learner(
         gamma=gamma,
         dispersion=dispersion,
     ).to(device)
-    target_updater = SoftUpdate(sac, tau=tau)
+    target_updater = (FusedSoftUpdate if fused_target_update else SoftUpdate)(sac, tau=tau)
     reward_network = make_reward_network(obs_dim, hidden=hidden, input_features=input_features,
                                          activation=reward_activation)
     if reward_reference is not None:

@@ -21,7 +21,7 @@ from tensordict import TensorDict
 from torch import nn
 from torchrl.data import TensorDictReplayBuffer
 from torchrl.envs.transforms import Transform
-from torchrl.objectives import GAILLoss, SoftUpdate
+from torchrl.objectives import GAILLoss
 
 from torchrl_csirl.data.mixing import DemonstrationMixer
 from torchrl_csirl.modules.exploration import MeanActionGaussianNoise
@@ -31,6 +31,7 @@ from torchrl_csirl.objectives.dac import DACDiscriminatorLoss, DACHyperparameter
 from torchrl_csirl.objectives.gail import GAILHyperparameters, gail_discriminator_input, make_gail_discriminator
 from torchrl_csirl.objectives.iq_learn import IQLearnHyperparameters, IQLearnLoss
 from torchrl_csirl.objectives.sqil import SQILHyperparameters, sqil_reward_labels
+from torchrl_csirl.objectives.target_update import FusedSoftUpdate
 from torchrl_csirl.objectives.valuedice import ValueDICEHyperparameters, ValueDICELoss, initial_observations
 from torchrl_csirl.trainers.imitation_updates import AdversarialImitationUpdate, DiscriminatorStep, ValueDICEUpdate
 from torchrl_csirl.trainers.trainer import CSIRLTrainer
@@ -91,7 +92,7 @@ def _identity(tensordict):
 
 def _sac(actor: nn.Module, make_qvalue: Callable[[], nn.Module], hp: SACHyperparameters, device):
     loss = make_sac_learner(actor, make_qvalue(), hp).to(device)
-    return loss, _adam(loss, hp.lr), SoftUpdate(loss, tau=hp.tau)
+    return loss, _adam(loss, hp.lr), FusedSoftUpdate(loss, tau=hp.tau)
 
 
 # ------------------------------------------------------------------------------ SQIL
@@ -160,7 +161,7 @@ def _make_iqlearn(actor, make_qvalue, hp: IQLearnHyperparameters, device) -> Imi
                        use_target_value=hp.use_target_value, value_loss=hp.value_loss,
                        chi2_policy_actions=hp.chi2_policy_actions).to(device)
     optimizer = _adam(loss, hp.lr, {"actor_network_params": hp.actor_lr})
-    target_updater = SoftUpdate(loss, tau=hp.tau)
+    target_updater = FusedSoftUpdate(loss, tau=hp.tau)
     num_expert = round(hp.expert_fraction * hp.batch_size)
     if not 0 < num_expert < hp.batch_size:
         raise ValueError(f"expert_fraction={hp.expert_fraction} leaves no expert or no replay sample in a batch of {hp.batch_size}.")
