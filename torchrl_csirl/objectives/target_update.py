@@ -1,11 +1,10 @@
 """The target critics' soft update as one fused in-place blend.
 
 TorchRL's :class:`~torchrl.objectives.SoftUpdate` blends each target TensorDict into place
-(``target.lerp_(source, tau)``), walking its TensorDicts at every step: about 0.4 ms a step for CSIRL's
-five 2x256 critics, against 0.08 ms for the blend itself (``benchmarks/bench_floor.py``'s reference
-uses ``torch._foreach_lerp_``). :class:`FusedSoftUpdate` does the same blend of the same tensors in one
-``torch._foreach_lerp_`` call, so its targets are bit-identical to the stock ones
-(``tests/test_target_update.py``); :class:`~torchrl.objectives.SoftUpdate` stays selectable
+(``target.lerp_(source, tau)``), walking its TensorDicts at every step. :class:`FusedSoftUpdate` does the
+same blend of the same tensors in one ``torch._foreach_lerp_`` call, so its targets are bit-identical to the
+stock ones (``tests/test_target_update.py``); what it saves is on the performance page
+(``benchmarks/bench_target_update.py``). :class:`~torchrl.objectives.SoftUpdate` stays selectable
 (``make_csirl_learner(..., fused_target_update=False)``).
 """
 from __future__ import annotations
@@ -22,8 +21,8 @@ class FusedSoftUpdate(SoftUpdate):
     """:class:`~torchrl.objectives.SoftUpdate` whose ``step`` is one ``torch._foreach_lerp_`` over every target.
 
     Takes :class:`~torchrl.objectives.SoftUpdate`'s arguments (``loss_module``, ``tau`` or ``eps``) and keeps
-    its state (``state_dict``); each step reads the loss module's current tensors, so moving or reloading
-    the loss module is safe.
+    its state (``state_dict``); each step blends the tensors :class:`~torchrl.objectives.SoftUpdate`'s own step
+    would, so it follows the loss module wherever the stock one does (a reload: ``tests/test_target_update.py``).
 
     Examples:
         >>> import torch
