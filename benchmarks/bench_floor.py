@@ -24,6 +24,11 @@ Usage::
     python benchmarks/bench_floor.py --batch 256 --rounds 20      # fp32 and bf16 (where native)
     python benchmarks/bench_floor.py --batch 64 --precisions fp32
     python benchmarks/bench_floor.py --hidden 8 --batch 8 --threads 1 --precisions fp32   # the per-call overhead
+    python benchmarks/bench_floor.py --precisions fp32 --fp32-bias-inside   # what float32's bit-identity costs
+
+``--fp32-bias-inside`` times ours with its critics' bias inside the matmul in float32 too (``baddbmm``, as the
+floor and our bfloat16 path compute it). That rounds differently from TorchRL's critic, so it is not a path
+the package ships: it measures how much of the float32 gap the bit-identity to SACLoss's path accounts for.
 
 Prints one final JSON line.
 """
@@ -44,6 +49,8 @@ from torch.nn import functional as F
 from torchrl_csirl._compat import sac_alpha
 from torchrl_csirl.modules import LearnerPrecision, has_native_bf16
 from torchrl_csirl.modules.actor_critic import masked_relu
+from torchrl_csirl.modules.ensemble import FusedCriticEnsemble
+from torchrl_csirl.modules.precision import low_precision_dtype
 
 _HALF_LOG_2PI = math.log(math.sqrt(2 * math.pi))
 _LOG_2 = math.log(2.0)
@@ -313,6 +320,18 @@ def measure(batch: int, precisions: Sequence[str], rounds: int, block: int, plai
     return result
 
 
+def _put_fp32_bias_inside() -> None:
+    """Our fused critics compute float32 as they compute bfloat16: every layer one ``baddbmm`` (the bias inside)."""
+    values = FusedCriticEnsemble.values
+
+    def bias_inside(self, x, params, activations=None):
+        if x.dtype != torch.float32 or low_precision_dtype(x) is not None:
+            return values(self, x, params, activations)
+        return self._values_low_precision(x, params, torch.float32, activations)
+
+    FusedCriticEnsemble.values = bias_inside
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--batch", type=int, default=256)
@@ -324,6 +343,8 @@ def main() -> None:
     parser.add_argument("--hidden", type=int, default=0,
                         help="hidden width of the actor and critics (0: bench_update.py's 256; 8 with --batch 8 "
                              "--threads 1 leaves the per-call overhead)")
+    parser.add_argument("--fp32-bias-inside", action="store_true",
+                        help="ours with the critics' bias inside the matmul in float32 (not bit-identical to SACLoss)")
     parser.add_argument("--plain-autocast", action="store_true",
                         help="also time the lean learner with every layer under bfloat16 autocast")
     args = parser.parse_args()
@@ -332,8 +353,11 @@ def main() -> None:
         make_actor, make_qvalue = bench_update.make_actor, bench_update.make_qvalue
         bench_update.make_actor = lambda obs, act: make_actor(obs, act, hidden=(args.hidden, args.hidden))
         bench_update.make_qvalue = lambda obs, act: make_qvalue(obs, act, hidden=(args.hidden, args.hidden))
+    if args.fp32_bias_inside:
+        _put_fp32_bias_inside()
     precisions = args.precisions or (["fp32", "bf16"] if has_native_bf16("cpu") else ["fp32"])
     result = {"batch": args.batch, "hidden": args.hidden or 256, "threads": args.threads, "rounds": args.rounds, "block": args.block,
+              "fp32_bias_inside": args.fp32_bias_inside,
               "cpu": torch.cpu.get_capabilities().get("cpu_name"), "native_bf16": has_native_bf16("cpu"),
               "torch": torch.__version__}
     with contextlib.suppress(OSError):

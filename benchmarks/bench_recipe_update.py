@@ -68,11 +68,11 @@ def main() -> None:
 
         def sac_step() -> None:
             trainer.updates = 1  # not a multiple of meta_every: a plain step
-            update(trainer)
+            trainer._run_updates(1)  # the trainer's own update (inside its input-map memo)
 
         def joint_step() -> None:
             trainer.updates = 0  # a multiple of meta_every: the meta-gradient step
-            update(trainer)
+            trainer._run_updates(1)
 
         sync = torch.cuda.synchronize if resolve_device(cfg.device).type == "cuda" else None
         steps = {"sample": sample, "sac_step": sac_step}

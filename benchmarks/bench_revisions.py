@@ -9,19 +9,26 @@ Only one worker computes at a time; each uses ``--threads`` torch threads, and t
 ``--pause`` seconds before each step, so that the other worker's OpenMP threads have stopped
 spinning (without it, two threads per worker measured 1.3-1.6x slower than ``bench_update.py``).
 
+``--recipe`` times the recipe's own updates instead (``bench_recipe_update.py``'s steps: the README's
+run, default configuration, after collecting ``--frames`` transitions; one update of the trainer, a plain
+one and a CSIRL one, sampling and input maps included), each checkout with its own trainer.
+
 Usage::
 
     git worktree add /tmp/base 58670cb
     python benchmarks/bench_revisions.py --before /tmp/base --batch 256
     python benchmarks/bench_revisions.py --before /tmp/base --batch 8 --hidden 8 --threads 1  # overhead
+    python benchmarks/bench_revisions.py --before /tmp/base --recipe                          # the run's updates
 
 Prints one final JSON line.
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
+import platform
 import statistics
 import subprocess
 import sys
@@ -52,16 +59,59 @@ for line in sys.stdin:
 """
 
 
+_RECIPE_STEPS = {"sac_step": "sac_step", "joint_step": "joint_step"}
+
+_RECIPE_WORKER = r"""
+import sys, tempfile, time, torch
+from bench_recipe_update import _fill
+from torchrl_csirl.methods import csirl
+frames, threads, warmup = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3])
+out = tempfile.mkdtemp(prefix="bench_revisions-")
+cfg = csirl.load_config(["collector.num_workers=1", "logger.backend=none", "logger.progress_bar=false",
+                         f"logger.output_dir={out}", f"collector.main_threads={threads}"])
+run = csirl.make_trainer(cfg, out)
+_fill(run, frames)
+trainer = run.trainer
+def step(updates):  # updates % meta_every decides the kind: 1 a plain update, 0 a CSIRL one
+    trainer.updates = updates
+    trainer._run_updates(1)
+steps = {"sac_step": lambda: step(1), "joint_step": lambda: step(0)}
+for _ in range(warmup):
+    for fn in steps.values():
+        fn()
+print("ready", flush=True)
+for line in sys.stdin:
+    fn = steps[line.strip()]
+    start = time.perf_counter()
+    fn()
+    print((time.perf_counter() - start) * 1e3, flush=True)
+run.close()
+"""
+
+
 def _worker(tree: str, args: argparse.Namespace) -> subprocess.Popen:
     # the checkout's package and its benchmarks/ (bench_update) first on the worker's path
     env = dict(os.environ, PYTHONPATH=os.pathsep.join((tree, os.path.join(tree, "benchmarks"))), RL_WARNINGS="0")
-    cmd = [sys.executable, "-c", _WORKER, *map(str, (args.batch, args.threads, args.warmup, args.hidden)),
-           *_STEPS.values()]
+    if args.recipe:
+        cmd = [sys.executable, "-c", _RECIPE_WORKER, *map(str, (args.frames, args.threads, args.warmup))]
+    else:
+        cmd = [sys.executable, "-c", _WORKER, *map(str, (args.batch, args.threads, args.warmup, args.hidden)),
+               *_STEPS.values()]
     proc = subprocess.Popen(cmd, cwd=tree, env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     for line in proc.stdout:  # log lines (TorchRL's logger writes to stdout) come before it
         if line.strip() == "ready":
             return proc
     raise RuntimeError(f"the worker in {tree} did not start")
+
+
+def _cpu_name() -> str:
+    """The CPU's model name (``/proc/cpuinfo``), or the platform's processor string."""
+    with contextlib.suppress(OSError):
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    return platform.processor()
 
 
 def _ask(proc: subprocess.Popen, step: str) -> float:
@@ -81,12 +131,15 @@ def main() -> None:
     parser.add_argument("--pause", type=float, default=0.05, help="seconds between two timed steps")
     parser.add_argument("--hidden", type=int, default=0,
                         help="hidden width of the actor and critics (0: bench_update.py's 256)")
+    parser.add_argument("--recipe", action="store_true", help="time the recipe's updates (the README's run)")
+    parser.add_argument("--frames", type=int, default=3000, help="with --recipe: transitions collected first")
     args = parser.parse_args()
+    steps = _RECIPE_STEPS if args.recipe else _STEPS
     workers = {side: _worker(getattr(args, side), args) for side in ("before", "after")}
-    times = {side: {name: [] for name in _STEPS} for side in workers}
+    times = {side: {name: [] for name in steps} for side in workers}
     try:
         for _ in range(args.iters):
-            for name, step in _STEPS.items():
+            for name, step in steps.items():
                 for side, proc in workers.items():
                     time.sleep(args.pause)  # the other worker's OpenMP threads stop spinning
                     times[side][name].append(_ask(proc, step))
@@ -94,8 +147,12 @@ def main() -> None:
         for proc in workers.values():
             proc.stdin.close()
             proc.wait()
-    result = {"batch": args.batch, "threads": args.threads, "iters": args.iters, "hidden": args.hidden or 256}
-    for name in _STEPS:
+    result = {"recipe": args.recipe, "batch": args.batch, "threads": args.threads, "iters": args.iters,
+              "hidden": args.hidden or 256}
+    if args.recipe:
+        result = {"recipe": True, "frames": args.frames, "threads": args.threads, "iters": args.iters}
+    result["cpu"] = _cpu_name()
+    for name in steps:
         before, after = times["before"][name], times["after"][name]
         result[f"{name}_ms_before"] = round(statistics.median(before), 2)
         result[f"{name}_ms_after"] = round(statistics.median(after), 2)

@@ -40,6 +40,16 @@ def test_relative_features_on_real_observations(scenario):
         expected = torch.clamp(x_gain * (rows[i, x] - rows[0, x]), -5, 5) if rows[i, presence] > 0 else 0.0
         assert relative[i - 1, feats.relative_indices.index(x)] == pytest.approx(float(expected), abs=1e-5)
     assert relative.abs().max() <= 5.0
+    assert torch.equal(out, _plain_relative_features(feats, obs)), "the plain formula, bit for bit"
+
+
+def _plain_relative_features(feats: EgoRelativeFeatures, obs: torch.Tensor) -> torch.Tensor:
+    """The class docstring's formula in plain tensor operations (an index list, no views, nothing in place)."""
+    rows = obs.unflatten(-1, (feats.vehicles_count, feats.num_features))
+    selected = rows[..., feats.relative_indices]
+    relative = ((selected[..., 1:, :] - selected[..., :1, :]) * torch.tensor(feats.gains)).clamp(-feats.clip, feats.clip)
+    present = rows[..., 1:, feats.presence_index : feats.presence_index + 1] > 0
+    return torch.cat([obs, torch.where(present, relative, torch.zeros_like(relative)).flatten(-2)], dim=-1)
 
 
 def test_absent_vehicles_give_zero_offsets_and_batches_work():

@@ -45,6 +45,7 @@ def test_fused_soft_update_follows_a_reloaded_loss_module():
     source, target = _loss(torch.float32), _loss(torch.float32)
     _move_sources(source, 0)
     updater = FusedSoftUpdate(target, tau=0.5)
+    updater.step()  # its tensors read before the reload
     target.load_state_dict(source.state_dict())
     _move_sources(target, 1)
     before = target.target_qvalue_network_params.data.clone()
@@ -56,3 +57,19 @@ def test_fused_soft_update_follows_a_reloaded_loss_module():
 def test_csirl_learner_fuses_its_target_update_and_keeps_the_stock_one_selectable():
     assert type(make_csirl_learner(4, 2, hidden=(8,)).target_updater) is FusedSoftUpdate
     assert type(make_csirl_learner(4, 2, hidden=(8,), fused_target_update=False).target_updater) is SoftUpdate
+
+
+def test_fused_soft_update_reads_its_tensors_again_after_init():
+    loss = _loss(torch.float32)
+    updater = FusedSoftUpdate(loss, tau=0.5)
+    updater.step()
+    first = updater._leaves()
+    assert updater._leaves() is first  # read once per init_()
+    with pytest.warns(UserWarning, match="already initialized"):
+        updater.init_()  # the targets copied from the sources again, the locked TensorDicts rebuilt
+    assert updater._leaves() is not first
+    _move_sources(loss, 0)
+    before = loss.target_qvalue_network_params.data.clone()
+    updater.step()
+    for key, value in loss.qvalue_network_params.data.items(True, True):
+        assert torch.equal(loss.target_qvalue_network_params.data[key], before[key].lerp(value, 0.5)), key

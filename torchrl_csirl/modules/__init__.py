@@ -21,6 +21,7 @@ from torchrl_csirl.modules.features import (
     with_standardization,
 )
 from torchrl_csirl.modules.fused_actor import FusedTanhNormalActor, fused_tanh_normal_actor
+from torchrl_csirl.modules.input_memo import map_each_input_once, mapped_once
 from torchrl_csirl.modules.lane_features import LaneFeatures
 from torchrl_csirl.modules.precision import LearnerPrecision, PrecisionUnsupported, has_native_bf16
 from torchrl_csirl.modules.reward import (
@@ -53,6 +54,8 @@ __all__ = [
     "make_input_features",
     "DropFeatures",
     "make_qvalue",
+    "map_each_input_once",
+    "mapped_once",
     "make_reward_network",
     "save_policy",
     "StandardizeFeatures",

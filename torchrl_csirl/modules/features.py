@@ -16,6 +16,7 @@ from typing import Any
 import torch
 from torch import nn
 
+from torchrl_csirl.modules.input_memo import mapped_once
 from torchrl_csirl.modules.lane_features import LaneFeatures
 
 __all__ = ["DropFeatures", "EgoRelativeFeatures", "FeatureChain", "RELATIVE_REFERENCE", "StandardizeFeatures", "feature_map_from_config",
@@ -128,20 +129,32 @@ class EgoRelativeFeatures(nn.Module):
         }
 
     def forward(self, observation: torch.Tensor) -> torch.Tensor:
+        return mapped_once(self, self._relative_features, observation)
+
+    def _relative_features(self, observation: torch.Tensor) -> torch.Tensor:
         if observation.shape[-1] != self.in_features:
             raise ValueError(
                 f"EgoRelativeFeatures expects observations of size {self.in_features} "
                 f"({self.vehicles_count} vehicles x {self.num_features} features), got {observation.shape[-1]}."
             )
         rows = observation.unflatten(-1, (self.vehicles_count, self.num_features))
-        selected = rows[..., self.relative_indices]
-        gains = torch.as_tensor(self.gains, dtype=observation.dtype, device=observation.device)
-        relative = (selected[..., 1:, :] - selected[..., :1, :]) * gains
-        relative = relative.clamp(-self.clip, self.clip)
+        indices = self.relative_indices
+        contiguous = indices == list(range(indices[0], indices[0] + len(indices)))
+        selected = rows[..., indices[0] : indices[-1] + 1] if contiguous else rows[..., indices]  # a view if it can
+        relative = (selected[..., 1:, :] - selected[..., :1, :]).mul_(self._gains_like(observation))
+        relative = relative.clamp_(-self.clip, self.clip)
         if self.presence_index is not None:
             present = rows[..., 1:, self.presence_index : self.presence_index + 1] > 0
-            relative = torch.where(present, relative, torch.zeros_like(relative))
+            relative = torch.where(present, relative, 0.0)
         return torch.cat([observation, relative.flatten(-2)], dim=-1)
+
+    def _gains_like(self, observation: torch.Tensor) -> torch.Tensor:
+        """The gains as a tensor of the observation's dtype and device (made once per kind)."""
+        kind = (self.gains, observation.dtype, observation.device)
+        cached = self.__dict__.get("_gains_tensor")
+        if cached is None or cached[0] != kind:
+            cached = self.__dict__["_gains_tensor"] = (kind, torch.tensor(self.gains, dtype=kind[1], device=kind[2]))
+        return cached[1]
 
     def extra_repr(self) -> str:
         return f"vehicles={self.vehicles_count}, relative={self.relative_indices}, gains={list(self.gains)}"

@@ -20,6 +20,8 @@ import numpy as np
 import torch
 from torch import nn
 
+from torchrl_csirl.modules.input_memo import mapped_once
+
 __all__ = ["LaneFeatures"]
 
 class LaneFeatures(nn.Module):
@@ -154,6 +156,9 @@ class LaneFeatures(nn.Module):
         return low + (value + 1.0) * (high - low) / 2.0
 
     def forward(self, features: torch.Tensor) -> torch.Tensor:
+        return mapped_once(self, self._lane_features, features)
+
+    def _lane_features(self, features: torch.Tensor) -> torch.Tensor:
         if features.shape[-1] != self._in_features:
             raise ValueError(f"LaneFeatures expects inputs of size {self._in_features}, got {features.shape[-1]}.")
         centres = self._centres.to(device=features.device, dtype=features.dtype)

@@ -42,8 +42,17 @@ class FusedSoftUpdate(SoftUpdate):
         """Blends every target tensor towards its source by ``1 - eps`` (``tau``), in place."""
         if not self.initialized:
             raise RuntimeError(f"{type(self).__name__} must be initialized (init_()) before step()")
-        targets, sources = soft_update_leaves(self)
+        targets, sources = self._leaves()
         if any(t.requires_grad for t in targets):
             raise RuntimeError("a target parameter is part of a graph")
         with torch.no_grad():
             torch._foreach_lerp_(targets, sources, 1 - self.eps)
+
+    def _leaves(self) -> tuple[list[torch.Tensor], list[torch.Tensor]]:
+        """The targets and sources, read once per ``init_()``: after it, the stock updater walks two locked
+        TensorDicts whose tensors stay the same objects, so the lists are rebuilt only when those change."""
+        pair = (self._targets, self._sources)
+        cached = self.__dict__.get("_leaves_cache")
+        if cached is None or cached[0][0] is not pair[0] or cached[0][1] is not pair[1]:
+            cached = self.__dict__["_leaves_cache"] = (pair, soft_update_leaves(self))
+        return cached[1]

@@ -22,6 +22,8 @@ import numpy as np
 import torch
 from tensordict import TensorDictBase
 
+from torchrl_csirl.modules.input_memo import map_each_input_once
+
 __all__ = ["CSIRLTrainer", "TrainingDivergedError", "TrainingInterrupted", "check_finite_losses", "rng_state",
            "set_rng_state"]
 
@@ -341,7 +343,8 @@ class CSIRLTrainer:
         sums: dict[str, float] = defaultdict(float)
         counts: dict[str, int] = defaultdict(int)
         for _ in range(n):
-            losses = self.update_step(self)
+            with map_each_input_once():  # the batch's observations through each input map once
+                losses = self.update_step(self)
             self.updates += 1
             self.updates_in_round += 1
             for _, op in self._ops["post_update"]:
