@@ -10,8 +10,10 @@ from tensordict.nn import TensorDictModule
 from torchrl.objectives import SACLoss, SoftUpdate
 from transitions import random_transitions
 
+from torchrl_csirl.modules import make_input_features
 from torchrl_csirl.modules.actor_critic import make_actor, make_qvalue
 from torchrl_csirl.objectives import EnsembleSACLoss, qvalue_dispersion
+from torchrl_csirl.tasks import SCENARIOS
 
 OBS, ACT, HID = 5, 2, (16, 16)
 
@@ -265,6 +267,37 @@ def test_fused_critic_ensemble_is_the_default_and_identical_to_vmap(device):
         _assert_same(g_fused, g_vmap, device)
     _assert_same(fused.qvalues(td), vmapped.qvalues(td), device)
     assert fused.qvalues(_batch(12).reshape(3, 4).to(device)).shape == (5, 3, 4)
+
+
+@pytest.mark.parametrize("batch", [7, 256])
+def test_fused_paths_are_bit_identical_to_sacloss_in_float32_at_the_recipes_sizes(batch):
+    """The README's learner (merge's input map, 2x256 networks, five critics): the fused critics and actor against
+    vmap over TorchRL's critic and SACLoss's actor path, losses and every gradient ``torch.equal`` in float32.
+    Small networks can hide a change of summation order that these sizes show (a first layer as ``expand`` +
+    ``bmm`` instead of ``matmul`` changed the gradients here and passed at 2x8)."""
+    spec = SCENARIOS["merge"]
+    losses = []
+    for fused in (True, False):
+        torch.manual_seed(0)
+        features = make_input_features(spec)
+        losses.append(EnsembleSACLoss(make_actor(spec.obs_dim, spec.action_dim, input_features=features),
+                                      make_qvalue(spec.obs_dim, spec.action_dim, input_features=features),
+                                      fused=fused, fused_qvalue=fused))
+    assert losses[0].fused and losses[0].fused_qvalue and not losses[1].fused and not losses[1].fused_qvalue
+    td = random_transitions(batch, spec.obs_dim, spec.action_dim, generator=torch.Generator().manual_seed(2))
+    td["next", "terminated"][:2] = True
+    outs, grads = [], []
+    for loss in losses:
+        torch.manual_seed(3)
+        out = loss(td.clone())
+        (out["loss_qvalue"] + out["loss_actor"] + out["loss_alpha"]).backward()
+        outs.append(out)
+        grads.append([p.grad for p in loss.parameters()])
+    for key in ("loss_qvalue", "loss_actor", "loss_alpha", "entropy"):
+        assert torch.equal(outs[0][key], outs[1][key]), key
+    assert len(grads[0]) == len(grads[1])
+    for g_fused, g_stock in zip(*grads):
+        _assert_same(g_fused, g_stock, "cpu")
 
 
 def test_fused_critic_ensemble_survives_set_vmap_randomness():
