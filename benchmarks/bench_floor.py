@@ -26,9 +26,10 @@ Usage::
     python benchmarks/bench_floor.py --hidden 8 --batch 8 --threads 1 --precisions fp32   # the per-call overhead
     python benchmarks/bench_floor.py --precisions fp32 --fp32-bias-inside   # what float32's bit-identity costs
 
-``--fp32-bias-inside`` times ours with its critics' bias inside the matmul in float32 too (``baddbmm``, as the
-floor and our bfloat16 path compute it). That rounds differently from TorchRL's critic, so it is not a path
-the package ships: it measures how much of the float32 gap the bit-identity to SACLoss's path accounts for.
+``--fp32-bias-inside`` times ours with its float32 critics computed as our bfloat16 path computes them (the
+first layer as ``expand`` + ``baddbmm``, the bias inside every layer's matmul, as the floor does). That rounds
+differently from TorchRL's critic, so it is not a path the package ships: it measures how much of the float32
+gap the bit-identity to SACLoss's path accounts for.
 
 Prints one final JSON line.
 """
@@ -321,7 +322,8 @@ def measure(batch: int, precisions: Sequence[str], rounds: int, block: int, plai
 
 
 def _put_fp32_bias_inside() -> None:
-    """Our fused critics compute float32 as they compute bfloat16: every layer one ``baddbmm`` (the bias inside)."""
+    """Our fused critics compute float32 as they compute bfloat16: the first layer on the expanded input, every
+    layer one ``baddbmm`` (the bias inside)."""
     values = FusedCriticEnsemble.values
 
     def bias_inside(self, x, params, activations=None):
@@ -344,7 +346,7 @@ def main() -> None:
                         help="hidden width of the actor and critics (0: bench_update.py's 256; 8 with --batch 8 "
                              "--threads 1 leaves the per-call overhead)")
     parser.add_argument("--fp32-bias-inside", action="store_true",
-                        help="ours with the critics' bias inside the matmul in float32 (not bit-identical to SACLoss)")
+                        help="ours with float32 critics computed as the bfloat16 path does (not bit-identical to SACLoss)")
     parser.add_argument("--plain-autocast", action="store_true",
                         help="also time the lean learner with every layer under bfloat16 autocast")
     args = parser.parse_args()

@@ -25,14 +25,14 @@ Prints one final JSON line.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import os
-import platform
 import statistics
 import subprocess
 import sys
 import time
+
+import torch
 
 _STEPS = {"sac_update": "plain_step", "csirl_iteration": "csirl_step"}
 
@@ -104,16 +104,6 @@ def _worker(tree: str, args: argparse.Namespace) -> subprocess.Popen:
     raise RuntimeError(f"the worker in {tree} did not start")
 
 
-def _cpu_name() -> str:
-    """The CPU's model name (``/proc/cpuinfo``), or the platform's processor string."""
-    with contextlib.suppress(OSError):
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    return platform.processor()
-
-
 def _ask(proc: subprocess.Popen, step: str) -> float:
     proc.stdin.write(step + "\n")
     proc.stdin.flush()
@@ -147,11 +137,9 @@ def main() -> None:
         for proc in workers.values():
             proc.stdin.close()
             proc.wait()
-    result = {"recipe": args.recipe, "batch": args.batch, "threads": args.threads, "iters": args.iters,
-              "hidden": args.hidden or 256}
-    if args.recipe:
-        result = {"recipe": True, "frames": args.frames, "threads": args.threads, "iters": args.iters}
-    result["cpu"] = _cpu_name()
+    sizes = {"frames": args.frames} if args.recipe else {"batch": args.batch, "hidden": args.hidden or 256}
+    result = {"recipe": args.recipe, **sizes, "threads": args.threads, "iters": args.iters,
+              "cpu": torch.cpu.get_capabilities().get("cpu_name")}
     for name in steps:
         before, after = times["before"][name], times["after"][name]
         result[f"{name}_ms_before"] = round(statistics.median(before), 2)

@@ -80,6 +80,10 @@ class EgoRelativeFeatures(nn.Module):
         self.vehicles_count = int(vehicles_count)
         self.num_features = int(num_features)
         self.relative_indices = relative_indices
+        # contiguous indices (x, y, vx, vy in the driving scenes) are a slice: a view, no gather
+        first = relative_indices[0]
+        contiguous = relative_indices == list(range(first, first + len(relative_indices)))
+        self._relative_slice = slice(first, first + len(relative_indices)) if contiguous else None
         self.presence_index = presence_index
         self.clip = float(clip)
         # a plain tuple, not a buffer: the ensemble critics stack their members' tensors
@@ -138,9 +142,7 @@ class EgoRelativeFeatures(nn.Module):
                 f"({self.vehicles_count} vehicles x {self.num_features} features), got {observation.shape[-1]}."
             )
         rows = observation.unflatten(-1, (self.vehicles_count, self.num_features))
-        indices = self.relative_indices
-        contiguous = indices == list(range(indices[0], indices[0] + len(indices)))
-        selected = rows[..., indices[0] : indices[-1] + 1] if contiguous else rows[..., indices]  # a view if it can
+        selected = rows[..., self._relative_slice if self._relative_slice is not None else self.relative_indices]
         relative = (selected[..., 1:, :] - selected[..., :1, :]).mul_(self._gains_like(observation))
         relative = relative.clamp_(-self.clip, self.clip)
         if self.presence_index is not None:
